@@ -1,0 +1,42 @@
+# Convenience targets around CMake. Builds use both cores (-j2) by default.
+JOBS ?= 2
+BUILD ?= build
+ASAN_BUILD ?= build-asan
+CMAKE_FLAGS ?=
+DEMO_OUT ?= out
+
+.PHONY: all build test test-asan bench demo clean format
+
+all: build
+
+$(BUILD)/CMakeCache.txt:
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release $(CMAKE_FLAGS)
+
+build: $(BUILD)/CMakeCache.txt
+	cmake --build $(BUILD) -j$(JOBS)
+
+test: build
+	cd $(BUILD) && ctest --output-on-failure -j$(JOBS)
+
+$(ASAN_BUILD)/CMakeCache.txt:
+	cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug -DLIDAR2D_SANITIZE=ON -DLIDAR2D_BUILD_BENCH=OFF $(CMAKE_FLAGS)
+
+# AddressSanitizer + UndefinedBehaviorSanitizer build of the whole test suite.
+test-asan: $(ASAN_BUILD)/CMakeCache.txt
+	cmake --build $(ASAN_BUILD) -j$(JOBS)
+	cd $(ASAN_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	  ctest --output-on-failure -j$(JOBS)
+
+bench: build
+	$(BUILD)/bench/lidar2d_bench
+
+# The main job on the built-in default: simulate the office world and run the most complete
+# pipeline that exists, writing under $(DEMO_OUT)/.
+demo: build
+	./tools/demo.sh $(BUILD)/lidar2d $(DEMO_OUT)
+
+format:
+	find include src apps tests bench -name '*.hpp' -o -name '*.cpp' | xargs clang-format -i
+
+clean:
+	rm -rf $(BUILD) $(ASAN_BUILD)

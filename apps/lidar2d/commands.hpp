@@ -1,0 +1,20 @@
+#pragma once
+// Subcommands of the lidar2d CLI. Each adds itself to the app and runs from its CLI11 callback;
+// errors are thrown as lidar2d::Error (exit 1) and turned into one line on stderr by main().
+
+#include <CLI/CLI.hpp>
+
+#include "lidar2d/io/frame_source.hpp"
+
+namespace lidar2d::cli {
+
+void addInfoCommand(CLI::App& app);
+void addSimulateCommand(CLI::App& app);
+void addPerturbCommand(CLI::App& app);
+void addEvalCommand(CLI::App& app);
+
+/// Adds the reader flags shared by every command that reads a log (--scan-topic, --odom-topic,
+/// --carmen-laser, --carmen-poses) bound to `options`.
+void addReaderOptions(CLI::App* sub, io::ReaderOptions& options);
+
+}  // namespace lidar2d::cli

@@ -1,0 +1,77 @@
+#pragma once
+/// @file
+/// One streaming interface over every log format, so that no algorithm knows where scans come from.
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lidar2d/core/frame.hpp"
+
+namespace lidar2d::io {
+
+enum class LogFormat {
+  kCarmen,   ///< CARMEN text log (.log/.clf), plain or gzip-compressed
+  kRosbag1,  ///< ROS1 bag, format 2.0 or 1.2
+  kRosbag2,  ///< ROS2 sqlite3 bag (a folder with metadata.yaml, or a .db3 file)
+};
+
+/// Printable name of a format ("carmen", "rosbag1", "rosbag2").
+const char* toString(LogFormat f);
+
+/// How the pose triples of CARMEN laser messages are interpreted.
+enum class CarmenPoses {
+  /// TRUEPOS lines give truth when present. Otherwise, when the log also has ODOM lines whose motion
+  /// disagrees with the laser messages' poses (logs corrected by a SLAM system, as in Radish), the
+  /// laser poses are taken as truth and odometry is interpolated from the ODOM lines; else the laser
+  /// messages' odometry triple is odometry and there is no truth.
+  kAuto,
+  kTruth,     ///< the laser messages' robot pose is ground truth; odometry from ODOM lines if any
+  kOdometry,  ///< the laser messages' odometry triple is odometry; no truth unless TRUEPOS lines
+};
+
+/// Options of every reader; each reader ignores what does not apply to its format.
+struct ReaderOptions {
+  std::string scan_topic;  ///< ROS: LaserScan topic; empty = the only/most frequent one
+  std::string odom_topic;  ///< ROS: Odometry topic; empty = auto-detect, "none" = ignore odometry
+  std::string carmen_laser;  ///< CARMEN: message to read ("FLASER", "RLASER", "ROBOTLASER1", ...);
+                             ///< empty = the first laser message type found in the file
+  CarmenPoses carmen_poses = CarmenPoses::kAuto;
+};
+
+/// Facts a reader learns about its log (some only once the stream is exhausted).
+struct SourceNotes {
+  std::string scan_source;   ///< e.g. "FLASER" or "/scan"
+  std::string odom_source;   ///< e.g. "ODOM lines (interpolated)", "/odom", or empty if none
+  std::string truth_source;  ///< e.g. "FLASER pose (corrected log)", "TRUEPOS", or empty if none
+  std::vector<std::string> warnings;  ///< e.g. "timestamps repeat (12 times)"
+};
+
+/// A stream of frames in file order. Memory use does not grow with the log's length.
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  FrameSource() = default;
+  FrameSource(const FrameSource&) = delete;
+  FrameSource& operator=(const FrameSource&) = delete;
+
+  /// The next frame, or std::nullopt at the end of the log. Throws `lidar2d::Error` (naming file,
+  /// line or message number, and field) on malformed content.
+  virtual std::optional<Frame> next() = 0;
+  virtual LogFormat format() const = 0;
+  /// The path the source was opened with.
+  virtual const std::string& path() const = 0;
+  /// What was learned so far (complete once `next()` has returned std::nullopt).
+  virtual SourceNotes notes() const = 0;
+};
+
+/// Detects the format from the file's first bytes (gzip magic -> CARMEN, "#ROSBAG V" -> ROS1,
+/// SQLite header or a folder with metadata.yaml -> ROS2). Throws `lidar2d::Error` for a missing,
+/// unreadable or empty file, a directory that is not a ROS2 bag, or unknown content.
+LogFormat detectFormat(const std::string& path);
+
+/// Opens any supported log. Throws `lidar2d::Error` as `detectFormat` and the readers do.
+std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options = {});
+
+}  // namespace lidar2d::io

@@ -1,0 +1,60 @@
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/io/frame_source.hpp"
+#include "src/io/internal/readers.hpp"
+
+namespace lidar2d::io {
+
+const char* toString(LogFormat f) {
+  switch (f) {
+    case LogFormat::kCarmen:
+      return "carmen";
+    case LogFormat::kRosbag1:
+      return "rosbag1";
+    case LogFormat::kRosbag2:
+      return "rosbag2";
+  }
+  return "unknown";
+}
+
+LogFormat detectFormat(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw ioError("no such file", {path});
+  if (fs::is_directory(path, ec)) {
+    if (fs::exists(fs::path(path) / "metadata.yaml", ec)) return LogFormat::kRosbag2;
+    throw badInput("is a directory, not a log file (a ROS2 bag folder would hold metadata.yaml)", {path});
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ioError(std::string("cannot open: ") + std::strerror(errno), {path});
+  char head[16] = {};
+  in.read(head, sizeof head);
+  const auto n = static_cast<std::size_t>(in.gcount());
+  if (n == 0) throw badInput("file is empty", {path});
+  const std::string h(head, n);
+  if (n >= 2 && static_cast<unsigned char>(head[0]) == 0x1f && static_cast<unsigned char>(head[1]) == 0x8b)
+    return LogFormat::kCarmen;  // gzip: only CARMEN text logs are read compressed
+  if (h.rfind("#ROSBAG V", 0) == 0) return LogFormat::kRosbag1;
+  if (h.rfind("SQLite format 3", 0) == 0) return LogFormat::kRosbag2;
+  if (n >= 2 && head[0] == 'B' && head[1] == 'Z')
+    throw badInput("bzip2-compressed file: decompress it first (only gzip is read directly)", {path});
+  return LogFormat::kCarmen;  // text; the CARMEN reader reports content it cannot parse
+}
+
+std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options) {
+  switch (detectFormat(path)) {
+    case LogFormat::kCarmen:
+      return internal::openCarmen(path, options);
+    case LogFormat::kRosbag1:
+      return internal::openRosbag1(path, options);
+    case LogFormat::kRosbag2:
+      return internal::openRosbag2(path, options);
+  }
+  throw badInput("unknown log format", {path});
+}
+
+}  // namespace lidar2d::io

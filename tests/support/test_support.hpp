@@ -1,0 +1,57 @@
+#pragma once
+// Shared test helpers: data location, temporary folders, running the CLI, pose matchers.
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include "lidar2d/core/se2.hpp"
+
+namespace lidar2d::test {
+
+/// ../shared/data, or $LIDAR2D_DATA_DIR when set.
+std::filesystem::path dataDir();
+/// Path of a data file; when missing, the calling test should GTEST_SKIP (see REQUIRE_DATA).
+std::filesystem::path dataFile(const std::string& relative);
+
+/// Skips the current test with a message when a data file is missing.
+#define LIDAR2D_REQUIRE_DATA(relative)                                                            \
+  do {                                                                                            \
+    if (!std::filesystem::exists(::lidar2d::test::dataFile(relative)))                            \
+      GTEST_SKIP() << "test data " << ::lidar2d::test::dataFile(relative)                         \
+                   << " is missing (set LIDAR2D_DATA_DIR to the shared/data folder)";           \
+  } while (0)
+
+/// A fresh temporary folder, removed when the object dies.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+/// Result of running the lidar2d CLI.
+struct CliResult {
+  int exit_code = -1;
+  std::string out;  ///< stdout
+  std::string err;  ///< stderr
+};
+/// Runs the built lidar2d binary with `args` (shell-quoted here), capturing stdout and stderr.
+CliResult runCli(const std::vector<std::string>& args);
+
+/// Writes `content` to `path` (for malformed-input tests).
+void writeFile(const std::filesystem::path& path, const std::string& content);
+/// Writes gzip-compressed `content` to `path`.
+void writeGzip(const std::filesystem::path& path, const std::string& content);
+
+/// gtest predicate: poses agree within tolerances; prints both on failure.
+::testing::AssertionResult IsNearPose(const SE2& expected, const SE2& actual, double tol_m, double tol_deg);
+
+}  // namespace lidar2d::test

@@ -1,0 +1,25 @@
+#!/bin/sh
+# Installs everything lidar2d needs to build, test and benchmark on Debian 12 (bookworm).
+# Idempotent: does nothing (not even 'apt-get update') when every package is already installed.
+set -eu
+PKGS="build-essential make cmake pkg-config git
+  libeigen3-dev libceres-dev libnanoflann-dev
+  libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  libcli11-dev libspdlog-dev libfmt-dev libyaml-cpp-dev nlohmann-json3-dev
+  zlib1g-dev libbz2-dev liblz4-dev libsqlite3-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  librosbag-storage-dev libsensor-msgs-dev libnav-msgs-dev libtf2-msgs-dev pluginlib-dev
+  python3 python3-rosbag"
+missing=""
+for p in $PKGS; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+done
+if [ -z "$missing" ]; then
+  echo "install-deps: all packages present"
+  exit 0
+fi
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+echo "install-deps: installing:$missing"
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
