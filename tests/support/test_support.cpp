@@ -57,7 +57,7 @@ std::string slurp(const std::filesystem::path& p) {
 CliResult runCli(const std::vector<std::string>& args) {
   TempDir tmp;
   std::string cmd = shellQuote(LIDAR2D_CLI_PATH);
-  for (const auto& a : args) cmd += " " + shellQuote(a);
+  for (const auto& a : args) cmd.append(" ").append(shellQuote(a));
   // append() rather than "literal" + std::string: GCC 12 raises a false -Wrestrict on the latter.
   cmd.append(" </dev/null >").append(shellQuote((tmp / "out").string()));
   cmd.append(" 2>").append(shellQuote((tmp / "err").string()));
