@@ -1,0 +1,146 @@
+#pragma once
+/// @file
+/// Occupancy maps built by inserting laser scans at known poses. Three models share one interface:
+/// log-odds, hit/miss counting, and a 2D truncated signed distance field (TSDF). All store their
+/// cells in a sparse `TiledGrid` and trace beams exactly (`traceRay`).
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "lidar2d/core/laser_scan.hpp"
+#include "lidar2d/core/se2.hpp"
+#include "lidar2d/mapping/tiled_grid.hpp"
+
+namespace lidar2d::mapping {
+
+enum class MapModel { kLogOdds, kCount, kTsdf };
+
+/// Printable name ("logodds", "count", "tsdf").
+const char* toString(MapModel m);
+
+/// Three-valued cell classification used for export (values as in nav_msgs/OccupancyGrid).
+enum class CellState : std::int8_t { kUnknown = -1, kFree = 0, kOccupied = 100 };
+
+/// How beams are inserted, common to all models.
+struct InsertOptions {
+  double max_range_m = 30.0;  ///< returns farther than this are treated as "no return" [m]
+  /// Beams without a return (>= range_max, +inf, or beyond max_range_m) clear free space up to
+  /// this distance and mark nothing occupied; 0 ignores them [m].
+  double no_return_clear_m = 5.0;
+  std::size_t cell_budget = 1'000'000'000;  ///< most cells the map may span [cells]
+};
+
+/// Log-odds model. Defaults follow Cartographer's 2D probability grid.
+struct LogOddsOptions {
+  double hit_probability = 0.55;   ///< probability added by a hit (as log-odds)
+  double miss_probability = 0.49;  ///< probability added by a pass (as log-odds)
+  double min_probability = 0.12;   ///< clamp [probability]
+  double max_probability = 0.97;   ///< clamp [probability]
+  /// The classic integer scheme instead of the probabilities above: cells start at 50 (unknown),
+  /// +2 per hit, -1 per pass, clamped to 1..100; probability = value / 100.
+  bool classic_integer = false;
+  double occupied_threshold = 0.6;  ///< exported occupied when probability >= this
+  double free_threshold = 0.45;     ///< exported free when probability < this
+};
+
+/// Hit/miss counting: probability = hits / (hits + misses).
+struct CountOptions {
+  double occupied_threshold = 0.25;  ///< exported occupied when hits/(hits+misses) >= this
+};
+
+/// 2D TSDF: signed distance along each beam (positive in front of the surface), truncated.
+struct TsdfOptions {
+  double truncation_m = 0.3;  ///< |signed distance| is clamped to this [m]
+  double max_weight = 100.0;  ///< cap of the running-average weight (older data keeps 1/cap influence)
+};
+
+struct MapOptions {
+  double resolution_m = 0.05;  ///< cell size [m]
+  InsertOptions insert;
+  LogOddsOptions logodds;
+  CountOptions count;
+  TsdfOptions tsdf;
+};
+
+/// A sub-cell surface point of the TSDF (a zero crossing between two adjacent cells).
+struct SurfacePoint {
+  Eigen::Vector2d p_world;  ///< [m]
+  double weight = 0.0;      ///< smaller of the two cells' weights
+};
+
+/// Base class of the three models. Non-copyable; options are fixed at construction.
+class OccupancyMap {
+ public:
+  virtual ~OccupancyMap() = default;
+  OccupancyMap(const OccupancyMap&) = delete;
+  OccupancyMap& operator=(const OccupancyMap&) = delete;
+
+  virtual MapModel model() const = 0;
+  const MapOptions& options() const { return options_; }
+  const GridGeometry& geometry() const { return geometry_; }
+
+  /// Inserts one scan taken by a laser at `T_world_laser`. Invalid beams: NaN and returns at or
+  /// below range_min are skipped; no-return beams clear free space (see InsertOptions). Throws
+  /// `lidar2d::Error` when the scan would push the map beyond its cell budget or the pose is not
+  /// finite; the map is unchanged in that case.
+  void insert(const LaserScan& scan, const SE2& T_world_laser);
+
+  /// Occupancy probability in [0, 1], or std::nullopt for a never-observed cell. (TSDF: 1 for
+  /// surface cells, 0 for observed free cells, 0.5 otherwise.)
+  virtual std::optional<double> probability(CellIndex c) const = 0;
+  /// Exported classification of a cell.
+  virtual CellState state(CellIndex c) const = 0;
+  /// Box of all cells any inserted beam touched; empty before any insertion.
+  const CellBox& bounds() const { return bounds_; }
+  /// Total cell updates so far (one per cell per beam), for benchmarks.
+  std::uint64_t cellUpdates() const { return cell_updates_; }
+  /// Memory held by the cells [bytes].
+  virtual std::size_t memoryBytes() const = 0;
+
+ protected:
+  explicit OccupancyMap(const MapOptions& options);
+  /// Model-specific insertion of prepared beams (all in continuous cell coordinates).
+  struct Beam {
+    Eigen::Vector2d end;  ///< end of the traced segment [cells]
+    double range_cells;   ///< length of the beam up to the return [cells]
+    bool hit;             ///< true: a return at `end`; false: no return (clear only)
+  };
+  virtual std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams,
+                                    const CellBox& box) = 0;
+
+  const MapOptions options_;
+  const GridGeometry geometry_;
+
+ private:
+  std::uint64_t cell_updates_ = 0;
+  CellBox bounds_;
+  std::vector<Beam> beams_;  // scratch buffer reused between scans
+};
+
+/// Creates a map of the given model. Throws `lidar2d::Error` (kInvalidArgument, naming the field)
+/// for out-of-domain options (resolution, probabilities outside (0, 1) or min > max, truncation <= 0).
+std::unique_ptr<OccupancyMap> makeMap(MapModel model, const MapOptions& options = {});
+
+/// The TSDF's zero crossings with sub-cell interpolation. Throws kInvalidArgument unless `map` is a
+/// TSDF map.
+std::vector<SurfacePoint> tsdfSurface(const OccupancyMap& map);
+
+/// A dense classified raster of a map's bounds (row 0 = lowest y), for export.
+struct ClassifiedGrid {
+  CellBox box;                    ///< cells covered
+  double resolution_m = 0.05;     ///< cell size [m]
+  std::vector<CellState> cells;   ///< width * height, row-major, row 0 = box.min.y
+  std::int64_t width() const { return box.width(); }
+  std::int64_t height() const { return box.height(); }
+  CellState at(CellIndex c) const {
+    return cells[static_cast<std::size_t>((c.y - box.min.y) * width() + (c.x - box.min.x))];
+  }
+};
+
+/// Classifies every cell in `map.bounds()` (optionally padded by `pad_cells`).
+ClassifiedGrid classify(const OccupancyMap& map, int pad_cells = 0);
+
+}  // namespace lidar2d::mapping

@@ -1,0 +1,238 @@
+// Occupancy models (log-odds, count, TSDF) on a tiny synthetic world: an axis-aligned room seen
+// from several poses with exact ranges.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+
+namespace lidar2d::mapping {
+namespace {
+
+// Room [x0, x1] x [y0, y1]; walls at non-grid-aligned positions so sub-cell accuracy matters.
+constexpr double kX0 = -2.013, kX1 = 3.021, kY0 = -1.537, kY1 = 2.478;
+
+double rangeInRoom(const Eigen::Vector2d& o, double a) {
+  const double dx = std::cos(a), dy = std::sin(a);
+  double t = std::numeric_limits<double>::infinity();
+  if (dx > 0) t = std::min(t, (kX1 - o.x()) / dx);
+  if (dx < 0) t = std::min(t, (kX0 - o.x()) / dx);
+  if (dy > 0) t = std::min(t, (kY1 - o.y()) / dy);
+  if (dy < 0) t = std::min(t, (kY0 - o.y()) / dy);
+  return t;
+}
+
+LaserScan roomScan(const SE2& T_world_laser, std::size_t beams = 720) {
+  LaserScanFields f;
+  f.angle_min = -std::numbers::pi;
+  f.angle_increment = 2 * std::numbers::pi / static_cast<double>(beams);
+  f.range_max = 30;
+  for (std::size_t i = 0; i < beams; ++i)
+    f.ranges.push_back(rangeInRoom(T_world_laser.translation(), T_world_laser.theta() + f.angle_min + i * f.angle_increment));
+  return LaserScan::create(f);
+}
+
+double distanceToWalls(const Eigen::Vector2d& p) {
+  return std::min({std::abs(p.x() - kX0), std::abs(p.x() - kX1), std::abs(p.y() - kY0), std::abs(p.y() - kY1)});
+}
+
+const std::vector<SE2> kPoses = {{0, 0, 0}, {1.5, 1.0, 0.7}, {-1.0, -0.5, -2.0}, {2.0, -1.0, 3.0}, {-1.2, 1.8, 1.1}};
+
+class ModelTest : public ::testing::TestWithParam<MapModel> {};
+
+TEST_P(ModelTest, WallsOccupiedInteriorFree) {
+  MapOptions o;
+  o.resolution_m = 0.05;
+  auto map = makeMap(GetParam(), o);
+  for (int rep = 0; rep < 3; ++rep)
+    for (const SE2& T : kPoses) map->insert(roomScan(T), T);
+  const GridGeometry& g = map->geometry();
+  int wall_cells = 0, wall_occupied = 0, inner = 0, inner_free = 0, false_occ = 0;
+  const CellBox b = map->bounds();
+  for (int y = b.min.y; y <= b.max.y; ++y)
+    for (int x = b.min.x; x <= b.max.x; ++x) {
+      const Eigen::Vector2d c = g.centerOf({x, y});
+      const bool inside = c.x() > kX0 && c.x() < kX1 && c.y() > kY0 && c.y() < kY1;
+      const double d = distanceToWalls(c);
+      const CellState s = map->state({x, y});
+      // Cells a wall passes through (the wall line crosses the cell), away from the corners.
+      const bool near_x_wall = std::min(std::abs(c.x() - kX0), std::abs(c.x() - kX1)) < 0.1;
+      const bool near_y_wall = std::min(std::abs(c.y() - kY0), std::abs(c.y() - kY1)) < 0.1;
+      const double h = 0.5 * g.resolution();
+      const bool in_box = c.x() > kX0 - h && c.x() < kX1 + h && c.y() > kY0 - h && c.y() < kY1 + h;
+      const bool on_wall = in_box && d < h && !(near_x_wall && near_y_wall);
+      if (on_wall) {
+        ++wall_cells;
+        wall_occupied += s == CellState::kOccupied;
+      }
+      if (inside && d > 2 * g.resolution()) {
+        ++inner;
+        inner_free += s == CellState::kFree;
+        false_occ += s == CellState::kOccupied;
+      }
+    }
+  ASSERT_GT(wall_cells, 300);
+  EXPECT_GE(wall_occupied, wall_cells * 98 / 100) << toString(GetParam()) << ": " << wall_occupied << "/" << wall_cells;
+  EXPECT_GE(inner_free, inner * 99 / 100) << toString(GetParam()) << ": " << inner_free << "/" << inner;
+  EXPECT_EQ(false_occ, 0) << toString(GetParam());
+  EXPECT_GT(map->cellUpdates(), 0u);
+}
+
+TEST_P(ModelTest, NoReturnBeamsClearButMarkNothing) {
+  MapOptions o;
+  o.insert.no_return_clear_m = 2.0;
+  auto map = makeMap(GetParam(), o);
+  LaserScanFields f;
+  f.angle_min = -0.5;
+  f.angle_increment = 0.01;
+  f.range_max = 10;
+  f.ranges.assign(100, 10.0);  // all no-return
+  // Several passes: with Cartographer's log-odds one pass (p = 0.49) is not yet "free".
+  for (int i = 0; i < 10; ++i) map->insert(LaserScan::create(f), SE2());
+  const CellBox b = map->bounds();
+  ASSERT_FALSE(b.empty());
+  for (int y = b.min.y; y <= b.max.y; ++y)
+    for (int x = b.min.x; x <= b.max.x; ++x) EXPECT_NE(map->state({x, y}), CellState::kOccupied);
+  EXPECT_LE(b.max.x, 2.0 / 0.05 + 1);
+  EXPECT_EQ(map->state(map->geometry().cellOf({1.0, 0.0})), CellState::kFree);
+  EXPECT_EQ(map->state(map->geometry().cellOf({3.0, 0.0})), CellState::kUnknown);
+}
+
+TEST_P(ModelTest, AbsurdPoseIsAnErrorAndLeavesTheMapUnchanged) {
+  MapOptions o;
+  o.insert.cell_budget = 10'000'000;
+  auto map = makeMap(GetParam(), o);
+  map->insert(roomScan(SE2()), SE2());
+  const auto updates = map->cellUpdates();
+  EXPECT_THROW(map->insert(roomScan(SE2()), SE2(1e7, 0, 0)), Error);
+  EXPECT_THROW(map->insert(roomScan(SE2()), SE2(1e12, 0, 0)), Error);
+  EXPECT_THROW(map->insert(roomScan(SE2()), SE2(std::nan(""), 0, 0)), Error);
+  EXPECT_EQ(map->cellUpdates(), updates);
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, ModelTest, ::testing::Values(MapModel::kLogOdds, MapModel::kCount, MapModel::kTsdf),
+                         [](const auto& info) { return std::string(toString(info.param)); });
+
+TEST(LogOdds, ClassicIntegerPreset) {
+  MapOptions o;
+  o.logodds.classic_integer = true;
+  auto map = makeMap(MapModel::kLogOdds, o);
+  LaserScanFields f;
+  f.angle_min = 0;
+  f.angle_increment = 0.01;
+  f.range_max = 10;
+  f.ranges = {1.0};
+  const auto scan = LaserScan::create(f);
+  map->insert(scan, SE2(0.025, 0.025, 0));  // along the row of cells y = 0
+  const GridGeometry& g = map->geometry();
+  EXPECT_DOUBLE_EQ(*map->probability(g.cellOf({0.5, 0.025})), 0.49);  // one pass: 50 - 1
+  EXPECT_DOUBLE_EQ(*map->probability(g.cellOf({1.03, 0.025})), 0.52);  // one hit: 50 + 2
+  for (int i = 0; i < 100; ++i) map->insert(scan, SE2(0.025, 0.025, 0));
+  EXPECT_DOUBLE_EQ(*map->probability(g.cellOf({0.5, 0.025})), 0.01);  // clamped at 1
+  EXPECT_DOUBLE_EQ(*map->probability(g.cellOf({1.03, 0.025})), 1.0);  // clamped at 100
+  EXPECT_FALSE(map->probability(g.cellOf({0.5, 1.0})).has_value());
+}
+
+TEST(LogOdds, CartographerDefaultsAndCellUpdatedOncePerBeam) {
+  auto map = makeMap(MapModel::kLogOdds);
+  LaserScanFields f;
+  f.angle_min = 0;
+  f.angle_increment = 0.01;
+  f.range_max = 10;
+  f.ranges = {1.0};
+  map->insert(LaserScan::create(f), SE2(0.025, 0.025, 0));
+  const GridGeometry& g = map->geometry();
+  EXPECT_NEAR(*map->probability(g.cellOf({0.5, 0.025})), 0.49, 1e-6);
+  EXPECT_NEAR(*map->probability(g.cellOf({1.03, 0.025})), 0.55, 1e-6);
+  EXPECT_EQ(map->cellUpdates(), 21u);  // cells 0..20 along the beam, each once
+}
+
+TEST(Count, HitsOverHitsPlusMisses) {
+  auto map = makeMap(MapModel::kCount);
+  LaserScanFields f;
+  f.angle_min = 0;
+  f.angle_increment = 0.01;
+  f.range_max = 10;
+  f.ranges = {1.0};
+  const auto near = LaserScan::create(f);
+  f.ranges = {2.0};
+  const auto far = LaserScan::create(f);
+  const SE2 T(0.025, 0.025, 0);
+  map->insert(near, T);
+  map->insert(far, T);
+  map->insert(far, T);
+  EXPECT_NEAR(*map->probability(map->geometry().cellOf({1.03, 0.025})), 1.0 / 3.0, 1e-12);
+}
+
+TEST(Tsdf, SurfaceIsSubCellAndBetterThanOccupancyCells) {
+  MapOptions o;
+  o.resolution_m = 0.05;
+  auto tsdf = makeMap(MapModel::kTsdf, o);
+  auto logodds = makeMap(MapModel::kLogOdds, o);
+  for (const SE2& T : kPoses) {
+    tsdf->insert(roomScan(T), T);
+    logodds->insert(roomScan(T), T);
+  }
+  const auto surface = tsdfSurface(*tsdf);
+  ASSERT_GT(surface.size(), 300u);
+  double sum = 0;
+  int n = 0;
+  for (const auto& s : surface) {
+    // Skip the corners, where two walls meet and the distance is ambiguous.
+    const Eigen::Vector2d& p = s.p_world;
+    if (p.x() < kX0 + 0.2 || p.x() > kX1 - 0.2 || p.y() < kY0 + 0.2 || p.y() > kY1 - 0.2) {
+      if (!(std::abs(p.x() - kX0) < 0.3 || std::abs(p.x() - kX1) < 0.3) || !(std::abs(p.y() - kY0) < 0.3 || std::abs(p.y() - kY1) < 0.3)) {
+        sum += distanceToWalls(p);
+        ++n;
+      }
+    }
+  }
+  ASSERT_GT(n, 200);
+  const double tsdf_mean = sum / n;
+  // Occupied log-odds cells, measured at their centres.
+  double occ_sum = 0;
+  int occ_n = 0;
+  const CellBox b = logodds->bounds();
+  for (int y = b.min.y; y <= b.max.y; ++y)
+    for (int x = b.min.x; x <= b.max.x; ++x)
+      if (logodds->state({x, y}) == CellState::kOccupied) {
+        occ_sum += distanceToWalls(logodds->geometry().centerOf({x, y}));
+        ++occ_n;
+      }
+  const double occ_mean = occ_sum / occ_n;
+  EXPECT_LT(tsdf_mean, 0.25 * o.resolution_m) << "tsdf " << tsdf_mean << " occupancy " << occ_mean;
+  EXPECT_LT(tsdf_mean, occ_mean);
+  EXPECT_THROW(tsdfSurface(*logodds), Error);
+}
+
+TEST(MakeMap, RejectsOutOfDomainOptions) {
+  auto expectField = [](MapOptions o, const std::string& field) {
+    try {
+      (void)makeMap(MapModel::kLogOdds, o);
+      ADD_FAILURE() << field;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.where().field, field) << e.what();
+    }
+  };
+  MapOptions o;
+  o.resolution_m = 0;
+  expectField(o, "resolution");
+  o = {};
+  o.logodds.hit_probability = 1.0;
+  expectField(o, "hit_probability");
+  o = {};
+  o.logodds.min_probability = 0.99;
+  expectField(o, "min_probability");
+  o = {};
+  o.tsdf.truncation_m = -1;
+  expectField(o, "truncation_m");
+  o = {};
+  o.insert.max_range_m = 1e9;
+  expectField(o, "max_range_m");
+}
+
+}  // namespace
+}  // namespace lidar2d::mapping

@@ -1,0 +1,84 @@
+// traceRay against a per-cell reference: a cell is crossed when the segment overlaps its interior
+// over a positive length (Liang-Barsky clipping of the segment to the cell).
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <set>
+
+#include "lidar2d/mapping/ray_trace.hpp"
+
+namespace lidar2d::mapping {
+namespace {
+
+double clippedLength(const Eigen::Vector2d& a, const Eigen::Vector2d& b, int cx, int cy) {
+  double t0 = 0, t1 = 1;
+  const Eigen::Vector2d d = b - a;
+  const double p[4] = {-d.x(), d.x(), -d.y(), d.y()};
+  const double q[4] = {a.x() - cx, cx + 1 - a.x(), a.y() - cy, cy + 1 - a.y()};
+  for (int i = 0; i < 4; ++i) {
+    if (p[i] == 0) {
+      if (q[i] < 0) return 0;
+      continue;
+    }
+    const double t = q[i] / p[i];
+    if (p[i] < 0)
+      t0 = std::max(t0, t);
+    else
+      t1 = std::min(t1, t);
+  }
+  return t1 > t0 ? (t1 - t0) * d.norm() : 0.0;
+}
+
+std::set<std::pair<int, int>> referenceCells(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  std::set<std::pair<int, int>> cells;
+  const int x0 = static_cast<int>(std::floor(std::min(a.x(), b.x()))) - 1;
+  const int x1 = static_cast<int>(std::floor(std::max(a.x(), b.x()))) + 1;
+  const int y0 = static_cast<int>(std::floor(std::min(a.y(), b.y()))) - 1;
+  const int y1 = static_cast<int>(std::floor(std::max(a.y(), b.y()))) + 1;
+  for (int y = y0; y <= y1; ++y)
+    for (int x = x0; x <= x1; ++x)
+      if (clippedLength(a, b, x, y) > 1e-9) cells.insert({x, y});
+  return cells;
+}
+
+TEST(TraceRay, MatchesPerCellReferenceOnRandomSegments) {
+  std::mt19937_64 rng(42);
+  std::uniform_real_distribution<double> u(-50.0, 50.0);
+  for (int trial = 0; trial < 3000; ++trial) {
+    const Eigen::Vector2d a(u(rng), u(rng));
+    const Eigen::Vector2d b = a + Eigen::Vector2d(u(rng), u(rng)) * (trial % 3 == 0 ? 0.05 : 0.6);
+    std::vector<std::pair<int, int>> visited;
+    const CellIndex end = traceRay(a, b, [&](CellIndex c) { visited.emplace_back(c.x, c.y); });
+    visited.emplace_back(end.x, end.y);
+    EXPECT_EQ(end.x, static_cast<int>(std::floor(b.x())));
+    EXPECT_EQ(end.y, static_cast<int>(std::floor(b.y())));
+    EXPECT_EQ(visited.front(), std::make_pair(static_cast<int>(std::floor(a.x())), static_cast<int>(std::floor(a.y()))));
+    // Each cell once, consecutive cells 4-adjacent.
+    const std::set<std::pair<int, int>> unique(visited.begin(), visited.end());
+    ASSERT_EQ(unique.size(), visited.size()) << "a cell visited twice, trial " << trial;
+    for (std::size_t i = 1; i < visited.size(); ++i)
+      EXPECT_EQ(std::abs(visited[i].first - visited[i - 1].first) + std::abs(visited[i].second - visited[i - 1].second), 1);
+    EXPECT_EQ(unique, referenceCells(a, b)) << "trial " << trial;
+  }
+}
+
+TEST(TraceRay, AxisAlignedAndDegenerateSegments) {
+  std::vector<std::pair<int, int>> v;
+  auto collect = [&](CellIndex c) { v.emplace_back(c.x, c.y); };
+  CellIndex e = traceRay({0.5, 0.5}, {0.7, 0.2}, collect);  // same cell
+  EXPECT_TRUE(v.empty());
+  EXPECT_EQ(e, (CellIndex{0, 0}));
+  e = traceRay({0.5, 0.5}, {-3.5, 0.5}, collect);  // along -x
+  EXPECT_EQ(v, (std::vector<std::pair<int, int>>{{0, 0}, {-1, 0}, {-2, 0}, {-3, 0}}));
+  EXPECT_EQ(e, (CellIndex{-4, 0}));
+  v.clear();
+  // Exactly through a corner: stays 4-connected and ends in the end cell.
+  e = traceRay({0.5, 0.5}, {2.5, 2.5}, collect);
+  EXPECT_EQ(e, (CellIndex{2, 2}));
+  EXPECT_EQ(v.size(), 4u);
+}
+
+}  // namespace
+}  // namespace lidar2d::mapping
