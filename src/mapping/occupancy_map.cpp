@@ -151,8 +151,13 @@ class TsdfMap final : public OccupancyMap {
   explicit TsdfMap(const MapOptions& o)
       : OccupancyMap(o),
         grid_(TsdfCell{}, o.insert.cell_budget),
-        trunc_cells_(static_cast<float>(o.tsdf.truncation_m * geometry_.inverseResolution())),
-        max_weight_(static_cast<float>(o.tsdf.max_weight)) {}
+        trunc_cells_(static_cast<float>(o.tsdf.truncation_m * geometry_.inverseResolution())) {
+    const auto cap = static_cast<std::size_t>(o.tsdf.max_weight);
+    for (std::size_t w = 0; w <= cap; ++w) {
+      inv_weight_.push_back(1.0f / static_cast<float>(std::min(w + 1, cap)));
+      weight_next_.push_back(static_cast<float>(std::min(w + 1, cap)));
+    }
+  }
   MapModel model() const override { return MapModel::kTsdf; }
 
   std::optional<double> probability(CellIndex c) const override {
@@ -195,18 +200,21 @@ class TsdfMap final : public OccupancyMap {
       const Eigen::Vector2d d = b.end - origin;
       const double len = d.norm();
       if (len <= 0) continue;
-      const Eigen::Vector2d dir = d / len;
-      // Signed distance of a cell = range - (projection of its centre on the beam), in cells.
+      // Signed distance of a cell = range - (projection of its centre on the beam), in cells;
+      // the projection is affine in the cell index, so it costs two multiply-adds per cell.
+      const float dir_x = static_cast<float>(d.x() / len), dir_y = static_cast<float>(d.y() / len);
+      const float offset = static_cast<float>(b.range_cells - ((0.5 - origin.x()) * d.x() + (0.5 - origin.y()) * d.y()) / len);
       auto update = [&](CellIndex c) {
-        const double along = (Eigen::Vector2d(c.x + 0.5, c.y + 0.5) - origin).dot(dir);
-        const float sdf = b.hit ? std::clamp(static_cast<float>(b.range_cells - along), -t, t) : t;
+        const float sdf = b.hit ? std::clamp(offset - (dir_x * static_cast<float>(c.x) + dir_y * static_cast<float>(c.y)), -t, t) : t;
         TsdfCell& v = grid_.cellUnchecked(c);
         // Free-space carving (sdf at the truncation) never pulls a cell that is behind a surface
         // back to the front: beams grazing a wall clip the corners of the cells the wall passes
         // through, and averaging +t into them would move the zero crossing off the wall.
-        if (sdf >= t && v.weight > 0 && v.sdf < 0) return;
-        v.sdf = (v.sdf * v.weight + sdf) / (v.weight + 1.0f);
-        v.weight = std::min(v.weight + 1.0f, max_weight_);
+        if (sdf >= t && v.sdf < 0) return;
+        // Weights are whole numbers up to the cap, so 1 / (w + 1) comes from a table.
+        const auto w = static_cast<std::size_t>(v.weight);
+        v.sdf += (sdf - v.sdf) * inv_weight_[w];
+        v.weight = weight_next_[w];
         ++updates;
       };
       // For a return, b.end already lies `truncation` behind the surface (see insert()).
@@ -219,7 +227,8 @@ class TsdfMap final : public OccupancyMap {
  private:
   TiledGrid<TsdfCell> grid_;
   const float trunc_cells_;
-  const float max_weight_;
+  std::vector<float> inv_weight_;   // 1 / (new weight) for each current whole weight
+  std::vector<float> weight_next_;  // new weight after one more observation (capped)
 };
 
 }  // namespace
@@ -288,7 +297,7 @@ std::unique_ptr<OccupancyMap> makeMap(MapModel model, const MapOptions& o) {
     throw badOption("min_probability", "clamp bounds must satisfy 0 < min < max < 1");
   if (!(o.tsdf.truncation_m > 0) || !std::isfinite(o.tsdf.truncation_m))
     throw badOption("truncation_m", "must be positive");
-  if (!(o.tsdf.max_weight >= 1)) throw badOption("max_weight", "must be >= 1");
+  if (!(o.tsdf.max_weight >= 1 && o.tsdf.max_weight <= 1e6)) throw badOption("max_weight", "must be in [1, 1e6]");
   if (!(o.insert.max_range_m > 0 && o.insert.max_range_m <= 1e4))
     throw badOption("max_range_m", "must be in (0, 10000] m");
   if (!(o.insert.no_return_clear_m >= 0 && o.insert.no_return_clear_m <= 1e4))

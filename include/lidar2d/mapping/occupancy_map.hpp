@@ -54,7 +54,7 @@ struct CountOptions {
 /// 2D TSDF: signed distance along each beam (positive in front of the surface), truncated.
 struct TsdfOptions {
   double truncation_m = 0.3;  ///< |signed distance| is clamped to this [m]
-  double max_weight = 100.0;  ///< cap of the running-average weight (older data keeps 1/cap influence)
+  double max_weight = 100.0;  ///< cap of the running-average weight, a whole number (older data keeps 1/cap influence)
 };
 
 struct MapOptions {
