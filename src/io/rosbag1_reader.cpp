@@ -1,11 +1,311 @@
-// Placeholder: replaced by the real reader.
+// ROS1 bag reader (bag formats 2.0 and 1.2, uncompressed, bz2 or lz4 chunks) on top of Debian's
+// rosbag_storage library: rosbag::Bag/View do the container (records, chunks, indexes, time
+// order), our bounds-checked decoders in internal/ros_messages.cpp turn the raw message bytes into
+// plain structs (see there why not ros::serialization). No ROS type leaves this file.
+
+#include <console_bridge/console.h>
+#include <fmt/format.h>
+#include <ros/serialization.h>
+#include <rosbag/bag.h>
+#include <rosbag/exceptions.h>
+#include <rosbag/query.h>
+#include <rosbag/view.h>
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <new>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
 #include "lidar2d/core/error.hpp"
 #include "src/io/internal/readers.hpp"
+#include "src/io/internal/ros_frames.hpp"
+#include "src/io/internal/ros_messages.hpp"
 
 namespace lidar2d::io::internal {
+namespace {
 
-std::unique_ptr<FrameSource> openRosbag1(const std::string& path, const ReaderOptions&) {
-  throw Error(ErrorKind::kUnsupported, "rosbag1 logs are not supported yet", {path});
+constexpr const char* kLaserScanType = "sensor_msgs/LaserScan";
+constexpr const char* kOdometryType = "nav_msgs/Odometry";
+// MD5 sums of the message definitions our decoders implement (from the .msg files; what rosbag
+// stores in each connection header). "*" means "any" in ROS1.
+constexpr const char* kLaserScanMd5 = "90c7ef2dc6895d81024acba2ac42f369";
+constexpr const char* kOdometryMd5 = "cd5e73d190d741a2f92e81eda573aca7";
+constexpr const char* kTfMessageMd5 = "94810edda583a504dfda3829e70d7eec";  // tf2_msgs and tf/tfMessage
+// Old bags (before tf2) have no /tf_static and republish static transforms on /tf; read at most this
+// much of /tf when looking for the laser mounting.
+constexpr double kTfSearchWindowS = 30.0;
+constexpr std::size_t kMaxTfMessages = 100000;
+
+void silenceRosLogging() {
+  // rosbag_storage logs through console_bridge to stderr; the library must never print.
+  static std::once_flag once;
+  std::call_once(once, [] { console_bridge::setLogLevel(console_bridge::CONSOLE_BRIDGE_LOG_NONE); });
+}
+
+/// Runs `f`, turning rosbag's and ROS's exceptions into lidar2d::Error naming the file.
+template <typename F>
+auto guarded(const std::string& path, const char* doing, F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    throw badInput(fmt::format("out of memory while {} (corrupt sizes in the bag?)", doing), {path});
+  } catch (const std::exception& e) {
+    throw badInput(fmt::format("not a readable ROS1 bag ({}): {}", doing, e.what()), {path});
+  }
+}
+
+std::vector<std::uint8_t>& rawBytes(const rosbag::MessageInstance& m, std::vector<std::uint8_t>& buf) {
+  buf.resize(m.size());
+  ros::serialization::OStream s(buf.data(), static_cast<std::uint32_t>(buf.size()));
+  m.write(s);
+  return buf;
+}
+
+class Ros1Source final : public FrameSource {
+ public:
+  Ros1Source(std::string path, const ReaderOptions& options) : path_(std::move(path)), assembler_(SE2(), false) {
+    silenceRosLogging();
+    guarded(path_, "opening", [&] { bag_.open(path_, rosbag::bagmode::Read); });
+    guarded(path_, "reading the index", [&] { setUp(options); });
+  }
+
+  std::optional<Frame> next() override {
+    return guarded(path_, "reading messages", [&]() -> std::optional<Frame> {
+      for (;;) {
+        if (auto f = assembler_.pop()) return f;
+        if (done_) return std::nullopt;
+        if (it_ == view_->end()) {
+          assembler_.finish();
+          done_ = true;
+          continue;
+        }
+        consume(*it_);
+        ++it_;
+      }
+    });
+  }
+
+  LogFormat format() const override { return LogFormat::kRosbag1; }
+  const std::string& path() const override { return path_; }
+
+  SourceNotes notes() const override {
+    SourceNotes n = notes_;
+    for (auto& w : assembler_.warnings()) n.warnings.push_back(std::move(w));
+    if (negative_ranges_)
+      n.warnings.push_back(fmt::format("{} negative ranges (treated as invalid beams)", negative_ranges_));
+    if (zero_stamps_)
+      n.warnings.push_back(fmt::format("{} messages have a zero header stamp; their bag time is used", zero_stamps_));
+    return n;
+  }
+
+ private:
+  struct Topic {
+    RosTopicInfo info;
+    std::set<std::string> md5s;
+  };
+
+  std::vector<Topic> listTopics() {
+    std::vector<Topic> topics;
+    std::map<std::string, std::size_t> by_name;
+    rosbag::View all(bag_);
+    for (const rosbag::ConnectionInfo* c : all.getConnections()) {
+      auto [it, fresh] = by_name.emplace(c->topic, topics.size());
+      if (fresh) topics.push_back({{c->topic, c->datatype, 0}, {}});
+      topics[it->second].md5s.insert(c->md5sum);
+    }
+    for (auto& t : topics) {
+      rosbag::View v(bag_, rosbag::TopicQuery(t.info.name));
+      t.info.count = v.size();
+    }
+    return topics;
+  }
+
+  void checkMd5(const Topic& t, const char* md5) const {
+    for (const auto& m : t.md5s)
+      if (m != md5 && m != "*")
+        throw Error(ErrorKind::kUnsupported,
+                    fmt::format("topic {} stores {} with definition md5 {}, not the standard {} (an older or modified "
+                                "message definition)",
+                                t.info.name, t.info.type, m, md5),
+                    {path_});
+  }
+
+  /// The first message of a topic, decoded with `decode`.
+  template <typename Decode>
+  auto firstMessage(const std::string& topic, Decode&& decode) {
+    rosbag::View v(bag_, rosbag::TopicQuery(topic));
+    std::vector<std::uint8_t> buf;
+    using Msg = decltype(decode(std::span<const std::uint8_t>(), RosMessageRef()));
+    std::optional<Msg> out;
+    const auto it = v.begin();
+    if (it != v.end()) out = decode(rawBytes(*it, buf), RosMessageRef{path_, fmt::format("first message on {}", topic)});
+    return out;
+  }
+
+  void setUp(const ReaderOptions& options) {
+    const std::vector<Topic> topics = listTopics();
+    std::vector<RosTopicInfo> infos;
+    for (const auto& t : topics) infos.push_back(t.info);
+    auto find = [&](const std::string& name) -> const Topic& {
+      for (const auto& t : topics)
+        if (t.info.name == name) return t;
+      throw badInput("internal: topic vanished", {path_});
+    };
+
+    const auto scan = chooseRosTopic(infos, {kLaserScanType}, options.scan_topic, false, "LaserScan", "--scan-topic",
+                                     path_, notes_.warnings);
+    if (!scan) {
+      std::string all;
+      for (const auto& t : infos) all += fmt::format("{}{} ({})", all.empty() ? "" : ", ", t.name, t.type);
+      throw badInput(fmt::format("no {} topic in the bag (topics: {})", kLaserScanType, all.empty() ? "none" : all),
+                     {path_});
+    }
+    checkMd5(find(scan->name), kLaserScanMd5);
+    scan_topic_ = scan->name;
+
+    const auto odom = chooseRosTopic(infos, {kOdometryType}, options.odom_topic, true, "Odometry", "--odom-topic",
+                                     path_, notes_.warnings);
+    if (odom) {
+      checkMd5(find(odom->name), kOdometryMd5);
+      odom_topic_ = odom->name;
+    }
+
+    // Frames: the laser frame from the first scan, the robot frame from the first odometry message.
+    const auto first_scan = firstMessage(scan_topic_, [](auto bytes, const RosMessageRef& ref) {
+      return decodeLaserScan(bytes, RosWire::kRos1, ref);
+    });
+    const std::string laser_frame = first_scan ? first_scan->frame_id : std::string();
+    std::vector<std::string> robot_frames{"base_link", "base_footprint"};
+    if (!odom_topic_.empty()) {
+      const auto first_odom = firstMessage(odom_topic_, [](auto bytes, const RosMessageRef& ref) {
+        return decodeOdometry(bytes, RosWire::kRos1, ref);
+      });
+      if (first_odom && !first_odom->child_frame_id.empty()) robot_frames = {first_odom->child_frame_id};
+    }
+    const RosMount mount = findMount(topics, robot_frames, laser_frame);
+
+    notes_.scan_source = fmt::format("{} ({}, frame '{}'{})", scan_topic_, kLaserScanType, laser_frame,
+                                     mount.found ? fmt::format(", mounting {}", mount.description) : std::string());
+    if (!odom_topic_.empty())
+      notes_.odom_source = fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic_, kOdometryType,
+                                       robot_frames.front());
+    assembler_ = RosFrameAssembler(mount.T_robot_laser, !odom_topic_.empty());
+
+    std::vector<std::string> wanted{scan_topic_};
+    if (!odom_topic_.empty()) wanted.push_back(odom_topic_);
+    view_ = std::make_unique<rosbag::View>(bag_, rosbag::TopicQuery(wanted));
+    it_ = view_->begin();
+  }
+
+  RosMount findMount(const std::vector<Topic>& topics, const std::vector<std::string>& robot_frames,
+                     const std::string& laser_frame) {
+    RosTfTree tree;
+    std::vector<std::uint8_t> buf;
+    auto tfTopic = [&](const std::string& name) -> const Topic* {
+      for (const auto& t : topics)
+        if (t.info.name == name && (t.info.type == "tf2_msgs/TFMessage" || t.info.type == "tf/tfMessage") &&
+            (t.md5s.count(kTfMessageMd5) || t.md5s.count("*")))
+          return &t;
+      return nullptr;
+    };
+    auto addMessage = [&](const rosbag::MessageInstance& m, std::size_t k) {
+      const RosMessageRef ref{path_, fmt::format("message {} on {}", k, m.getTopic())};
+      for (const auto& t : decodeTfMessage(rawBytes(m, buf), RosWire::kRos1, ref)) tree.add(t);
+    };
+    RosMount mount;
+    std::string source;
+    if (const Topic* st = tfTopic("/tf_static"); st && !laser_frame.empty()) {
+      rosbag::View v(bag_, rosbag::TopicQuery(st->info.name));
+      std::size_t k = 0;
+      for (auto it = v.begin(); it != v.end() && k < kMaxTfMessages; ++it) addMessage(*it, ++k);
+      mount = findRosMount(tree, robot_frames, laser_frame);
+      source = "/tf_static";
+    }
+    if (const Topic* dyn = tfTopic("/tf"); dyn && !mount.found && !laser_frame.empty()) {
+      rosbag::View v(bag_, rosbag::TopicQuery(dyn->info.name));
+      std::size_t k = 0;
+      std::optional<double> t0;
+      for (auto it = v.begin(); it != v.end() && k < kMaxTfMessages; ++it) {
+        const double t = it->getTime().toSec();
+        if (!t0) t0 = t;
+        if (t - *t0 > kTfSearchWindowS) break;
+        addMessage(*it, ++k);
+        mount = findRosMount(tree, robot_frames, laser_frame);
+        if (mount.found) break;
+      }
+      source = "/tf";
+    }
+    if (mount.found) {
+      if (!mount.description.empty() && mount.description.find("->") != std::string::npos)
+        mount.description += fmt::format(" from {}", source);
+      if (mount.max_tilt > 0.05)
+        notes_.warnings.push_back(fmt::format(
+            "the laser mounting {} is tilted by {:.1f} deg out of the plane; only its yaw is used", mount.description,
+            mount.max_tilt * 180.0 / std::numbers::pi));
+    } else {
+      std::string robots;
+      for (const auto& r : robot_frames) robots += fmt::format("{}'{}'", robots.empty() ? "" : " or ", r);
+      notes_.warnings.push_back(
+          laser_frame.empty()
+              ? std::string("the scans have no frame_id: laser mounting unknown, identity used")
+              : fmt::format("no transform from {} to the scans' frame '{}' in /tf_static or /tf: laser mounting "
+                            "unknown, identity used",
+                            robots, laser_frame));
+    }
+    return mount;
+  }
+
+  void consume(const rosbag::MessageInstance& m) {
+    const std::string& topic = m.getTopic();
+    const RosNanos bag_time = static_cast<RosNanos>(m.getTime().toNSec());
+    if (topic == scan_topic_) {
+      ++scan_count_;
+      const RosMessageRef ref{path_, fmt::format("message {} on {} (bag time {:.6f})", scan_count_, topic,
+                                                 rosSeconds(bag_time))};
+      const RosLaserScanMsg msg = decodeLaserScan(rawBytes(m, buf_), RosWire::kRos1, ref);
+      RosNanos stamp = msg.stamp;
+      if (stamp == 0) {
+        ++zero_stamps_;
+        stamp = bag_time;
+      }
+      const double t = rosSeconds(stamp);
+      assembler_.pushScan(toLaserScan(msg, t, ref, negative_ranges_), t);
+    } else if (topic == odom_topic_) {
+      ++odom_count_;
+      const RosMessageRef ref{path_, fmt::format("message {} on {} (bag time {:.6f})", odom_count_, topic,
+                                                 rosSeconds(bag_time))};
+      const RosOdometryMsg msg = decodeOdometry(rawBytes(m, buf_), RosWire::kRos1, ref);
+      RosNanos stamp = msg.stamp;
+      if (stamp == 0) {
+        ++zero_stamps_;
+        stamp = bag_time;
+      }
+      assembler_.pushOdometry(rosSeconds(stamp), projectToPlane(msg.pose));
+    }
+  }
+
+  std::string path_;
+  rosbag::Bag bag_;
+  std::unique_ptr<rosbag::View> view_;
+  rosbag::View::iterator it_;
+  std::string scan_topic_, odom_topic_;
+  RosFrameAssembler assembler_;
+  SourceNotes notes_;
+  std::vector<std::uint8_t> buf_;
+  std::size_t scan_count_ = 0, odom_count_ = 0, negative_ranges_ = 0, zero_stamps_ = 0;
+  bool done_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<FrameSource> openRosbag1(const std::string& path, const ReaderOptions& options) {
+  return std::make_unique<Ros1Source>(path, options);
 }
 
 }  // namespace lidar2d::io::internal

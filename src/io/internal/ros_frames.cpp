@@ -1,0 +1,248 @@
+#include "src/io/internal/ros_frames.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "lidar2d/core/error.hpp"
+
+namespace lidar2d::io::internal {
+
+namespace {
+
+std::string listTopics(const std::vector<const RosTopicInfo*>& topics) {
+  if (topics.empty()) return "none";
+  std::string out;
+  for (const auto* t : topics) {
+    if (!out.empty()) out += ", ";
+    out += fmt::format("{} ({} messages)", t->name, t->count);
+  }
+  return out;
+}
+
+}  // namespace
+
+std::optional<RosTopicInfo> chooseRosTopic(const std::vector<RosTopicInfo>& topics,
+                                           const std::vector<std::string>& types, const std::string& requested,
+                                           bool allow_none, const std::string& what, const std::string& option,
+                                           const std::string& path, std::vector<std::string>& warnings) {
+  std::vector<const RosTopicInfo*> candidates;
+  for (const auto& t : topics)
+    if (std::find(types.begin(), types.end(), t.type) != types.end()) candidates.push_back(&t);
+  if (allow_none && requested == "none") return std::nullopt;
+  if (!requested.empty()) {
+    for (const auto* c : candidates)
+      if (c->name == requested) return *c;
+    std::string other;
+    for (const auto& t : topics)
+      if (t.name == requested) other = fmt::format(" (it has type {})", t.type);
+    const std::string msg = other.empty() ? fmt::format("no {} topic named '{}'", what, requested)
+                                          : fmt::format("topic '{}' is not a {} topic{}", requested, what, other);
+    throw badInput(fmt::format("{}; {} topics: {}", msg, what, listTopics(candidates)), {path, 0, option});
+  }
+  if (candidates.empty()) return std::nullopt;
+  // Most messages first; stable, so ties keep the bag's order.
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const RosTopicInfo* a, const RosTopicInfo* b) { return a->count > b->count; });
+  if (candidates.size() > 1)
+    warnings.push_back(fmt::format("several {} topics: {}; reading {}, the one with the most messages (choose with {})",
+                                   what, listTopics(candidates), candidates.front()->name, option));
+  return *candidates.front();
+}
+
+SE2 projectToPlane(const RosTransform3& t) {
+  // Yaw of the ZYX (yaw-pitch-roll) decomposition of the unit quaternion.
+  const double yaw = std::atan2(2.0 * (t.qw * t.qz + t.qx * t.qy), 1.0 - 2.0 * (t.qy * t.qy + t.qz * t.qz));
+  return SE2(t.tx, t.ty, yaw);
+}
+
+double tiltOf(const RosTransform3& t) {
+  // z component of the rotated z axis: R(2,2) = 1 - 2(x^2 + y^2) for a unit quaternion.
+  const double zz = 1.0 - 2.0 * (t.qx * t.qx + t.qy * t.qy);
+  return std::acos(std::clamp(zz, -1.0, 1.0));
+}
+
+void RosTfTree::add(const RosTransformStamped& t) {
+  if (t.child.empty() || t.parent.empty() || t.child == t.parent) return;
+  parent_of_[t.child] = Edge{t.parent, t.transform};
+}
+
+bool RosTfTree::hasFrame(const std::string& frame) const {
+  if (parent_of_.count(frame)) return true;
+  return std::any_of(parent_of_.begin(), parent_of_.end(), [&](const auto& kv) { return kv.second.parent == frame; });
+}
+
+std::optional<RosTfTree::Lookup> RosTfTree::lookup(const std::string& from, const std::string& to) const {
+  struct Up {
+    std::string frame;
+    SE2 T_frame_start;  // the start frame in this ancestor
+    double tilt;
+  };
+  // Ancestors of a frame, itself first; stops at the root or on a cycle.
+  auto climb = [this](const std::string& start) {
+    std::vector<Up> ups{{start, SE2(), 0.0}};
+    std::set<std::string> seen{start};
+    for (;;) {
+      const auto it = parent_of_.find(ups.back().frame);
+      if (it == parent_of_.end() || seen.count(it->second.parent)) break;
+      const SE2 T_parent_child = projectToPlane(it->second.T_parent_child);
+      ups.push_back({it->second.parent, T_parent_child * ups.back().T_frame_start,
+                     std::max(ups.back().tilt, tiltOf(it->second.T_parent_child))});
+      seen.insert(it->second.parent);
+    }
+    return ups;
+  };
+  const auto from_up = climb(from);
+  const auto to_up = climb(to);
+  for (std::size_t j = 0; j < to_up.size(); ++j) {
+    for (std::size_t i = 0; i < from_up.size(); ++i) {
+      if (from_up[i].frame != to_up[j].frame) continue;
+      Lookup l;
+      // T_from_to = T_anc_from^-1 * T_anc_to
+      l.T_from_to = from_up[i].T_frame_start.inverse() * to_up[j].T_frame_start;
+      l.max_tilt = std::max(from_up[i].tilt, to_up[j].tilt);
+      for (std::size_t k = 0; k <= i; ++k) l.chain.push_back(from_up[k].frame);
+      for (std::size_t k = j; k-- > 0;) l.chain.push_back(to_up[k].frame);
+      return l;
+    }
+  }
+  return std::nullopt;
+}
+
+RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& robot_frames,
+                      const std::string& laser_frame) {
+  RosMount m;
+  if (laser_frame.empty()) return m;
+  for (const auto& robot : robot_frames) {
+    if (robot.empty()) continue;
+    if (robot == laser_frame) {
+      m.found = true;
+      m.robot_frame = robot;
+      m.description = fmt::format("the scans' frame {} is the robot frame", laser_frame);
+      return m;
+    }
+    if (const auto l = tree.lookup(robot, laser_frame)) {
+      m.found = true;
+      m.robot_frame = robot;
+      m.T_robot_laser = l->T_from_to;
+      m.max_tilt = l->max_tilt;
+      for (const auto& f : l->chain) {
+        if (!m.description.empty()) m.description += " -> ";
+        m.description += f;
+      }
+      return m;
+    }
+  }
+  return m;
+}
+
+LaserScan toLaserScan(const RosLaserScanMsg& m, double time, const RosMessageRef& ref, std::size_t& negative_ranges) {
+  LaserScanFields f;
+  f.time = time;
+  f.angle_min = m.angle_min;
+  f.angle_increment = m.angle_increment;
+  f.range_min = m.range_min;
+  f.range_max = m.range_max;
+  f.ranges.assign(m.ranges.begin(), m.ranges.end());
+  for (const float r : m.ranges)
+    if (std::isfinite(r) && r < 0.0f) ++negative_ranges;
+  f.intensities.assign(m.intensities.begin(), m.intensities.end());
+  try {
+    return LaserScan::create(std::move(f));
+  } catch (const Error& e) {
+    throw Error(e.kind(), fmt::format("{}: {}", ref.message, e.message()),
+                {ref.file, 0, fmt::format("LaserScan.{}", e.where().field)});
+  }
+}
+
+RosFrameAssembler::RosFrameAssembler(SE2 T_robot_laser, bool use_odometry)
+    : T_robot_laser_(T_robot_laser), use_odometry_(use_odometry) {}
+
+void RosFrameAssembler::pushScan(LaserScan scan, double time) { pending_.push_back({std::move(scan), time}); }
+
+void RosFrameAssembler::pushOdometry(double time, const SE2& T_odom_robot) {
+  if (!use_odometry_) return;
+  if (odom_.empty() || time >= odom_.back().time) {
+    odom_.push_back({time, T_odom_robot});
+  } else {
+    ++odom_out_of_order_;
+    const auto it = std::upper_bound(odom_.begin(), odom_.end(), time,
+                                     [](double t, const Odom& o) { return t < o.time; });
+    odom_.insert(it, {time, T_odom_robot});
+  }
+  newest_odom_time_ = std::max(newest_odom_time_, time);
+  prune();
+}
+
+std::optional<Frame> RosFrameAssembler::pop() {
+  if (pending_.empty()) return std::nullopt;
+  const double t = pending_.front().time;
+  const bool bracketed = !odom_.empty() && newest_odom_time_ >= t;
+  const bool overflow = pending_.size() > kMaxPendingScans;
+  if (!(finished_ || !use_odometry_ || bracketed || overflow)) return std::nullopt;
+  if (use_odometry_ && !finished_ && !bracketed) ++forced_;
+  Frame f;
+  f.index = next_index_++;
+  f.time = t;
+  f.scan = std::move(pending_.front().scan);
+  f.T_robot_laser = T_robot_laser_;
+  if (use_odometry_) f.T_odom_robot = interpolate(t);
+  pending_.pop_front();
+  prune();
+  return f;
+}
+
+std::optional<SE2> RosFrameAssembler::interpolate(double t) {
+  if (odom_.empty()) return std::nullopt;
+  const auto it = std::lower_bound(odom_.begin(), odom_.end(), t, [](const Odom& o, double v) { return o.time < v; });
+  double gap = 0.0;
+  SE2 pose;
+  if (it == odom_.begin()) {
+    pose = it->pose;
+    gap = it->time - t;
+  } else if (it == odom_.end()) {
+    pose = odom_.back().pose;
+    gap = t - odom_.back().time;
+  } else {
+    const Odom& o1 = *it;
+    const Odom& o0 = *(it - 1);
+    if (o1.time == t) return o1.pose;
+    const double a = (t - o0.time) / (o1.time - o0.time);
+    const Eigen::Vector2d p = o0.pose.translation() + a * (o1.pose.translation() - o0.pose.translation());
+    return SE2(p, o0.pose.theta() + a * angleDiff(o1.pose.theta(), o0.pose.theta()));
+  }
+  if (gap > kMaxOdomGapS) {
+    ++gap_scans_;
+    max_gap_ = std::max(max_gap_, gap);
+  }
+  return pose;
+}
+
+void RosFrameAssembler::prune() {
+  // Keep the odometry that can still bracket a scan: everything from the last message at or
+  // before (oldest waiting scan - 1 s); with no scan waiting, the last 10 s of odometry (the next
+  // scan's stamp is near the newest odometry unless the clocks disagree).
+  const double t_ref = pending_.empty() ? newest_odom_time_ - 10.0 : pending_.front().time - 1.0;
+  while (odom_.size() >= 2 && odom_[1].time <= t_ref) odom_.pop_front();
+}
+
+std::vector<std::string> RosFrameAssembler::warnings() const {
+  std::vector<std::string> w;
+  if (gap_scans_)
+    w.push_back(fmt::format(
+        "{} scans are more than {} s (up to {:.3f} s) before the first or after the last odometry message; "
+        "they use that message's pose",
+        gap_scans_, kMaxOdomGapS, max_gap_));
+  if (odom_out_of_order_)
+    w.push_back(fmt::format("{} odometry messages have a stamp earlier than a previous one (sorted by stamp)",
+                            odom_out_of_order_));
+  if (forced_)
+    w.push_back(fmt::format("{} scans were completed before any later odometry message arrived (look-ahead limit "
+                            "of {} scans)",
+                            forced_, kMaxPendingScans));
+  return w;
+}
+
+}  // namespace lidar2d::io::internal

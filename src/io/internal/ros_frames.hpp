@@ -1,0 +1,144 @@
+#pragma once
+// What the ROS1 and ROS2 bag readers share once messages are decoded: topic choice, the laser
+// mounting pose from tf, odometry interpolation at scan stamps, and LaserScan conversion. Only the
+// bag readers include this.
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lidar2d/core/frame.hpp"
+#include "lidar2d/core/se2.hpp"
+#include "lidar2d/io/frame_source.hpp"
+#include "src/io/internal/ros_messages.hpp"
+
+namespace lidar2d::io::internal {
+
+/// A topic of a bag: name, message type as stored ("sensor_msgs/LaserScan" or
+/// "sensor_msgs/msg/LaserScan") and number of messages.
+struct RosTopicInfo {
+  std::string name;
+  std::string type;
+  std::uint64_t count = 0;
+};
+
+/// Picks the topic to read among `topics` whose type is one of `types`.
+/// - `requested` empty: the topic with the most messages (ties: the first listed); when there are
+///   several, a note naming the choice is appended to `warnings`. Returns std::nullopt when there
+///   is no such topic.
+/// - `requested` "none" (only when `allow_none`): std::nullopt.
+/// - otherwise the topic of that name; throws lidar2d::Error naming `path` and listing the topics
+///   of the wanted types when it does not exist or has another type.
+/// `what` names the kind in messages ("LaserScan", "Odometry"), `option` the override
+/// ("--scan-topic").
+std::optional<RosTopicInfo> chooseRosTopic(const std::vector<RosTopicInfo>& topics,
+                                           const std::vector<std::string>& types, const std::string& requested,
+                                           bool allow_none, const std::string& what, const std::string& option,
+                                           const std::string& path, std::vector<std::string>& warnings);
+
+/// Planar projection of a 3D transform: (x, y, yaw), yaw from the quaternion (ZYX convention).
+SE2 projectToPlane(const RosTransform3& t);
+/// Angle between the transform's z axis and the parent's z axis [rad] (0 for a planar transform).
+double tiltOf(const RosTransform3& t);
+
+/// A tf tree built from tf2_msgs/TFMessage transforms (each child has one parent; a later transform
+/// of the same child replaces the earlier one, as tf2's static buffer does).
+class RosTfTree {
+ public:
+  void add(const RosTransformStamped& t);
+  bool hasFrame(const std::string& frame) const;
+  std::size_t size() const { return parent_of_.size(); }
+
+  struct Lookup {
+    SE2 T_from_to;                   ///< pose of frame `to` in frame `from`, planar
+    std::vector<std::string> chain;  ///< frames visited from `from` to `to`
+    double max_tilt = 0.0;           ///< largest tilt of a transform on the chain [rad]
+  };
+  /// The transform from `from` to `to` through their common ancestor (each transform projected
+  /// to the plane, then composed), or std::nullopt when they are not connected.
+  std::optional<Lookup> lookup(const std::string& from, const std::string& to) const;
+
+ private:
+  struct Edge {
+    std::string parent;
+    RosTransform3 T_parent_child;
+  };
+  std::map<std::string, Edge> parent_of_;  // child -> parent edge
+};
+
+/// Finds T_robot_laser in `tree`. Tries `robot_frames` in order; returns the first that is
+/// connected to `laser_frame`, with a human-readable description of the chain. Identity and no
+/// chain when `laser_frame` is one of the robot frames.
+struct RosMount {
+  SE2 T_robot_laser;
+  std::string robot_frame;
+  std::string description;  ///< e.g. "base_link -> laser"; empty when not found
+  double max_tilt = 0.0;
+  bool found = false;
+};
+RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& robot_frames,
+                      const std::string& laser_frame);
+
+/// A scan message turned into checked lidar2d types; throws lidar2d::Error naming `ref` when the
+/// scan violates LaserScan's invariants. `negative_ranges` is increased by the number of negative
+/// finite ranges (kept as they are: LaserScan treats them as invalid since range_min >= 0).
+LaserScan toLaserScan(const RosLaserScanMsg& m, double time, const RosMessageRef& ref, std::size_t& negative_ranges);
+
+/// Turns time-ordered scan and odometry messages into Frames in scan order, with the odometry pose
+/// interpolated at each scan's time. Memory is bounded: at most kMaxPendingScans scans wait for a
+/// later odometry message, and odometry older than the oldest waiting scan (minus a margin) is
+/// dropped.
+///
+/// Interpolation (documented once here, the test expectations use the same rule): with o0 the last
+/// odometry message at or before the scan time t and o1 the first at or after it,
+/// a = (t - t0) / (t1 - t0), x and y are linear in a and yaw = yaw0 + a * wrap(yaw1 - yaw0).
+/// Before the first / after the last odometry message the nearest message's pose is used, and
+/// scans more than kMaxOdomGapS away from it are counted in a warning.
+class RosFrameAssembler {
+ public:
+  static constexpr std::size_t kMaxPendingScans = 512;
+  static constexpr double kMaxOdomGapS = 0.5;
+
+  RosFrameAssembler(SE2 T_robot_laser, bool use_odometry);
+
+  /// A scan (already converted) with its frame time [s].
+  void pushScan(LaserScan scan, double time);
+  /// An odometry message at time `time` [s] with pose T_odom_robot.
+  void pushOdometry(double time, const SE2& T_odom_robot);
+  /// No more messages will come.
+  void finish() { finished_ = true; }
+  /// The next frame when it can be completed now.
+  std::optional<Frame> pop();
+  /// Warnings collected so far (odometry gaps, out-of-order odometry).
+  std::vector<std::string> warnings() const;
+
+ private:
+  struct Pending {
+    LaserScan scan;
+    double time;
+  };
+  struct Odom {
+    double time;
+    SE2 pose;
+  };
+  std::optional<SE2> interpolate(double t);
+  void prune();
+
+  SE2 T_robot_laser_;
+  bool use_odometry_;
+  bool finished_ = false;
+  std::deque<Pending> pending_;
+  std::deque<Odom> odom_;  // sorted by time
+  double newest_odom_time_ = 0.0;
+  std::size_t next_index_ = 0;
+  std::size_t gap_scans_ = 0;
+  double max_gap_ = 0.0;
+  std::size_t odom_out_of_order_ = 0;
+  std::size_t forced_ = 0;
+};
+
+}  // namespace lidar2d::io::internal
