@@ -12,6 +12,7 @@ void addInfoCommand(CLI::App& app);
 void addSimulateCommand(CLI::App& app);
 void addPerturbCommand(CLI::App& app);
 void addEvalCommand(CLI::App& app);
+void addMapCommand(CLI::App& app);
 
 /// Adds the reader flags shared by every command that reads a log (--scan-topic, --odom-topic,
 /// --carmen-laser, --carmen-poses) bound to `options`.

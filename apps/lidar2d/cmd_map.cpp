@@ -1,0 +1,199 @@
+// lidar2d map LOG --model logodds|count|tsdf -o PREFIX: an occupancy map from known poses.
+
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+
+#include "commands.hpp"
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/eval/metrics.hpp"
+#include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/io/prefetch.hpp"
+#include "lidar2d/io/trajectory.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+
+namespace lidar2d::cli {
+namespace {
+
+enum class PoseSource { kAuto, kTruth, kOdometry };
+
+struct MapArgs {
+  std::string log;
+  std::string prefix;
+  std::string poses_file;
+  std::string prior;
+  mapping::MapModel model = mapping::MapModel::kLogOdds;
+  PoseSource pose_source = PoseSource::kAuto;
+  mapping::MapOptions options;
+  double max_dt = 0.001;
+  bool quiet = false;
+  io::ReaderOptions reader;
+};
+
+// Pose of each frame from a trajectory file: the pose with the same index when its time agrees
+// (this keeps logs whose timestamps repeat unambiguous), else the nearest time within max_dt.
+class TrajectoryPoses {
+ public:
+  TrajectoryPoses(const std::string& path, double max_dt)
+      : path_(path), traj_(io::readTrajectory(path)), index_(traj_), max_dt_(max_dt) {}
+  SE2 at(const Frame& f) const {
+    if (f.index < traj_.size() && std::abs(traj_[f.index].time - f.time) <= max_dt_) return traj_[f.index].pose;
+    if (auto i = index_.nearest(f.time, max_dt_)) return traj_[*i].pose;
+    throw badInput(fmt::format("has no pose within {} s of scan {} (time {:.6f})", max_dt_, f.index, f.time),
+                   ErrorLocation(path_, 0, "timestamp"));
+  }
+
+ private:
+  std::string path_;
+  io::Trajectory traj_;
+  eval::TimeIndex index_;
+  double max_dt_;
+};
+
+std::string writePng(const std::string& path, const io::OccupancyImage& map) {
+  // Occupied black, free white, unknown grey; image row 0 is the top (largest y).
+  cv::Mat img(map.height(), map.width(), CV_8UC1);
+  for (int row = 0; row < map.height(); ++row)
+    for (int col = 0; col < map.width(); ++col) {
+      const std::int8_t v = map.at(col, row);
+      img.at<std::uint8_t>(map.height() - 1 - row, col) =
+          v == io::OccupancyImage::kOccupied ? 0 : (v == io::OccupancyImage::kFree ? 255 : 160);
+    }
+  std::vector<std::uint8_t> png;
+  if (!cv::imencode(".png", img, png)) throw ioError("PNG encoding failed", ErrorLocation(path));
+  io::writeFileAtomically(path, std::string(png.begin(), png.end()));
+  return path;
+}
+
+io::OccupancyImage readPriorImage(const std::string& path, const io::OccupancyImage& map, std::size_t& overridden) {
+  io::OccupancyImage out = map;
+  const std::string ext = std::filesystem::path(path).extension().string();
+  try {
+    if (ext == ".yaml" || ext == ".yml") {
+      overridden = mapping::applyPrior(out, io::readMap(path).map);
+      return out;
+    }
+    // A bare image of exactly the exported map's size: black = occupied, white = free, any other
+    // grey = no override (the PNG/PGM that `lidar2d map` wrote, painted over, works directly).
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) throw ioError("no such file", ErrorLocation(path));
+    const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
+    if (img.empty()) throw badInput("cannot read the prior image (PGM or PNG expected)", ErrorLocation(path));
+    std::vector<std::int8_t> cells(static_cast<std::size_t>(img.rows) * static_cast<std::size_t>(img.cols));
+    for (int r = 0; r < img.rows; ++r)
+      for (int c = 0; c < img.cols; ++c) {
+        const std::uint8_t v = img.at<std::uint8_t>(img.rows - 1 - r, c);
+        cells[static_cast<std::size_t>(r) * static_cast<std::size_t>(img.cols) + static_cast<std::size_t>(c)] =
+            v < 50 ? io::OccupancyImage::kOccupied : (v > 250 ? io::OccupancyImage::kFree : io::OccupancyImage::kUnknown);
+      }
+    overridden = mapping::applyPriorSameSize(out, cells, img.cols, img.rows);
+    return out;
+  } catch (const Error& e) {
+    if (!e.where().file.empty()) throw;
+    throw Error(e.kind(), e.message(), ErrorLocation(path, 0, e.where().field));
+  }
+}
+
+void run(const MapArgs& a) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto map = mapping::makeMap(a.model, a.options);
+  std::optional<TrajectoryPoses> traj;
+  if (!a.poses_file.empty()) traj.emplace(a.poses_file, a.max_dt);
+  auto source = io::prefetch(io::openLog(a.log, a.reader));
+  std::size_t scans = 0;
+  const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
+  while (auto f = source->next()) {
+    SE2 T_world_robot;
+    if (traj) {
+      T_world_robot = traj->at(*f);
+    } else {
+      const bool use_truth = a.pose_source == PoseSource::kTruth || (a.pose_source == PoseSource::kAuto && f->T_world_robot);
+      const std::optional<SE2>& pose = use_truth ? f->T_world_robot : f->T_odom_robot;
+      if (!pose)
+        throw badInput(fmt::format("scan {} (time {:.6f}) has no {} pose (use --poses TRAJ or --pose-source)", f->index,
+                                   f->time, use_truth ? "truth" : "odometry"),
+                       ErrorLocation(a.log));
+      T_world_robot = *pose;
+    }
+    map->insert(f->scan, T_world_robot * f->T_robot_laser);
+    ++scans;
+    if (progress && scans % 500 == 0) std::cerr << "\rmapped " << scans << " scans" << std::flush;
+  }
+  if (progress) std::cerr << "\r";
+  if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
+  io::OccupancyImage image = mapping::toOccupancyImage(*map);
+  std::size_t overridden = 0;
+  if (!a.prior.empty()) image = readPriorImage(a.prior, image, overridden);
+  const std::string yaml = a.prefix + ".yaml";
+  const std::string pgm = a.prefix + ".pgm";
+  const std::string png = a.prefix + ".png";
+  // Our images are already trinary (-1/0/100), so the writer's thresholds only pass them through.
+  io::writeMap(yaml, image, pgm);
+  writePng(png, image);
+  std::vector<std::string> written{pgm, yaml, png};
+  if (a.model == mapping::MapModel::kTsdf) {
+    const auto surface = mapping::tsdfSurface(*map);
+    io::AtomicFile f(a.prefix + ".surface.txt");
+    f.stream() << "# lidar2d TSDF surface: sub-cell zero crossings, one per line: x y weight [m, m, observations]\n";
+    for (const auto& s : surface) f.stream() << fmt::format("{:.4f} {:.4f} {:.0f}\n", s.p_world.x(), s.p_world.y(), s.weight);
+    f.commit();
+    written.push_back(a.prefix + ".surface.txt");
+  }
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!a.quiet) {
+    std::cerr << fmt::format("mapped {} scans ({} model, {} m cells) in {:.3f} s: {} x {} cells, {:.1f} M cell updates",
+                             scans, mapping::toString(a.model), a.options.resolution_m, secs, image.width(),
+                             image.height(), static_cast<double>(map->cellUpdates()) / 1e6);
+    if (!a.prior.empty()) std::cerr << fmt::format(", prior overrode {} cells", overridden);
+    std::cerr << "\n";
+    for (const auto& w : written) std::cout << w << "\n";
+  }
+}
+
+}  // namespace
+
+void addMapCommand(CLI::App& app) {
+  auto a = std::make_shared<MapArgs>();
+  auto* sub = app.add_subcommand("map", "Occupancy map from the log's poses (or --poses) as a map_server PGM + YAML and a PNG");
+  sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
+  sub->add_option("-o,--output", a->prefix, "output prefix: writes PREFIX.pgm, PREFIX.yaml, PREFIX.png (+ PREFIX.surface.txt for tsdf)")
+      ->required();
+  const std::map<std::string, mapping::MapModel> models{
+      {"logodds", mapping::MapModel::kLogOdds}, {"count", mapping::MapModel::kCount}, {"tsdf", mapping::MapModel::kTsdf}};
+  sub->add_option("--model", a->model, "map model: logodds, count or tsdf")
+      ->transform(CLI::CheckedTransformer(models, CLI::ignore_case))
+      ->default_str("logodds");
+  sub->add_option("--resolution", a->options.resolution_m, "cell size [m]")->default_val(0.05)->check(CLI::PositiveNumber);
+  sub->add_option("--max-range", a->options.insert.max_range_m, "returns beyond this are treated as no return [m]")
+      ->default_val(30.0);
+  sub->add_option("--no-return-clear", a->options.insert.no_return_clear_m,
+                  "beams without a return clear free space up to this distance [m] (0: ignore them)")
+      ->default_val(5.0);
+  sub->add_option("--cell-budget", a->options.insert.cell_budget, "largest map extent allowed [cells]")->default_val(1000000000);
+  sub->add_flag("--classic", a->options.logodds.classic_integer,
+                "logodds: the classic integer scheme (+2 per hit, -1 per pass, 1..100 around 50)");
+  sub->add_option("--truncation", a->options.tsdf.truncation_m, "tsdf: truncation distance [m]")->default_val(0.3);
+  sub->add_option("--poses", a->poses_file, "trajectory file (t x y theta or TUM) giving the pose of every scan");
+  sub->add_option("--max-dt", a->max_dt, "--poses: largest timestamp difference to accept [s]")->default_val(0.001);
+  const std::map<std::string, PoseSource> sources{
+      {"auto", PoseSource::kAuto}, {"truth", PoseSource::kTruth}, {"odometry", PoseSource::kOdometry}};
+  sub->add_option("--pose-source", a->pose_source, "without --poses: auto (truth if present, else odometry), truth or odometry")
+      ->transform(CLI::CheckedTransformer(sources, CLI::ignore_case))
+      ->default_str("auto");
+  sub->add_option("--prior", a->prior,
+                  "prior layer overriding the sensor: a map_server YAML (aligned by world coordinates) or an image of the "
+                  "output's size; black = occupied, white = free, grey = no override");
+  sub->add_flag("-q,--quiet", a->quiet, "print nothing on success");
+  addReaderOptions(sub, a->reader);
+  sub->callback([a] { run(*a); });
+}
+
+}  // namespace lidar2d::cli
