@@ -11,6 +11,9 @@
 #include <rosbag/query.h>
 #include <rosbag/view.h>
 
+#include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -67,11 +70,41 @@ std::vector<std::uint8_t>& rawBytes(const rosbag::MessageInstance& m, std::vecto
   return buf;
 }
 
+/// rosbag needs the index that a bag 2.0 stores at its end; an interrupted recording lacks it and
+/// rosbag's own message ("wanted 4 bytes, read 0") does not say so. Throws a clearer error when the
+/// file header's index_pos is zero or past the end of the file; returns otherwise.
+void explainTruncation(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string head(4096, '\0');
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<std::size_t>(in.gcount()));
+  if (head.rfind("#ROSBAG V2.0\n", 0) != 0) return;
+  const auto key = head.find("index_pos=");
+  if (key == std::string::npos || key + 18 > head.size()) return;
+  std::uint64_t index_pos = 0;
+  std::memcpy(&index_pos, head.data() + key + 10, sizeof index_pos);
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) return;
+  if (index_pos == 0)
+    throw badInput("bag has no index (the recording was not closed); 'rosbag reindex' can rebuild it", {path});
+  if (index_pos >= size)
+    throw badInput(fmt::format("truncated bag: its index should start at byte {} but the file has {} bytes (an "
+                               "interrupted recording or copy? 'rosbag reindex' can rebuild the index)",
+                               index_pos, size),
+                   {path});
+}
+
 class Ros1Source final : public FrameSource {
  public:
   Ros1Source(std::string path, const ReaderOptions& options) : path_(std::move(path)), assembler_(SE2(), false) {
     silenceRosLogging();
-    guarded(path_, "opening", [&] { bag_.open(path_, rosbag::bagmode::Read); });
+    try {
+      guarded(path_, "opening", [&] { bag_.open(path_, rosbag::bagmode::Read); });
+    } catch (const Error&) {
+      explainTruncation(path_);
+      throw;
+    }
     guarded(path_, "reading the index", [&] { setUp(options); });
   }
 
@@ -241,23 +274,7 @@ class Ros1Source final : public FrameSource {
       }
       source = "/tf";
     }
-    if (mount.found) {
-      if (!mount.description.empty() && mount.description.find("->") != std::string::npos)
-        mount.description += fmt::format(" from {}", source);
-      if (mount.max_tilt > 0.05)
-        notes_.warnings.push_back(fmt::format(
-            "the laser mounting {} is tilted by {:.1f} deg out of the plane; only its yaw is used", mount.description,
-            mount.max_tilt * 180.0 / std::numbers::pi));
-    } else {
-      std::string robots;
-      for (const auto& r : robot_frames) robots += fmt::format("{}'{}'", robots.empty() ? "" : " or ", r);
-      notes_.warnings.push_back(
-          laser_frame.empty()
-              ? std::string("the scans have no frame_id: laser mounting unknown, identity used")
-              : fmt::format("no transform from {} to the scans' frame '{}' in /tf_static or /tf: laser mounting "
-                            "unknown, identity used",
-                            robots, laser_frame));
-    }
+    noteRosMount(mount, source, robot_frames, laser_frame, notes_.warnings);
     return mount;
   }
 

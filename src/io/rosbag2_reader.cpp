@@ -322,22 +322,7 @@ class Ros2Source final : public FrameSource {
       });
       source = "/tf";
     }
-    if (mount.found) {
-      if (mount.description.find("->") != std::string::npos) mount.description += fmt::format(" from {}", source);
-      if (mount.max_tilt > 0.05)
-        notes_.warnings.push_back(fmt::format(
-            "the laser mounting {} is tilted by {:.1f} deg out of the plane; only its yaw is used", mount.description,
-            mount.max_tilt * 180.0 / std::numbers::pi));
-    } else {
-      std::string robots;
-      for (const auto& r : robot_frames) robots += fmt::format("{}'{}'", robots.empty() ? "" : " or ", r);
-      notes_.warnings.push_back(
-          laser_frame.empty()
-              ? std::string("the scans have no frame_id: laser mounting unknown, identity used")
-              : fmt::format("no transform from {} to the scans' frame '{}' in /tf_static or /tf: laser mounting "
-                            "unknown, identity used",
-                            robots, laser_frame));
-    }
+    noteRosMount(mount, source, robot_frames, laser_frame, notes_.warnings);
     return mount;
   }
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <set>
 
 #include "lidar2d/core/error.hpp"
@@ -136,6 +137,24 @@ RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& rob
     }
   }
   return m;
+}
+
+void noteRosMount(RosMount& mount, const std::string& source, const std::vector<std::string>& robot_frames,
+                  const std::string& laser_frame, std::vector<std::string>& warnings) {
+  if (mount.found) {
+    if (mount.description.find("->") != std::string::npos) mount.description += fmt::format(" from {}", source);
+    if (mount.max_tilt > 0.05)
+      warnings.push_back(fmt::format("the laser mounting {} is tilted by {:.1f} deg out of the plane; only its yaw is used",
+                                     mount.description, mount.max_tilt * 180.0 / std::numbers::pi));
+    return;
+  }
+  std::string robots;
+  for (const auto& r : robot_frames) robots += fmt::format("{}'{}'", robots.empty() ? "" : " or ", r);
+  warnings.push_back(laser_frame.empty()
+                         ? std::string("the scans have no frame_id: laser mounting unknown, identity used")
+                         : fmt::format("no transform from {} to the scans' frame '{}' in /tf_static or /tf: laser "
+                                       "mounting unknown, identity used",
+                                       robots, laser_frame));
 }
 
 LaserScan toLaserScan(const RosLaserScanMsg& m, double time, const RosMessageRef& ref, std::size_t& negative_ranges) {

@@ -82,6 +82,11 @@ struct RosMount {
 };
 RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& robot_frames,
                       const std::string& laser_frame);
+/// Completes `mount.description` with the topic it came from (`source`, e.g. "/tf_static") and
+/// appends to `warnings` what the user should know: a chain tilted out of the plane (only its yaw
+/// is used), or no mounting found (identity used).
+void noteRosMount(RosMount& mount, const std::string& source, const std::vector<std::string>& robot_frames,
+                  const std::string& laser_frame, std::vector<std::string>& warnings);
 
 /// A scan message turned into checked lidar2d types; throws lidar2d::Error naming `ref` when the
 /// scan violates LaserScan's invariants. `negative_ranges` is increased by the number of negative

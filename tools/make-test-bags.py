@@ -1,0 +1,135 @@
+#!/usr/bin/python3
+"""Writes the small ROS1 fixture bags in tests/data/ (used by tests/test_rosbag1_reader.cpp and
+tests/test_bad_input_bags.cpp) with Debian's python3-rosbag. Messages are serialized here by hand
+(ROS1 wire format: packed little-endian; strings are uint32 length + bytes) and written raw, so no
+message packages are needed. Run from the repository root: /usr/bin/python3 tools/make-test-bags.py
+
+Fixtures:
+- tf_chain.bag (lz4 chunks): two LaserScan topics (/scan_front 10 messages, /scan_rear 4), /odom,
+  and an old-style /tf (no /tf_static) carrying odom->base_link and the chain
+  base_link -> laser_mount (x 0.10, y 0.05, yaw +90 deg) -> laser_front (x 0.20, z 0.10,
+  yaw -30 deg), so T_base_link_laser_front = (0.10, 0.25, +60 deg). Scan frame ids have a leading
+  '/'. Odometry: 11 messages at stamps 100.0 .. 101.0 s (step 0.1) with x = s, y = 2 s,
+  yaw = wrap(3.0 + 0.5 s), s = stamp - 100 (yaw crosses +pi at s = 0.2832). Front scans: header stamp
+  100.04 + 0.2 k (k = 0..9) except k = 3, whose stamp is zero (bag time 100.65 is used); beams
+  (8, angle_min -pi/2, increment pi/8, range_min 0.1, range_max 10): 0.5 + k, -1.0 (negative),
+  NaN, inf, 0.05 (below range_min), 10.0 (= range_max), 2.0, 3.0.
+- no_scan.bag: /odom (3 messages) and /chatter (std_msgs/String), no LaserScan.
+- corrupt_scan.bag: /scan with 2 messages; the second states 1000 ranges but holds 3.
+"""
+
+import math
+import os
+import struct
+
+import genpy
+import rosbag
+
+MD5 = {
+    "sensor_msgs/LaserScan": "90c7ef2dc6895d81024acba2ac42f369",
+    "nav_msgs/Odometry": "cd5e73d190d741a2f92e81eda573aca7",
+    "tf2_msgs/TFMessage": "94810edda583a504dfda3829e70d7eec",
+    "std_msgs/String": "992ce8a1687cec8c8bd883ec73ca41d1",
+}
+
+
+class FakeType:
+    def __init__(self, name):
+        self._md5sum = MD5[name]
+        self._full_text = "# lidar2d test fixture: " + name + "\n"
+
+
+def s(text):
+    b = text.encode()
+    return struct.pack("<I", len(b)) + b
+
+
+def header(seq, stamp, frame):
+    sec, nsec = stamp
+    return struct.pack("<III", seq, sec, nsec) + s(frame)
+
+
+def stamp_of(t):
+    ns = round(t * 1e9)
+    return ns // 1000000000, ns % 1000000000
+
+
+def quat_yaw(yaw):
+    return (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+
+def laser_scan(seq, stamp, frame, ranges, count=None):
+    b = header(seq, stamp, frame)
+    b += struct.pack("<7f", -math.pi / 2, -math.pi / 2 + 7 * math.pi / 8, math.pi / 8, 0.0, 0.1, 0.1, 10.0)
+    b += struct.pack("<I", len(ranges) if count is None else count) + struct.pack(f"<{len(ranges)}f", *ranges)
+    if count is None:
+        b += struct.pack("<I", 0)  # no intensities
+    return b
+
+
+def odometry(seq, stamp, x, y, yaw):
+    b = header(seq, stamp, "odom") + s("base_link")
+    b += struct.pack("<7d", x, y, 0.0, *quat_yaw(yaw)) + struct.pack("<36d", *([0.0] * 36))
+    b += struct.pack("<6d", *([0.0] * 6)) + struct.pack("<36d", *([0.0] * 36))
+    return b
+
+
+def tf_message(transforms):
+    b = struct.pack("<I", len(transforms))
+    for stamp, parent, child, x, y, z, yaw in transforms:
+        b += header(0, stamp, parent) + s(child) + struct.pack("<7d", x, y, z, *quat_yaw(yaw))
+    return b
+
+
+def write(bag, topic, typ, data, t):
+    bag.write(topic, (typ, data, MD5[typ], FakeType(typ)), genpy.Time.from_sec(t), raw=True)
+
+
+def wrap(a):
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+def tf_chain(path):
+    with rosbag.Bag(path, "w", compression="lz4") as bag:
+        for i in range(11):
+            t = 100.0 + 0.1 * i
+            sd = 0.1 * i
+            write(bag, "/odom", "nav_msgs/Odometry", odometry(i, stamp_of(t), sd, 2 * sd, wrap(3.0 + 0.5 * sd)), t + 0.001)
+            write(bag, "/tf", "tf2_msgs/TFMessage",
+                  tf_message([(stamp_of(t), "odom", "base_link", sd, 2 * sd, 0.0, 0.0),
+                              (stamp_of(t), "base_link", "laser_mount", 0.10, 0.05, 0.0, math.pi / 2),
+                              (stamp_of(t), "laser_mount", "laser_front", 0.20, 0.0, 0.10, -math.pi / 6)]),
+                  t + 0.002)
+        for k in range(10):
+            bag_t = 100.05 + 0.2 * k
+            stamp = (0, 0) if k == 3 else stamp_of(100.04 + 0.2 * k)
+            ranges = [0.5 + k, -1.0, float("nan"), float("inf"), 0.05, 10.0, 2.0, 3.0]
+            write(bag, "/scan_front", "sensor_msgs/LaserScan", laser_scan(k, stamp, "/laser_front", ranges), bag_t)
+        for k in range(4):
+            bag_t = 100.07 + 0.2 * k
+            write(bag, "/scan_rear", "sensor_msgs/LaserScan",
+                  laser_scan(k, stamp_of(bag_t), "laser_rear", [1.0] * 8), bag_t)
+
+
+def no_scan(path):
+    with rosbag.Bag(path, "w") as bag:
+        for i in range(3):
+            t = 10.0 + i
+            write(bag, "/odom", "nav_msgs/Odometry", odometry(i, stamp_of(t), i, 0.0, 0.0), t)
+        write(bag, "/chatter", "std_msgs/String", s("hello"), 10.5)
+
+
+def corrupt_scan(path):
+    with rosbag.Bag(path, "w") as bag:
+        write(bag, "/scan", "sensor_msgs/LaserScan", laser_scan(0, stamp_of(5.0), "laser", [1.0] * 8), 5.0)
+        write(bag, "/scan", "sensor_msgs/LaserScan",
+              laser_scan(1, stamp_of(5.1), "laser", [1.0, 2.0, 3.0], count=1000), 5.1)
+
+
+if __name__ == "__main__":
+    os.makedirs("tests/data", exist_ok=True)
+    tf_chain("tests/data/tf_chain.bag")
+    no_scan("tests/data/no_scan.bag")
+    corrupt_scan("tests/data/corrupt_scan.bag")
+    for f in sorted(os.listdir("tests/data")):
+        print(f, os.path.getsize(os.path.join("tests/data", f)))
