@@ -1,0 +1,94 @@
+#pragma once
+/// @file
+/// The laser and odometry simulator: drives a robot along a sampled path through a `World` and
+/// produces `Frame`s with a simulated scan, noisy odometry (`T_odom_robot`), the truth
+/// (`T_world_robot`) and the laser mounting (`T_robot_laser`).
+///
+/// Deterministic per seed: the laser noise and the odometry noise use two independent `Rng`
+/// streams derived from `SimulatorOptions::seed`, and every beam and step draws a fixed number of
+/// random numbers, so switching one noise source off leaves the other unchanged.
+
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "lidar2d/core/frame.hpp"
+#include "lidar2d/core/laser_scan.hpp"
+#include "lidar2d/sim/noise.hpp"
+#include "lidar2d/sim/path.hpp"
+#include "lidar2d/sim/world.hpp"
+
+namespace lidar2d::sim {
+
+/// A 2D laser scanner. Defaults: a Hokuyo UTM-30LX-like scanner (270 degrees, 0.5 degree steps,
+/// 30 m), mounted 0.1 m ahead of the robot's centre.
+///
+/// Beams are evenly spaced and centred on the laser's x axis: with a field of view below 360 degrees,
+/// beam 0 is at -fov/2 and the last beam at +fov/2 (increment fov / (beams - 1)); with 360 degrees,
+/// beam 0 is at -pi and the increment 2*pi / beams (no duplicated beam).
+/// A beam that hits nothing within `range_max_m` reads `range_max_m` ("no return", invalid); a hit
+/// reads the true distance plus N(0, range_noise_m^2), and is replaced by `range_max_m` with
+/// probability `dropout`. Noisy ranges below 0 are clamped to 0 (and are then invalid, since they
+/// are <= range_min).
+struct LaserModel {
+  int beams = 541;                        ///< number of beams, >= 1
+  double fov_rad = 4.71238898038469;      ///< field of view [rad] (270 deg), in (0, 2*pi]
+  double range_min_m = 0.05;              ///< shorter readings are invalid [m], >= 0
+  double range_max_m = 30.0;              ///< maximum range; also the "no return" value [m], > range_min
+  double range_noise_m = 0.01;            ///< standard deviation of the range noise [m], >= 0
+  double dropout = 0.01;                  ///< probability that a hit is lost (reads range_max) [0, 1]
+  SE2 T_robot_laser = SE2(0.1, 0.0, 0.0); ///< mounting pose of the laser on the robot [m, m, rad]
+
+  double angleMin() const;
+  double angleIncrement() const;
+  /// Throws `lidar2d::Error` (kInvalidArgument) naming the field out of its domain.
+  void validate() const;
+};
+
+/// Everything the simulator does, in one struct.
+struct SimulatorOptions {
+  LaserModel laser;
+  OdometryNoise odometry;
+  std::uint64_t seed = 1;            ///< seeds both noise streams
+  bool odom_starts_at_truth = true;  ///< odometry frame = world frame at the first scan (else odometry starts at identity)
+
+  /// The same options without any noise: exact ranges (hits at their true distance, no dropout)
+  /// and odometry whose every step equals the true relative motion.
+  SimulatorOptions noiseFree() const;
+};
+
+/// Streams frames along a given truth trajectory. Holds a reference to the world, which must
+/// outlive the simulator.
+class Simulator {
+ public:
+  /// `truth` gives the time and true pose of every scan (e.g. from `samplePath`). Throws
+  /// `lidar2d::Error` (kInvalidArgument) for bad options or non-finite poses.
+  Simulator(const World& world, std::vector<TimedPose> truth, SimulatorOptions options);
+  Simulator(const Simulator&) = delete;
+  Simulator& operator=(const Simulator&) = delete;
+
+  /// The next frame (index, time, scan, odometry, truth, mounting), or std::nullopt after the last.
+  std::optional<Frame> next();
+  /// Number of frames in total.
+  std::size_t size() const { return truth_.size(); }
+  const std::vector<TimedPose>& truth() const { return truth_; }
+  const SimulatorOptions& options() const { return options_; }
+
+  /// The noise-free ranges the laser would measure with the robot at `T_world_robot` (one per
+  /// beam; `range_max_m` for no return).
+  std::vector<double> exactRanges(const SE2& T_world_robot) const;
+
+ private:
+  const World& world_;
+  std::vector<TimedPose> truth_;
+  const SimulatorOptions options_;
+  Rng laser_rng_;
+  Rng odom_rng_;
+  std::size_t k_ = 0;
+  SE2 odom_;
+};
+
+/// All frames at once.
+std::vector<Frame> simulate(const World& world, const std::vector<TimedPose>& truth, const SimulatorOptions& options);
+
+}  // namespace lidar2d::sim
