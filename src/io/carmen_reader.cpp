@@ -45,6 +45,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -110,6 +111,8 @@ class LineReader {
         return emit(b, len, line);
       }
       if (eof_) {
+        // The decompressed data stopped early: report it at the line it cut, not as a short line.
+        if (error_) throw *error_;
         if (begin_ == end_) return false;
         const std::size_t len = end_ - begin_;
         begin_ = end_;
@@ -154,17 +157,26 @@ class LineReader {
     const int n = gzread(gz_, buf_.data() + end_, static_cast<unsigned>(kReadChunk));
     int err = Z_OK;
     const char* msg = gzerror(gz_, &err);
+    if (n > 0) end_ += static_cast<std::size_t>(n);
     if (n < 0 || (err != Z_OK && err != Z_STREAM_END)) {
-      if (err == Z_ERRNO) throw ioError(fmt::format("read error: {}", std::strerror(errno)), {path_, line_ + 1});
-      if (err == Z_BUF_ERROR)
-        throw badInput("truncated gzip data (unexpected end of the compressed stream)", {path_, line_ + 1});
-      throw badInput(fmt::format("corrupt gzip data ({})", msg ? msg : "unknown zlib error"), {path_, line_ + 1});
-    }
-    if (n == 0) {
+      // zlib hands out what it could decompress before the error; the complete lines in it are
+      // still read, and the error is raised where the good data ends (see next()).
+      const std::size_t at = line_ + 1 + static_cast<std::size_t>(
+                                             std::count(buf_.data() + begin_, buf_.data() + end_, '\n'));
+      if (err == Z_ERRNO)
+        error_ = ioError(fmt::format("read error: {}", std::strerror(errno)), {path_, at});
+      else if (err == Z_BUF_ERROR)
+        error_ = badInput("truncated gzip data (the compressed stream ends early)", {path_, at});
+      else {
+        // zlib prefixes its message with the path, which the location already shows.
+        std::string_view why = msg ? msg : "unknown zlib error";
+        if (why.rfind(path_ + ": ", 0) == 0) why.remove_prefix(path_.size() + 2);
+        error_ = badInput(fmt::format("corrupt gzip data ({})", why), {path_, at});
+      }
       eof_ = true;
       return;
     }
-    end_ += static_cast<std::size_t>(n);
+    if (n == 0) eof_ = true;
   }
 
   std::string path_;
@@ -173,6 +185,7 @@ class LineReader {
   std::size_t begin_ = 0, end_ = 0;
   std::size_t line_ = 0;
   bool eof_ = false;
+  std::optional<Error> error_;  // read error to raise once the data before it is consumed
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -394,7 +407,7 @@ LaserMsg parseNewLaser(const LineParser& p, const LaserType& type, const Params&
   if (max_range <= 0.0) p.fail(name + " maximum_range", fmt::format("{} m must be positive", max_range));
   LaserScanFields fields;
   p.ranges(9, n, fields.ranges);
-  const std::size_t after = robot ? 14 : 1;  // fields after the remissions, through ipc_timestamp
+  const std::size_t after = robot ? 12 : 1;  // fields after the remissions, through the timestamp
   const std::size_t m_rem = p.count(9 + n, "num_remissions", after);
   std::vector<double> rem;
   p.numbers(10 + n, m_rem, "remission", rem);
@@ -779,6 +792,7 @@ class CarmenSource final : public FrameSource {
   };
 
   Error noScans() const {
+    if (reader_.lineNo() == 0) return badInput("no laser scans found: the file is empty", {path_});
     if (requested_)
       return badInput(fmt::format("no {} scans found", requested_->name), {path_, reader_.lineNo()});
     return badInput("no laser scans found (looked for FLASER, RLASER, ROBOTLASER1, ROBOTLASER2, RAWLASER1-4)",
