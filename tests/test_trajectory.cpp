@@ -239,6 +239,7 @@ TEST(DetectPoseFile, TellsTrajectoriesRelationsAndLogsApart) {
   writeFile(tmp / "named.relations", "garbage\n");  // the extension decides; the reader reports content
   writeFile(tmp / "carmen.log", "# CARMEN\nPARAM robot_name x\nFLASER 0 0 0 0 0 0 0 1 h 1\n");
   writeFile(tmp / "empty.txt", "");
+  writeFile(tmp / "word.txt", "abc 0 0 0\n");
   test::writeGzip(tmp / "log.gz", "1 0 0 0\n");
   writeFile(tmp / "bag.bag", "#ROSBAG V2.0\n....");
   EXPECT_EQ(detectPoseFile((tmp / "plain.txt").string()), PoseFileKind::kTrajectory);
@@ -247,6 +248,7 @@ TEST(DetectPoseFile, TellsTrajectoriesRelationsAndLogsApart) {
   EXPECT_EQ(detectPoseFile((tmp / "named.relations").string()), PoseFileKind::kRelations);
   EXPECT_EQ(detectPoseFile((tmp / "carmen.log").string()), PoseFileKind::kLog);
   EXPECT_EQ(detectPoseFile((tmp / "empty.txt").string()), PoseFileKind::kTrajectory);
+  EXPECT_EQ(detectPoseFile((tmp / "word.txt").string()), PoseFileKind::kTrajectory);
   EXPECT_EQ(detectPoseFile((tmp / "log.gz").string()), PoseFileKind::kLog);
   EXPECT_EQ(detectPoseFile((tmp / "bag.bag").string()), PoseFileKind::kLog);
   EXPECT_EQ(detectPoseFile(tmp.path().string()), PoseFileKind::kLog);

@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <charconv>
@@ -236,32 +237,30 @@ PoseFileKind detectPoseFile(const std::string& path) {
   in.clear();
   in.seekg(0);
   std::string line;
-  std::size_t data_lines = 0;
-  bool eight_numeric_non_quaternion = false;
-  bool all_eight_numeric = true;
-  // A few lines suffice: a relations file differs from TUM on nearly every line (dyaw is rarely +-1).
-  while (data_lines < 20 && std::getline(in, line)) {
+  while (std::getline(in, line)) {
     const auto f = splitFields(line);
     if (f.empty()) continue;
-    ++data_lines;
-    if (data_lines == 1 && !toDouble(f[0])) return PoseFileKind::kLog;  // e.g. "PARAM", "FLASER"
-    if (f.size() != 8) {
-      all_eight_numeric = false;
-      break;
+    if (!toDouble(f[0])) {
+      // CARMEN lines start with an upper-case message name ("PARAM", "FLASER", "ROBOTLASER1"); any
+      // other word is a malformed pose file, which the trajectory reader reports with line and field.
+      const bool keyword = std::all_of(f[0].begin(), f[0].end(), [](char c) {
+        return (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_';
+      });
+      return keyword ? PoseFileKind::kLog : PoseFileKind::kTrajectory;
     }
+    if (f.size() != 8) return PoseFileKind::kTrajectory;
+    // 8 numbers: TUM when the last four are a unit quaternion. Only the first data line decides, so
+    // that a TUM file with a bad quaternion further down is reported by the trajectory reader with
+    // its line (a relations line's last four are (dz, droll, dpitch, dyaw) = (0, 0, 0, dyaw)).
     std::array<double, 8> v{};
-    for (std::size_t i = 0; i < 8 && all_eight_numeric; ++i) {
+    for (std::size_t i = 0; i < 8; ++i) {
       const auto d = toDouble(f[i]);
-      if (!d)
-        all_eight_numeric = false;
-      else
-        v[i] = *d;
+      if (!d) return PoseFileKind::kTrajectory;  // the reader names the bad field
+      v[i] = *d;
     }
-    if (!all_eight_numeric) break;
     const double norm = std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]);
-    if (!(std::abs(norm - 1.0) <= kQuatNormTol)) eight_numeric_non_quaternion = true;
+    return std::abs(norm - 1.0) <= kQuatNormTol ? PoseFileKind::kTrajectory : PoseFileKind::kRelations;
   }
-  if (data_lines > 0 && all_eight_numeric && eight_numeric_non_quaternion) return PoseFileKind::kRelations;
   return PoseFileKind::kTrajectory;  // empty files too: readTrajectory reports them
 }
 

@@ -84,9 +84,11 @@ enum class PoseFileKind {
 
 /// Guesses what `path` holds without parsing all of it: folders, gzip, ROS bags and SQLite files are
 /// logs; a text file is a relations file when its name ends in `.relations`, or when its first
-/// data lines have 8 numeric fields of which the last four do not form a unit quaternion (so they
-/// cannot be TUM); a text file whose first data line starts with a number is a trajectory; any other
-/// text is a log. Throws `lidar2d::Error` (kIo) when `path` does not exist or cannot be read.
+/// data line has 8 numeric fields of which the last four do not form a unit quaternion within 1e-3
+/// (so it cannot be TUM); a text file whose first data line starts with a number is a trajectory
+/// (an empty one too: readTrajectory reports it); text whose first data line starts with an
+/// upper-case word (a CARMEN message name such as PARAM or FLASER) is a log; any other text is a
+/// malformed trajectory (kTrajectory, so that readTrajectory names the line and field). Throws `lidar2d::Error` (kIo) when `path` does not exist or cannot be read.
 PoseFileKind detectPoseFile(const std::string& path);
 
 }  // namespace lidar2d::io
