@@ -32,6 +32,9 @@ std::optional<RosTopicInfo> chooseRosTopic(const std::vector<RosTopicInfo>& topi
   std::vector<const RosTopicInfo*> candidates;
   for (const auto& t : topics)
     if (std::find(types.begin(), types.end(), t.type) != types.end()) candidates.push_back(&t);
+  // Most messages first; stable, so ties keep the bag's order.
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const RosTopicInfo* a, const RosTopicInfo* b) { return a->count > b->count; });
   if (allow_none && requested == "none") return std::nullopt;
   if (!requested.empty()) {
     for (const auto* c : candidates)
@@ -44,9 +47,6 @@ std::optional<RosTopicInfo> chooseRosTopic(const std::vector<RosTopicInfo>& topi
     throw badInput(fmt::format("{}; {} topics: {}", msg, what, listTopics(candidates)), {path, 0, option});
   }
   if (candidates.empty()) return std::nullopt;
-  // Most messages first; stable, so ties keep the bag's order.
-  std::stable_sort(candidates.begin(), candidates.end(),
-                   [](const RosTopicInfo* a, const RosTopicInfo* b) { return a->count > b->count; });
   if (candidates.size() > 1)
     warnings.push_back(fmt::format("several {} topics: {}; reading {}, the one with the most messages (choose with {})",
                                    what, listTopics(candidates), candidates.front()->name, option));
