@@ -28,9 +28,14 @@ CellBox unite(CellBox a, const CellBox& b) {
 
 // ---------------------------------------------------------------------------------------------
 // Log-odds: one float per cell holding the (clamped) log-odds, or the classic integer score.
+struct LogOddsCell {
+  float value = std::numeric_limits<float>::quiet_NaN();  // NaN: never observed
+  std::uint32_t stamp = 0;                                 // last scan that updated the cell
+};
+
 class LogOddsMap final : public OccupancyMap {
  public:
-  explicit LogOddsMap(const MapOptions& o) : OccupancyMap(o), grid_(kUnknown, o.insert.cell_budget) {
+  explicit LogOddsMap(const MapOptions& o) : OccupancyMap(o), grid_(LogOddsCell{}, o.insert.cell_budget) {
     const auto& l = o.logodds;
     if (l.classic_integer) {
       hit_ = 2.0f;
@@ -49,7 +54,7 @@ class LogOddsMap final : public OccupancyMap {
   MapModel model() const override { return MapModel::kLogOdds; }
 
   std::optional<double> probability(CellIndex c) const override {
-    const float v = grid_.get(c);
+    const float v = grid_.get(c).value;
     if (std::isnan(v)) return std::nullopt;
     if (options_.logodds.classic_integer) return v / 100.0;
     return 1.0 / (1.0 + std::exp(-static_cast<double>(v)));
@@ -57,37 +62,43 @@ class LogOddsMap final : public OccupancyMap {
   CellState state(CellIndex c) const override {
     const auto p = probability(c);
     if (!p) return CellState::kUnknown;
-    if (*p >= options_.logodds.occupied_threshold) return CellState::kOccupied;
+    if (*p > options_.logodds.occupied_threshold) return CellState::kOccupied;
     if (*p < options_.logodds.free_threshold) return CellState::kFree;
     return CellState::kUnknown;
   }
-  std::size_t memoryBytes() const override { return grid_.numAllocatedCells() * sizeof(float); }
+  std::size_t memoryBytes() const override { return grid_.numAllocatedCells() * sizeof(LogOddsCell); }
 
  protected:
   std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams,
                             const CellBox& box) override {
     grid_.reserve(box);
+    // Each cell is updated at most once per scan, hits first (as Cartographer's update marker,
+    // Hess et al. 2016, section IV-B): a wall cell hit by one beam is not cleared by another beam of
+    // the same scan that grazes it, and cells near the sensor crossed by many beams get one miss,
+    // not dozens. A per-cell scan stamp says whether the cell was updated in this scan.
+    ++scan_;
     std::uint64_t updates = 0;
-    // NaN marks a never-observed cell, so "unknown" costs no extra memory; the first update starts
-    // from the prior (0 log-odds, or 50 for the integer scheme).
-    auto update = [this](float& v, float delta) {
-      const float base = std::isnan(v) ? start_ : v;
-      v = std::clamp(base + delta, lo_, hi_);
-    };
-    for (const Beam& b : beams) {
-      const CellIndex end = traceRay(origin, b.end, [&](CellIndex c) {
-        update(grid_.cellUnchecked(c), miss_);
-        ++updates;
-      });
-      update(grid_.cellUnchecked(end), b.hit ? hit_ : miss_);
+    auto update = [this, &updates](LogOddsCell& cell, float delta) {
+      if (cell.stamp == scan_) return;
+      cell.stamp = scan_;
+      const float base = std::isnan(cell.value) ? start_ : cell.value;  // NaN = never observed
+      cell.value = std::clamp(base + delta, lo_, hi_);
       ++updates;
+    };
+    for (const Beam& b : beams)
+      if (b.hit) update(grid_.cellUnchecked(CellIndex{static_cast<std::int32_t>(std::floor(b.end.x())),
+                                                       static_cast<std::int32_t>(std::floor(b.end.y()))}),
+                        hit_);
+    for (const Beam& b : beams) {
+      const CellIndex end = traceRay(origin, b.end, [&](CellIndex c) { update(grid_.cellUnchecked(c), miss_); });
+      if (!b.hit) update(grid_.cellUnchecked(end), miss_);
     }
     return updates;
   }
 
  private:
-  static constexpr float kUnknown = std::numeric_limits<float>::quiet_NaN();
-  TiledGrid<float> grid_;
+  TiledGrid<LogOddsCell> grid_;
+  std::uint32_t scan_ = 0;  // number of the scan being inserted (stamps start at 0 = none)
   float hit_, miss_, lo_, hi_, start_;
 };
 
@@ -120,23 +131,32 @@ class CountMap final : public OccupancyMap {
   std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams,
                             const CellBox& box) override {
     grid_.reserve(box);
-    std::uint64_t updates = 0;
-    // Saturating increments: 2^32 updates of one cell would otherwise wrap around.
-    auto inc = [](std::uint32_t& v) { v += (v != UINT32_MAX) ? 1u : 0u; };
+    // At most one update per cell per scan, hits first, as for log-odds; the top bit of `misses`
+    // marks the cells updated in this scan. Counts saturate below that bit.
+    touched_.clear();
+    auto update = [this](HitMiss& h, bool hit) {
+      if (h.misses & kMarker) return;
+      std::uint32_t& v = hit ? h.hits : h.misses;
+      v += (v < kMarker - 1) ? 1u : 0u;
+      h.misses |= kMarker;
+      touched_.push_back(&h);
+    };
+    for (const Beam& b : beams)
+      if (b.hit) update(grid_.cellUnchecked(CellIndex{static_cast<std::int32_t>(std::floor(b.end.x())),
+                                                       static_cast<std::int32_t>(std::floor(b.end.y()))}),
+                        true);
     for (const Beam& b : beams) {
-      const CellIndex end = traceRay(origin, b.end, [&](CellIndex c) {
-        inc(grid_.cellUnchecked(c).misses);
-        ++updates;
-      });
-      HitMiss& e = grid_.cellUnchecked(end);
-      inc(b.hit ? e.hits : e.misses);
-      ++updates;
+      const CellIndex end = traceRay(origin, b.end, [&](CellIndex c) { update(grid_.cellUnchecked(c), false); });
+      if (!b.hit) update(grid_.cellUnchecked(end), false);
     }
-    return updates;
+    for (HitMiss* h : touched_) h->misses &= ~kMarker;
+    return touched_.size();
   }
 
  private:
+  static constexpr std::uint32_t kMarker = 0x80000000u;
   TiledGrid<HitMiss> grid_;
+  std::vector<HitMiss*> touched_;  // cells updated in the current scan
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -205,12 +225,13 @@ class TsdfMap final : public OccupancyMap {
       const float dir_x = static_cast<float>(d.x() / len), dir_y = static_cast<float>(d.y() / len);
       const float offset = static_cast<float>(b.range_cells - ((0.5 - origin.x()) * d.x() + (0.5 - origin.y()) * d.y()) / len);
       auto update = [&](CellIndex c) {
-        const float sdf = b.hit ? std::clamp(offset - (dir_x * static_cast<float>(c.x) + dir_y * static_cast<float>(c.y)), -t, t) : t;
+        const float sdf =
+            b.hit ? std::clamp(offset - (dir_x * static_cast<float>(c.x) + dir_y * static_cast<float>(c.y)), -t, t) : t;
         TsdfCell& v = grid_.cellUnchecked(c);
-        // Free-space carving (sdf at the truncation) never pulls a cell that is behind a surface
-        // back to the front: beams grazing a wall clip the corners of the cells the wall passes
-        // through, and averaging +t into them would move the zero crossing off the wall.
-        if (sdf >= t && v.sdf < 0) return;
+        // Free-space carving (sdf at the truncation) leaves cells near a surface (|sdf| < t) alone:
+        // beams grazing a wall clip the corners of the cells the wall passes through, and averaging
+        // +t into them would move the zero crossing off the wall.
+        if (sdf >= t && v.weight > 0 && v.sdf < t) return;
         // Weights are whole numbers up to the cap, so 1 / (w + 1) comes from a table.
         const auto w = static_cast<std::size_t>(v.weight);
         v.sdf += (sdf - v.sdf) * inv_weight_[w];
@@ -257,9 +278,12 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   const Eigen::Vector2d origin = geometry_.toCellCoords(T_world_laser.translation());
   const double max_range = options_.insert.max_range_m;
   const double clear = options_.insert.no_return_clear_m;
-  // The TSDF traces past each return by the truncation distance, so the cells just behind the
-  // surface get their negative distance.
-  const double beyond = model() == MapModel::kTsdf ? options_.tsdf.truncation_m : 0.0;
+  // The TSDF traces past each return so that the cells just behind the surface get their negative
+  // distance - but only a short way (behind_surface_m): walls are thinner than the truncation
+  // distance, and a long negative band would reach into the room on the other side of the wall and
+  // cancel its zero crossing when the two are averaged.
+  const double beyond =
+      model() == MapModel::kTsdf ? std::min(options_.tsdf.truncation_m, options_.tsdf.behind_surface_m) : 0.0;
   beams_.clear();
   CellBox box{geometry_.cellOf(T_world_laser.translation()), geometry_.cellOf(T_world_laser.translation())};
   auto grow = [&box](const Eigen::Vector2d& p) {
@@ -285,6 +309,10 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   }
   if (beams_.empty()) return;
   cell_updates_ += insertBeams(origin, beams_, box);
+  const auto ox = static_cast<std::int64_t>(std::floor(origin.x())), oy = static_cast<std::int64_t>(std::floor(origin.y()));
+  for (const Beam& b : beams_)
+    cell_visits_ += static_cast<std::uint64_t>(std::abs(static_cast<std::int64_t>(std::floor(b.end.x())) - ox) +
+                                               std::abs(static_cast<std::int64_t>(std::floor(b.end.y())) - oy) + 1);
   bounds_ = unite(bounds_, box);
 }
 

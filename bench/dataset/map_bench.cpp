@@ -1,0 +1,110 @@
+// Mapping on the corrected Radish logs with their truth poses:
+// - speed: all scans inserted, per model: ms per scan and cell updates per second (one core);
+// - consistency: a map from the even-numbered scans must explain the odd-numbered ones: the
+//   fraction of their beam endpoints (ranges under 20 m) within one cell of an occupied cell.
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <filesystem>
+#include <iostream>
+
+#include "dataset_bench.hpp"
+#include "lidar2d/io/frame_source.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+
+namespace lidar2d::bench {
+
+std::vector<Frame> loadFrames(const std::string& path) {
+  std::vector<Frame> frames;
+  auto src = io::openLog(path);
+  while (auto f = src->next()) frames.push_back(std::move(*f));
+  return frames;
+}
+
+namespace {
+
+struct Consistency {
+  double explained = 0;      // endpoints within one cell of an occupied cell
+  double free_occupied = 0;  // samples along the beams (0.3 m after the laser to 0.2 m before the
+                             // return, every 0.25 m) that fall in occupied cells
+};
+
+Consistency consistency(const io::OccupancyImage& map, const std::vector<Frame>& frames, std::size_t first,
+                        double max_range) {
+  std::size_t n = 0, ok = 0, free_n = 0, free_occ = 0;
+  auto occupied = [&map](int col, int row) {
+    return map.contains(col, row) && map.at(col, row) == io::OccupancyImage::kOccupied;
+  };
+  for (std::size_t i = first; i < frames.size(); i += 2) {
+    const Frame& f = frames[i];
+    const SE2 T_world_laser = *f.T_world_robot * f.T_robot_laser;
+    for (std::size_t b = 0; b < f.scan.size(); ++b) {
+      if (!f.scan.isValid(b) || f.scan.ranges()[b] >= max_range) continue;
+      const double r = f.scan.ranges()[b];
+      const Eigen::Vector2d dir(std::cos(f.scan.angle(b)), std::sin(f.scan.angle(b)));
+      ++n;
+      if (const auto c = map.worldToCell(T_world_laser * (r * dir))) {
+        bool hit = false;
+        for (int dy = -1; dy <= 1 && !hit; ++dy)
+          for (int dx = -1; dx <= 1 && !hit; ++dx) hit = occupied(c->x() + dx, c->y() + dy);
+        ok += hit;
+      }
+      for (double s = 0.3; s < r - 0.2; s += 0.25)
+        if (const auto c = map.worldToCell(T_world_laser * (s * dir))) {
+          ++free_n;
+          free_occ += occupied(c->x(), c->y());
+        }
+    }
+  }
+  Consistency out;
+  out.explained = n ? static_cast<double>(ok) / static_cast<double>(n) : 0.0;
+  out.free_occupied = free_n ? static_cast<double>(free_occ) / static_cast<double>(free_n) : 0.0;
+  return out;
+}
+
+}  // namespace
+
+void runMapBenchmark(const std::string& data_dir) {
+  const std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz",
+                                      "corrected/infinite-corridor.log.gz"};
+  std::cout << "| dataset | model | scans | ms/scan | M cells traversed/s | M cell updates/s | map cells | odd endpoints "
+               "explained | odd free space occupied |\n";
+  std::cout << "|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& rel : logs) {
+    const std::string path = (std::filesystem::path(data_dir) / rel).string();
+    if (!std::filesystem::exists(path)) {
+      std::cout << "| " << rel << " | missing: skipped | | | | | |\n";
+      continue;
+    }
+    const std::vector<Frame> frames = loadFrames(path);
+    for (auto model : {mapping::MapModel::kLogOdds, mapping::MapModel::kCount, mapping::MapModel::kTsdf}) {
+      mapping::MapOptions o;
+      // Speed: every scan; best of 3 runs to damp the noise of a shared machine.
+      double best = 1e30;
+      std::uint64_t updates = 0, visits = 0;
+      for (int rep = 0; rep < 3; ++rep) {
+        auto map = mapping::makeMap(model, o);
+        const auto t0 = std::chrono::steady_clock::now();
+        for (const Frame& f : frames) map->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
+        best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        updates = map->cellUpdates();
+        visits = map->cellVisits();
+      }
+      // Consistency: even scans build, odd scans test.
+      auto even = mapping::makeMap(model, o);
+      for (std::size_t i = 0; i < frames.size(); i += 2)
+        even->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
+      const io::OccupancyImage image = mapping::toOccupancyImage(*even);
+      const Consistency c = consistency(image, frames, 1, 20.0);
+      std::cout << fmt::format("| {} | {} | {} | {:.3f} | {:.0f} | {:.0f} | {} x {} | {:.1f}% | {:.2f}% |\n",
+                               std::filesystem::path(rel).stem().stem().string(), mapping::toString(model), frames.size(),
+                               1e3 * best / static_cast<double>(frames.size()), static_cast<double>(visits) / best / 1e6,
+                               static_cast<double>(updates) / best / 1e6, image.width(), image.height(),
+                               100.0 * c.explained, 100.0 * c.free_occupied);
+    }
+  }
+}
+
+}  // namespace lidar2d::bench
