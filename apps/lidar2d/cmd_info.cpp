@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <limits>
@@ -99,8 +100,13 @@ nlohmann::json summarise(const InfoArgs& args) {
   j["odometry_source"] = notes.odom_source;
   j["truth_source"] = notes.truth_source;
   nlohmann::json warnings = notes.warnings;
-  if (time_repeats) warnings.push_back(std::to_string(time_repeats) + " scans repeat the previous scan's timestamp");
-  if (time_backwards) warnings.push_back(std::to_string(time_backwards) + " scans have a timestamp earlier than the previous scan's");
+  // Readers that already reported timestamp problems keep their wording; otherwise say it here.
+  const bool reader_told = std::any_of(notes.warnings.begin(), notes.warnings.end(),
+                                       [](const std::string& w) { return w.find("timestamp") != std::string::npos; });
+  if (!reader_told && time_repeats)
+    warnings.push_back(std::to_string(time_repeats) + " scans repeat the previous scan's timestamp");
+  if (!reader_told && time_backwards)
+    warnings.push_back(std::to_string(time_backwards) + " scans have a timestamp earlier than the previous scan's");
   j["warnings"] = warnings;
   return j;
 }
