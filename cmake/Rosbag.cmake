@@ -1,6 +1,10 @@
 # Debian 12 packages ROS1's rosbag_storage (librosbag-storage-dev) but its pkg-config file fails
 # on pluginlib (Debian mixes ROS1 and ROS2 headers), so we locate the libraries and the nested
-# include folders by hand. Only src/io/rosbag1_reader.cpp includes ROS headers.
+# include folders by hand. Only src/io/rosbag1_reader.cpp includes ROS headers, and only the
+# container ones (rosbag/bag.h, view.h, ros/serialization.h), which compile as C++20. The generated
+# message headers (sensor_msgs/LaserScan.h, ...) do not (they use std::allocator<void>::rebind,
+# removed in C++20), so messages are decoded by src/io/internal/ros_messages.cpp instead; no
+# per-file -std=c++17 is needed. roslz4 is listed for bags with lz4 chunks.
 set(_ros_libs rosbag_storage roscpp_serialization rostime cpp_common console_bridge class_loader
               ament_index_cpp roslz4)
 set(_ros_found_libs)
