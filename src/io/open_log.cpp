@@ -38,7 +38,7 @@ LogFormat detectFormat(const std::string& path) {
   const std::string h(head, n);
   if (n >= 2 && static_cast<unsigned char>(head[0]) == 0x1f && static_cast<unsigned char>(head[1]) == 0x8b)
     return LogFormat::kCarmen;  // gzip: only CARMEN text logs are read compressed
-  if (h.rfind("#ROSBAG V", 0) == 0) return LogFormat::kRosbag1;
+  if (h.rfind("#ROSBAG V", 0) == 0 || h.rfind("#ROSRECORD V", 0) == 0) return LogFormat::kRosbag1;  // 2.0 | 1.2
   if (h.rfind("SQLite format 3", 0) == 0) return LogFormat::kRosbag2;
   if (n >= 2 && head[0] == 'B' && head[1] == 'Z')
     throw badInput("bzip2-compressed file: decompress it first (only gzip is read directly)", {path});
