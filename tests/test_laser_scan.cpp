@@ -73,7 +73,7 @@ TEST(LaserScan, ViolatedInvariantsNameTheField) {
   f.angle_increment = std::nan("");
   expectField(f, "angle_increment");
   f = fourBeams();
-  f.angle_increment = 3.0;  // 4 beams over 9 rad
+  f.angle_increment = 4.0;  // 4 beams over 12 rad
   expectField(f, "angle_increment");
   f = fourBeams();
   f.range_max = 0.05;

@@ -17,16 +17,28 @@ namespace {
 
 using V = Eigen::Vector2d;
 constexpr double kPi = std::numbers::pi;
+constexpr double kWallThickness = 0.2;  // [m], a masonry interior wall
 
 struct Builder {
   std::vector<Segment> segs;
   std::vector<Arc> arcs;
 
-  void wall(V a, V b) { segs.push_back({a, b}); }
+  /// A building wall along a -> b, kWallThickness thick (centred on the line) like a real wall:
+  /// zero-thickness walls would let a wall seen from both sides look like one infinitely thin
+  /// surface, which no real building has (and which defeats TSDF mapping's negative band).
+  void wall(V a, V b) {
+    const V n = V(a.y() - b.y(), b.x() - a.x()).normalized() * (kWallThickness / 2);
+    segs.push_back({a + n, b + n});
+    segs.push_back({b + n, b - n});
+    segs.push_back({b - n, a - n});
+    segs.push_back({a - n, a + n});
+  }
+  /// A single zero-thickness segment (the faces of furniture).
+  void edge(V a, V b) { segs.push_back({a, b}); }
   void polyline(std::initializer_list<V> pts) {
     const V* prev = nullptr;
     for (const V& p : pts) {
-      if (prev) wall(*prev, p);
+      if (prev) edge(*prev, p);
       prev = &p;
     }
   }
@@ -117,8 +129,9 @@ Scenario office() {
 // ---- corridor: 60 m x 2 m, rooms at both ends ----
 Scenario corridor() {
   Builder b;
-  b.wall(V(0, -1), V(60, -1));
-  b.wall(V(0, 1), V(60, 1));
+  // Wall centre lines chosen so the inner faces are at y = -1 and +1: 2 m wide.
+  b.wall(V(0, -1 - kWallThickness / 2), V(60, -1 - kWallThickness / 2));
+  b.wall(V(0, 1 + kWallThickness / 2), V(60, 1 + kWallThickness / 2));
   // West room x -8..0, y -4..4, open to the corridor.
   b.polyline({V(0, 1), V(0, 4), V(-8, 4), V(-8, -4), V(0, -4), V(0, -1)});
   b.pillar(-4, -1.8, 0.3);  // off the corridor's axis: invisible from its middle

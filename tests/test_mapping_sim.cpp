@@ -1,0 +1,129 @@
+// Mapping accuracy on the simulator's office world with noise off: walls seen are occupied, free
+// space seen is free (compared with the world geometry at the map's resolution), and the TSDF's
+// sub-cell surface is closer to the true walls than the occupancy models' cells.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include "lidar2d/mapping/occupancy_map.hpp"
+#include "lidar2d/sim/path.hpp"
+#include "lidar2d/sim/simulator.hpp"
+#include "lidar2d/sim/worlds.hpp"
+
+namespace lidar2d::mapping {
+namespace {
+
+struct SimData {
+  sim::Scenario scenario = sim::builtinScenario("office");
+  std::vector<Frame> frames;
+  SimData() {
+    sim::PathOptions p;
+    p.rate_hz = 2.0;  // a scan every 0.4 m keeps the test fast
+    frames = sim::simulate(scenario.world, sim::samplePath(scenario.waypoints, p), sim::SimulatorOptions{}.noiseFree());
+  }
+};
+
+const SimData& data() {
+  static const SimData d;
+  return d;
+}
+
+std::unique_ptr<OccupancyMap> buildMap(MapModel model) {
+  MapOptions o;
+  o.resolution_m = 0.05;
+  auto map = makeMap(model, o);
+  for (const Frame& f : data().frames) map->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
+  return map;
+}
+
+class SimMapping : public ::testing::TestWithParam<MapModel> {};
+
+TEST_P(SimMapping, SeenWallsOccupiedSeenFreeSpaceFree) {
+  const auto map = buildMap(GetParam());
+  const GridGeometry& g = map->geometry();
+  const sim::World& world = data().scenario.world;
+  // Wall cells that a beam endpoint fell into: the cells the laser actually saw a wall in.
+  std::set<std::pair<int, int>> seen_wall;
+  for (const Frame& f : data().frames)
+    for (const auto& p : f.scan.toPoints(*f.T_world_robot * f.T_robot_laser)) {
+      const CellIndex c = g.cellOf(p);
+      seen_wall.insert({c.x, c.y});
+    }
+  ASSERT_GT(seen_wall.size(), 2000u);
+  // Strictly (the endpoint's own cell occupied) and within one cell (as the real-data benchmark
+  // counts): a cell that a wall crosses is also crossed, in front of the wall, by beams grazing it,
+  // so strict coverage is lower (figures in BENCHMARK.md).
+  std::size_t wall_ok = 0, wall_near = 0;
+  for (const auto& [x, y] : seen_wall) {
+    wall_ok += map->state({x, y}) == CellState::kOccupied;
+    bool near = false;
+    for (int dy = -1; dy <= 1 && !near; ++dy)
+      for (int dx = -1; dx <= 1 && !near; ++dx) near = map->state({x + dx, y + dy}) == CellState::kOccupied;
+    wall_near += near;
+  }
+  // Free space: observed cells whose whole square is clear of the world (centre farther than half
+  // a cell diagonal from every primitive) must be free, never occupied.
+  std::size_t clear_cells = 0, clear_free = 0, clear_occupied = 0;
+  const CellBox b = map->bounds();
+  for (int y = b.min.y; y <= b.max.y; ++y)
+    for (int x = b.min.x; x <= b.max.x; ++x) {
+      const CellState s = map->state({x, y});
+      if (s == CellState::kUnknown && GetParam() != MapModel::kTsdf) continue;
+      if (!map->probability({x, y})) continue;  // never observed
+      if (world.distance(g.centerOf({x, y})) < 0.75 * g.resolution()) continue;
+      ++clear_cells;
+      clear_free += s == CellState::kFree;
+      clear_occupied += s == CellState::kOccupied;
+    }
+  ASSERT_GT(clear_cells, 20000u);
+  const double wall_frac = static_cast<double>(wall_ok) / static_cast<double>(seen_wall.size());
+  const double wall_near_frac = static_cast<double>(wall_near) / static_cast<double>(seen_wall.size());
+  const double free_frac = static_cast<double>(clear_free) / static_cast<double>(clear_cells);
+  const double occ_frac = static_cast<double>(clear_occupied) / static_cast<double>(clear_cells);
+  std::printf("%s: seen wall cells occupied %.1f%% (within one cell %.2f%%), clear cells free %.2f%%, occupied %.3f%%\n",
+              toString(GetParam()), 100 * wall_frac, 100 * wall_near_frac, 100 * free_frac, 100 * occ_frac);
+  EXPECT_GE(wall_near_frac, 0.99) << toString(GetParam());
+  if (GetParam() == MapModel::kTsdf) {
+    // The TSDF marks cells just behind every surface negative (unknown in the export): inside the
+    // 0.2 m walls and behind table legs. World::distance measures to the faces, so this test cannot
+    // tell those cells from free space; they make up the few percent that are not "free".
+    EXPECT_GE(free_frac, 0.93);
+    EXPECT_LE(occ_frac, 0.002);
+  } else {
+    EXPECT_GE(free_frac, 0.99) << toString(GetParam());
+    EXPECT_LE(occ_frac, 0.001) << toString(GetParam());
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, SimMapping, ::testing::Values(MapModel::kLogOdds, MapModel::kCount, MapModel::kTsdf),
+                         [](const auto& info) { return std::string(toString(info.param)); });
+
+TEST(SimMapping, TsdfSurfaceIsSubCellAndBeatsOccupancyCells) {
+  const sim::World& world = data().scenario.world;
+  const auto tsdf = buildMap(MapModel::kTsdf);
+  const auto surface = tsdfSurface(*tsdf);
+  ASSERT_GT(surface.size(), 2000u);
+  double sum = 0;
+  for (const auto& s : surface) sum += world.distance(s.p_world);
+  const double tsdf_mean = sum / static_cast<double>(surface.size());
+  for (MapModel m : {MapModel::kLogOdds, MapModel::kCount}) {
+    const auto occ = buildMap(m);
+    double occ_sum = 0;
+    std::size_t n = 0;
+    const CellBox b = occ->bounds();
+    for (int y = b.min.y; y <= b.max.y; ++y)
+      for (int x = b.min.x; x <= b.max.x; ++x)
+        if (occ->state({x, y}) == CellState::kOccupied) {
+          occ_sum += world.distance(occ->geometry().centerOf({x, y}));
+          ++n;
+        }
+    EXPECT_LT(tsdf_mean, occ_sum / static_cast<double>(n)) << toString(m);
+  }
+  EXPECT_LT(tsdf_mean, 0.25 * 0.05) << "mean distance of TSDF surface points to the walls [m]";
+}
+
+}  // namespace
+}  // namespace lidar2d::mapping
