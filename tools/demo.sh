@@ -1,15 +1,24 @@
 #!/bin/sh
-# make demo: the most complete pipeline that exists, on the built-in simulator's office world.
+# make demo: the most complete pipeline that exists, on the built-in simulator's office world:
+# simulate -> summary -> occupancy map from the true poses -> odometry drift against the truth.
 set -eu
 BIN=${1:-build/lidar2d}
 OUT=${2:-out}
 mkdir -p "$OUT"
-echo "== simulate the office world"
+echo "== simulate the office world (scans, noisy odometry, truth)"
 "$BIN" simulate --world office --seed 1 -o "$OUT/office.log"
 echo "== summary"
 "$BIN" info "$OUT/office.log"
-echo "== odometry against truth"
-"$BIN" eval "$OUT/office.log" --truth "$OUT/office.log" --estimate-from odometry -o "$OUT/odometry-eval.json"
+echo "== occupancy maps from the true poses (log-odds, TSDF)"
+"$BIN" map "$OUT/office.log" --model logodds -o "$OUT/office-logodds" >/dev/null
+"$BIN" map "$OUT/office.log" --model tsdf -o "$OUT/office-tsdf" >/dev/null
+echo "== odometry against the truth"
+"$BIN" eval "$OUT/office.log" --truth "$OUT/office.log" --estimate-from odometry -o "$OUT/odometry-eval.json" |
+  grep -E '"(ate_rmse_m|rpe_trans_rmse_m|matched)"' || true
 echo
 echo "demo wrote:"
-for f in "$OUT"/office.log "$OUT"/odometry-eval.json; do echo "  $f"; done
+for f in "$OUT"/office.log "$OUT"/office-logodds.pgm "$OUT"/office-logodds.yaml "$OUT"/office-logodds.png \
+  "$OUT"/office-tsdf.pgm "$OUT"/office-tsdf.yaml "$OUT"/office-tsdf.png "$OUT"/office-tsdf.surface.txt \
+  "$OUT"/odometry-eval.json; do
+  echo "  $f"
+done

@@ -171,7 +171,7 @@ void addMapCommand(CLI::App& app) {
   sub->add_option("--model", a->model, "map model: logodds, count or tsdf")
       ->transform(CLI::CheckedTransformer(models, CLI::ignore_case))
       ->default_str("logodds");
-  sub->add_option("--resolution", a->options.resolution_m, "cell size [m]")->default_val(0.05)->check(CLI::PositiveNumber);
+  sub->add_option("--resolution", a->options.resolution_m, "cell size [m]")->default_val(0.05);
   sub->add_option("--max-range", a->options.insert.max_range_m, "returns beyond this are treated as no return [m]")
       ->default_val(30.0);
   sub->add_option("--no-return-clear", a->options.insert.no_return_clear_m,

@@ -3,6 +3,7 @@
 
 #include <CLI/CLI.hpp>
 #include <exception>
+#include <opencv2/core/utils/logger.hpp>
 #include <iostream>
 #include <new>
 
@@ -10,6 +11,9 @@
 #include "lidar2d/core/error.hpp"
 
 int main(int argc, char** argv) {
+  // OpenCV would print its own warnings (e.g. on an unreadable image) on stderr; errors reach the
+  // user as one lidar2d::Error line instead.
+  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
   CLI::App app{"lidar2d: scan matching, mapping, localization and SLAM for 2D laser scanners"};
   app.set_version_flag("--version", "lidar2d 0.1.0");
   app.require_subcommand(1);
