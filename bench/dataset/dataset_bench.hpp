@@ -1,6 +1,7 @@
 #pragma once
 // Shared pieces of the dataset benchmark.
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -12,5 +13,14 @@ namespace lidar2d::bench {
 std::vector<Frame> loadFrames(const std::string& path);
 
 void runMapBenchmark(const std::string& data_dir);
+
+/// Options of the `match` subcommand.
+struct MatchBenchOptions {
+  double sigma_xy_m = 0.1;          ///< RMS translation error of the perturbed initial guess [m]
+  double sigma_theta_deg = 5.0;     ///< RMS rotation error of the perturbed initial guess [deg]
+  std::uint64_t seed = 1;           ///< seed of the perturbation
+  std::vector<std::string> methods;  ///< method names to run (p2p, p2l, lf, corr); empty = all
+};
+void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);
 
 }  // namespace lidar2d::bench

@@ -1,0 +1,135 @@
+#pragma once
+/// @file
+/// Iterative closest point (ICP) scan matching in the plane: point-to-point and point-to-line
+/// (Censi 2008, "An ICP variant using a point-to-line metric", ICRA), each solved either by a
+/// hand-written Gauss-Newton loop with analytic Jacobians or by Ceres with a robust loss.
+///
+/// Both estimate `T_target_source` (see result.hpp): `p_target = T_target_source * p_source`.
+/// Every iteration pairs each transformed source point with its nearest target point (a nanoflann
+/// k-d tree built once per target, see `IcpTarget`), rejects pairs farther apart than
+/// `max_correspondence_dist_m`, keeps the `trim_keep_fraction` closest of the rest (trimmed ICP,
+/// Chetverikov et al. 2002), and minimises
+///   point-to-point: sum_i rho(|T p_i - q_i|^2)
+///   point-to-line:  sum_i rho((n_i . (T p_i - q_i))^2)
+/// with q_i the nearest target point, n_i the unit normal of the line fitted to q_i's neighbours
+/// (precomputed per target point) and rho the robust loss. It stops when the increment of the pose
+/// falls below both `translation_eps_m` and `rotation_eps_rad`.
+///
+/// Bad input never throws and never yields a NaN pose: empty or too small point sets, all-NaN or
+/// all-identical points, a non-finite initial guess and out-of-domain options give a `Result` with
+/// `converged == false`, the matching `Status`, a message, and the initial guess as the pose (the
+/// identity when the guess itself is not finite).
+
+#include <cstddef>
+#include <memory>
+#include <string>
+
+#include "lidar2d/core/laser_scan.hpp"
+#include "lidar2d/core/se2.hpp"
+#include "lidar2d/registration/result.hpp"
+
+namespace lidar2d::registration {
+
+/// Which optimiser solves the least-squares problem of a matcher (shared by every matcher that
+/// offers both).
+enum class Solver {
+  kGaussNewton,  ///< hand-written Gauss-Newton with analytic Jacobians (robust loss as IRLS weights)
+  kCeres,        ///< Ceres Solver (dense QR, Levenberg-Marquardt) with the robust loss
+};
+/// "gn" or "ceres".
+const char* toString(Solver s);
+
+/// A robust loss rho(s) of a squared residual s = r^2, with Ceres' definitions (the cost is
+/// 0.5 * rho(s)). The Gauss-Newton solvers use the matching iteratively-reweighted least-squares
+/// weight rho'(s), so both solvers minimise the same cost for fixed correspondences.
+struct RobustLoss {
+  enum class Kind {
+    kNone,    ///< rho(s) = s (plain least squares)
+    kHuber,   ///< rho(s) = s for s <= a^2, else 2 a sqrt(s) - a^2 (weight min(1, a / |r|))
+    kCauchy,  ///< rho(s) = a^2 log(1 + s / a^2) (weight 1 / (1 + s / a^2))
+  };
+  Kind kind = Kind::kHuber;
+  double scale_m = 0.05;  ///< a: residual size where the loss turns robust [m], > 0
+
+  /// rho'(r^2): the IRLS weight of a residual r [m].
+  double weight(double r) const;
+  /// rho(r^2) [m^2].
+  double rho(double r) const;
+};
+/// "none", "huber" or "cauchy".
+const char* toString(RobustLoss::Kind k);
+
+/// The residual ICP minimises.
+enum class IcpMetric {
+  kPointToPoint,  ///< |T p - q| (2 residuals per pair)
+  kPointToLine,   ///< n . (T p - q), n the normal of the target's local line (Censi 2008)
+};
+
+/// Options of ICP. Defaults suit indoor 2D scans (0.25 - 1 degree beam spacing, ranges up to tens
+/// of metres) with initial errors up to ~0.3 m and ~10 degrees.
+struct IcpOptions {
+  IcpMetric metric = IcpMetric::kPointToLine;  ///< residual (set from `Method` by matchScans)
+  Solver solver = Solver::kGaussNewton;        ///< optimiser (set from `Solver` by matchScans)
+  double max_correspondence_dist_m = 1.0;  ///< pairs whose points are farther apart are rejected [m], > 0
+  double trim_keep_fraction = 0.9;  ///< keep this fraction of the distance-gated pairs, the closest ones
+                                    ///< (trimmed ICP), in (0, 1]
+  int max_iterations = 50;          ///< outer iterations (correspondence searches), >= 1
+  double translation_eps_m = 1e-5;  ///< converged when the translation increment is below this [m], >= 0
+  double rotation_eps_rad = 1e-5;   ///< ... and the rotation increment below this [rad], >= 0
+  RobustLoss loss;                  ///< robust loss of both solvers (IRLS weights for Gauss-Newton)
+  std::size_t min_points = 10;      ///< fewer finite source or target points: kTooFewPoints, >= 3
+  std::size_t min_inliers = 8;      ///< fewer surviving pairs in an iteration: kTooFewInliers, >= 3
+  int normal_neighbors = 5;         ///< target points (itself included) fitted per line, >= 2
+  double normal_max_radius_m = 1.0;  ///< neighbours farther than this from the point are not fitted [m], > 0
+  double max_line_flatness = 0.2;   ///< a fit whose smaller/larger spread ratio (sqrt of the eigenvalue
+                                    ///< ratio) exceeds this is no line: that target point gets no normal
+                                    ///< and is not used by point-to-line, in [0, 1]
+  int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
+
+  /// Empty when every option is in its domain, else a message naming the first bad field.
+  std::string check() const;
+};
+
+/// A target point set prepared once for matching many sources against it: the finite target
+/// points, a k-d tree over them and the unit normal of each point's local line fit. Build it once
+/// per target scan and reuse it (the tree and normals are never rebuilt during the iterations).
+/// Movable, not copyable; thread-safe for concurrent `alignIcp` calls once built.
+class IcpTarget {
+ public:
+  /// Keeps the finite points of `points_target` (in the target frame [m]) and fits their lines
+  /// with `options.normal_neighbors` and `options.normal_max_radius_m` (other fields are unused).
+  /// Never throws for bad points: an empty or all-NaN set gives an empty target that every match
+  /// reports as kTooFewPoints.
+  explicit IcpTarget(const Points2& points_target, const IcpOptions& options = {});
+  ~IcpTarget();
+  IcpTarget(IcpTarget&&) noexcept;
+  IcpTarget& operator=(IcpTarget&&) noexcept;
+  IcpTarget(const IcpTarget&) = delete;
+  IcpTarget& operator=(const IcpTarget&) = delete;
+
+  /// Number of finite target points kept.
+  std::size_t size() const;
+  /// The finite target points [m], in input order.
+  const Points2& points() const;
+  /// Unit normal of each point's fitted line, or (0, 0) where the neighbourhood is no line.
+  const Points2& normals() const;
+  /// True when every kept point is the same point (within 1e-9 m): nothing can be matched.
+  bool allIdentical() const;
+  /// Index of the target point nearest to `p` and its squared distance [m^2]; size() when empty.
+  std::size_t nearest(const Eigen::Vector2d& p, double* dist_sq) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Aligns `points_source` (source frame [m]) to a prepared target, starting at
+/// `init_T_target_source`. See the file comment for the method and for bad input.
+Result alignIcp(const IcpTarget& target, const Points2& points_source, const SE2& init_T_target_source,
+                const IcpOptions& options = {});
+
+/// Convenience: prepares the target and aligns. Prefer `IcpTarget` when a target is reused.
+Result alignIcp(const Points2& points_target, const Points2& points_source, const SE2& init_T_target_source,
+                const IcpOptions& options = {});
+
+}  // namespace lidar2d::registration

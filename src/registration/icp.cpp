@@ -1,0 +1,532 @@
+#include "lidar2d/registration/icp.hpp"
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "internal/kdtree2.hpp"
+
+namespace lidar2d::registration {
+
+const char* toString(Solver s) {
+  switch (s) {
+    case Solver::kGaussNewton:
+      return "gn";
+    case Solver::kCeres:
+      return "ceres";
+  }
+  return "unknown";
+}
+
+const char* toString(RobustLoss::Kind k) {
+  switch (k) {
+    case RobustLoss::Kind::kNone:
+      return "none";
+    case RobustLoss::Kind::kHuber:
+      return "huber";
+    case RobustLoss::Kind::kCauchy:
+      return "cauchy";
+  }
+  return "unknown";
+}
+
+double RobustLoss::weight(double r) const {
+  switch (kind) {
+    case Kind::kNone:
+      return 1.0;
+    case Kind::kHuber: {
+      const double a = std::abs(r);
+      return a <= scale_m ? 1.0 : scale_m / a;
+    }
+    case Kind::kCauchy:
+      return 1.0 / (1.0 + (r * r) / (scale_m * scale_m));
+  }
+  return 1.0;
+}
+
+double RobustLoss::rho(double r) const {
+  const double s = r * r;
+  switch (kind) {
+    case Kind::kNone:
+      return s;
+    case Kind::kHuber:
+      return s <= scale_m * scale_m ? s : 2.0 * scale_m * std::sqrt(s) - scale_m * scale_m;
+    case Kind::kCauchy:
+      return scale_m * scale_m * std::log1p(s / (scale_m * scale_m));
+  }
+  return s;
+}
+
+std::string IcpOptions::check() const {
+  auto finite_pos = [](double v) { return std::isfinite(v) && v > 0.0; };
+  if (!finite_pos(max_correspondence_dist_m)) return "max_correspondence_dist_m must be finite and > 0";
+  if (!(trim_keep_fraction > 0.0 && trim_keep_fraction <= 1.0)) return "trim_keep_fraction must be in (0, 1]";
+  if (max_iterations < 1) return "max_iterations must be >= 1";
+  if (!(std::isfinite(translation_eps_m) && translation_eps_m >= 0.0)) return "translation_eps_m must be finite and >= 0";
+  if (!(std::isfinite(rotation_eps_rad) && rotation_eps_rad >= 0.0)) return "rotation_eps_rad must be finite and >= 0";
+  if (loss.kind != RobustLoss::Kind::kNone && !finite_pos(loss.scale_m)) return "loss.scale_m must be finite and > 0";
+  if (min_points < 3) return "min_points must be >= 3";
+  if (min_inliers < 3) return "min_inliers must be >= 3";
+  if (normal_neighbors < 2) return "normal_neighbors must be >= 2";
+  if (!finite_pos(normal_max_radius_m)) return "normal_max_radius_m must be finite and > 0";
+  if (!(max_line_flatness >= 0.0 && max_line_flatness <= 1.0)) return "max_line_flatness must be in [0, 1]";
+  if (ceres_max_inner_iterations < 1) return "ceres_max_inner_iterations must be >= 1";
+  return {};
+}
+
+// ---------------------------------------------------------------------------------------------
+// Prepared target
+
+namespace {
+
+Points2 finitePoints(const Points2& in) {
+  Points2 out;
+  out.reserve(in.size());
+  for (const auto& p : in)
+    if (std::isfinite(p.x()) && std::isfinite(p.y())) out.push_back(p);
+  return out;
+}
+
+bool allSame(const Points2& pts) {
+  if (pts.empty()) return false;
+  Eigen::Vector2d lo = pts.front(), hi = pts.front();
+  for (const auto& p : pts) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  return (hi - lo).maxCoeff() <= 1e-9;
+}
+
+}  // namespace
+
+struct IcpTarget::Impl {
+  Points2 points;
+  Points2 normals;
+  bool identical = false;
+  internal::KdTree2 tree;
+
+  Impl(Points2 pts, const IcpOptions& o) : points(std::move(pts)), identical(allSame(points)), tree(points) {
+    computeNormals(o);
+  }
+
+  // Local line fit per target point (the "local line fit" variant of Censi 2008, section III: the
+  // line through the nearest target points, here a total-least-squares fit over up to k of them,
+  // which is less sensitive to range noise than the line through exactly two points).
+  void computeNormals(const IcpOptions& o) {
+    normals.assign(points.size(), Eigen::Vector2d::Zero());
+    const auto k = static_cast<std::size_t>(std::max(2, o.normal_neighbors));
+    std::vector<std::uint32_t> idx(k);
+    std::vector<double> d2(k);
+    const double r2 = o.normal_max_radius_m * o.normal_max_radius_m;
+    const double flat2 = o.max_line_flatness * o.max_line_flatness;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const std::size_t n = tree.knn(points[i], k, idx.data(), d2.data());
+      Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+      std::size_t m = 0;
+      for (std::size_t j = 0; j < n; ++j)
+        if (d2[j] <= r2) {
+          mean += points[idx[j]];
+          ++m;
+        }
+      if (m < 2) continue;
+      mean /= static_cast<double>(m);
+      double a = 0, b = 0, c = 0;
+      for (std::size_t j = 0; j < n; ++j)
+        if (d2[j] <= r2) {
+          const Eigen::Vector2d d = points[idx[j]] - mean;
+          a += d.x() * d.x();
+          b += d.x() * d.y();
+          c += d.y() * d.y();
+        }
+      // Eigenvalues of [[a, b], [b, c]] in closed form; the line direction is the major axis.
+      const double half_tr = 0.5 * (a + c);
+      const double disc = std::sqrt(0.25 * (a - c) * (a - c) + b * b);
+      const double lmax = half_tr + disc;
+      const double lmin = std::max(0.0, half_tr - disc);
+      if (!(lmax > 1e-18) || lmin > flat2 * lmax) continue;
+      const double phi = 0.5 * std::atan2(2.0 * b, a - c);
+      normals[i] = Eigen::Vector2d(-std::sin(phi), std::cos(phi));
+    }
+  }
+};
+
+IcpTarget::IcpTarget(const Points2& points_target, const IcpOptions& options)
+    : impl_(std::make_unique<Impl>(finitePoints(points_target), options)) {}
+IcpTarget::~IcpTarget() = default;
+IcpTarget::IcpTarget(IcpTarget&&) noexcept = default;
+IcpTarget& IcpTarget::operator=(IcpTarget&&) noexcept = default;
+std::size_t IcpTarget::size() const { return impl_->points.size(); }
+const Points2& IcpTarget::points() const { return impl_->points; }
+const Points2& IcpTarget::normals() const { return impl_->normals; }
+bool IcpTarget::allIdentical() const { return impl_->identical; }
+std::size_t IcpTarget::nearest(const Eigen::Vector2d& p, double* dist_sq) const {
+  return impl_->tree.nearest(p, dist_sq);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Matching
+
+namespace {
+
+struct Pair {
+  std::uint32_t src = 0;
+  std::uint32_t tgt = 0;
+  double key = 0.0;  // squared residual used for trimming [m^2]
+};
+
+// Normal equations of one linearisation (Gauss-Newton: H = sum w J^T J, g = sum w J^T r).
+struct Linearisation {
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d g = Eigen::Vector3d::Zero();
+  double cost = 0.0;      // 0.5 * sum rho(r^2) [m^2]
+  double wr2 = 0.0;       // sum w r^2 [m^2]
+  std::size_t residuals = 0;
+};
+
+class Icp {
+ public:
+  Icp(const IcpTarget& target, const Points2& source, const IcpOptions& o)
+      : tgt_(target), src_(source), o_(o), p2l_(o.metric == IcpMetric::kPointToLine) {
+    pairs_.reserve(src_.size());
+  }
+
+  // Pairs each transformed source point with its nearest target point; rejects by distance (and,
+  // for point-to-line, target points without a line), then keeps the closest fraction.
+  void findPairs(const SE2& T) {
+    pairs_.clear();
+    const double gate2 = o_.max_correspondence_dist_m * o_.max_correspondence_dist_m;
+    const Points2& tp = tgt_.points();
+    const Points2& tn = tgt_.normals();
+    for (std::size_t i = 0; i < src_.size(); ++i) {
+      const Eigen::Vector2d q = T * src_[i];
+      double d2 = 0.0;
+      const std::size_t j = tgt_.nearest(q, &d2);
+      if (!(d2 <= gate2)) continue;
+      double key = d2;
+      if (p2l_) {
+        const Eigen::Vector2d& n = tn[j];
+        if (n.x() == 0.0 && n.y() == 0.0) continue;
+        const double r = n.dot(q - tp[j]);
+        key = r * r;
+      }
+      pairs_.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j), key});
+    }
+    if (o_.trim_keep_fraction < 1.0 && pairs_.size() > 1) {
+      const auto keep = static_cast<std::size_t>(std::ceil(o_.trim_keep_fraction * static_cast<double>(pairs_.size())));
+      if (keep < pairs_.size()) {
+        std::nth_element(pairs_.begin(), pairs_.begin() + static_cast<std::ptrdiff_t>(keep), pairs_.end(),
+                         [](const Pair& a, const Pair& b) { return a.key < b.key; });
+        pairs_.resize(keep);
+      }
+    }
+  }
+
+  Linearisation linearise(const SE2& T) const {
+    Linearisation L;
+    const Points2& tp = tgt_.points();
+    const Points2& tn = tgt_.normals();
+    const double c = std::cos(T.theta()), s = std::sin(T.theta());
+    double h00 = 0, h01 = 0, h02 = 0, h11 = 0, h12 = 0, h22 = 0, g0 = 0, g1 = 0, g2 = 0;
+    for (const Pair& pr : pairs_) {
+      const Eigen::Vector2d& p = src_[pr.src];
+      const Eigen::Vector2d& m = tp[pr.tgt];
+      // d(T p)/d(x, y, theta) = [1 0 -s px - c py; 0 1 c px - s py] (SE2::pointJacobian).
+      const double jx = -s * p.x() - c * p.y();
+      const double jy = c * p.x() - s * p.y();
+      const double qx = c * p.x() - s * p.y() + T.x() - m.x();
+      const double qy = s * p.x() + c * p.y() + T.y() - m.y();
+      if (p2l_) {
+        // Censi 2008, eq. (3): r = n^T (R p + t - m); J = n^T d(T p)/d(x, y, theta).
+        const Eigen::Vector2d& n = tn[pr.tgt];
+        const double r = n.x() * qx + n.y() * qy;
+        const double j2 = n.x() * jx + n.y() * jy;
+        const double w = o_.loss.weight(r);
+        h00 += w * n.x() * n.x();
+        h01 += w * n.x() * n.y();
+        h02 += w * n.x() * j2;
+        h11 += w * n.y() * n.y();
+        h12 += w * n.y() * j2;
+        h22 += w * j2 * j2;
+        g0 += w * n.x() * r;
+        g1 += w * n.y() * r;
+        g2 += w * j2 * r;
+        L.cost += 0.5 * o_.loss.rho(r);
+        L.wr2 += w * r * r;
+        L.residuals += 1;
+      } else {
+        // Point-to-point: the robust loss acts on the pair's squared distance (one residual block
+        // of two components, as in the Ceres variant).
+        const double d = std::hypot(qx, qy);
+        const double w = o_.loss.weight(d);
+        h00 += w;
+        h02 += w * jx;
+        h11 += w;
+        h12 += w * jy;
+        h22 += w * (jx * jx + jy * jy);
+        g0 += w * qx;
+        g1 += w * qy;
+        g2 += w * (jx * qx + jy * qy);
+        L.cost += 0.5 * o_.loss.rho(d);
+        L.wr2 += w * d * d;
+        L.residuals += 2;
+      }
+    }
+    L.H << h00, h01, h02, h01, h11, h12, h02, h12, h22;
+    L.g << g0, g1, g2;
+    return L;
+  }
+
+  const std::vector<Pair>& pairs() const { return pairs_; }
+  const Points2& source() const { return src_; }
+  const IcpTarget& target() const { return tgt_; }
+
+ private:
+  const IcpTarget& tgt_;
+  const Points2& src_;
+  const IcpOptions& o_;
+  const bool p2l_;
+  std::vector<Pair> pairs_;
+};
+
+// Solves H dx = -g. Falls back to the pseudo-inverse (eigenvalues below 1e-12 of the largest
+// dropped) when H is singular or nearly so (a corridor leaves one direction unconstrained): the
+// step then does not move along that direction. Returns false when H carries no information.
+bool solveStep(const Eigen::Matrix3d& H, const Eigen::Vector3d& g, Eigen::Vector3d& dx) {
+  Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
+  if (ldlt.info() == Eigen::Success && ldlt.isPositive() && ldlt.rcond() > 1e-10) {
+    dx = -ldlt.solve(g);
+    if (dx.allFinite()) return true;
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(H);
+  const double lmax = es.eigenvalues()(2);
+  if (!(lmax > 0.0) || !std::isfinite(lmax)) return false;
+  dx.setZero();
+  for (int i = 0; i < 3; ++i) {
+    const double l = es.eigenvalues()(i);
+    if (l > 1e-12 * lmax) dx -= es.eigenvectors().col(i) * (es.eigenvectors().col(i).dot(g) / l);
+  }
+  return dx.allFinite();
+}
+
+Result failure(const SE2& init, Status status, std::string message) {
+  Result r;
+  r.T_target_source = init.isFinite() ? init : SE2();
+  r.converged = false;
+  r.status = status;
+  r.message = std::move(message);
+  return r;
+}
+
+// Fills information, covariance, cost and inliers of `r` from the final linearisation.
+void finish(Result& r, const Linearisation& L, std::size_t inliers) {
+  r.information = L.H;
+  r.final_cost = L.cost;
+  r.num_inliers = inliers;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(L.H);
+  const double lmin = es.eigenvalues()(0), lmax = es.eigenvalues()(2);
+  if (lmax > 0.0 && lmin > 1e-12 * lmax && L.residuals > 3) {
+    const double sigma2 = L.wr2 / static_cast<double>(L.residuals - 3);
+    r.covariance = sigma2 * es.eigenvectors() * es.eigenvalues().cwiseInverse().asDiagonal() *
+                   es.eigenvectors().transpose();
+  } else {
+    r.covariance = Eigen::Matrix3d::Identity() * std::numeric_limits<double>::infinity();
+  }
+}
+
+bool smallStep(const Eigen::Vector3d& dx, const IcpOptions& o) {
+  return std::hypot(dx.x(), dx.y()) < o.translation_eps_m && std::abs(dx.z()) < o.rotation_eps_rad;
+}
+
+Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
+  Result res;
+  Eigen::Vector3d x = init.vector();
+  Linearisation L;
+  std::size_t inliers = 0;
+  int it = 0;
+  bool converged = false;
+  while (it < o.max_iterations) {
+    ++it;
+    const SE2 T = SE2::fromVector(x);
+    icp.findPairs(T);
+    if (icp.pairs().size() < o.min_inliers)
+      return failure(init, Status::kTooFewInliers,
+                     fmt::format("iteration {}: {} correspondences survived the rejection, {} needed", it,
+                                 icp.pairs().size(), o.min_inliers));
+    L = icp.linearise(T);
+    inliers = icp.pairs().size();
+    Eigen::Vector3d dx;
+    if (!solveStep(L.H, L.g, dx))
+      return failure(init, Status::kDegenerate, "the normal equations carry no information");
+    x += dx;
+    x.z() = wrapAngle(x.z());
+    if (!x.allFinite()) return failure(init, Status::kSolverFailure, "the estimate became non-finite");
+    if (smallStep(dx, o)) {
+      converged = true;
+      break;
+    }
+  }
+  res.T_target_source = SE2::fromVector(x);
+  res.iterations = it;
+  res.converged = converged;
+  res.status = converged ? Status::kConverged : Status::kMaxIterations;
+  if (!converged) res.message = fmt::format("no convergence within {} iterations", o.max_iterations);
+  finish(res, L, inliers);
+  return res;
+}
+
+// Analytic Ceres cost functions over the parameter block (x, y, theta) of T_target_source.
+class PointToLineCost final : public ceres::SizedCostFunction<1, 3> {
+ public:
+  PointToLineCost(const Eigen::Vector2d& p, const Eigen::Vector2d& m, const Eigen::Vector2d& n) : p_(p), m_(m), n_(n) {}
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const double* x = parameters[0];
+    const double c = std::cos(x[2]), s = std::sin(x[2]);
+    const double qx = c * p_.x() - s * p_.y() + x[0] - m_.x();
+    const double qy = s * p_.x() + c * p_.y() + x[1] - m_.y();
+    residuals[0] = n_.x() * qx + n_.y() * qy;
+    if (jacobians != nullptr && jacobians[0] != nullptr) {
+      jacobians[0][0] = n_.x();
+      jacobians[0][1] = n_.y();
+      jacobians[0][2] = n_.x() * (-s * p_.x() - c * p_.y()) + n_.y() * (c * p_.x() - s * p_.y());
+    }
+    return true;
+  }
+
+ private:
+  Eigen::Vector2d p_, m_, n_;
+};
+
+class PointToPointCost final : public ceres::SizedCostFunction<2, 3> {
+ public:
+  PointToPointCost(const Eigen::Vector2d& p, const Eigen::Vector2d& m) : p_(p), m_(m) {}
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const double* x = parameters[0];
+    const double c = std::cos(x[2]), s = std::sin(x[2]);
+    residuals[0] = c * p_.x() - s * p_.y() + x[0] - m_.x();
+    residuals[1] = s * p_.x() + c * p_.y() + x[1] - m_.y();
+    if (jacobians != nullptr && jacobians[0] != nullptr) {
+      double* J = jacobians[0];  // row-major 2 x 3
+      J[0] = 1.0;
+      J[1] = 0.0;
+      J[2] = -s * p_.x() - c * p_.y();
+      J[3] = 0.0;
+      J[4] = 1.0;
+      J[5] = c * p_.x() - s * p_.y();
+    }
+    return true;
+  }
+
+ private:
+  Eigen::Vector2d p_, m_;
+};
+
+std::unique_ptr<ceres::LossFunction> makeLoss(const RobustLoss& loss) {
+  switch (loss.kind) {
+    case RobustLoss::Kind::kNone:
+      return nullptr;
+    case RobustLoss::Kind::kHuber:
+      return std::make_unique<ceres::HuberLoss>(loss.scale_m);
+    case RobustLoss::Kind::kCauchy:
+      return std::make_unique<ceres::CauchyLoss>(loss.scale_m);
+  }
+  return nullptr;
+}
+
+// Outer loop of correspondence searches; for each set of pairs Ceres minimises the robust cost
+// (a few Levenberg-Marquardt iterations), then the pairs are searched again at the new pose.
+Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
+  const std::unique_ptr<ceres::LossFunction> loss = makeLoss(o.loss);
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = o.ceres_max_inner_iterations;
+  so.num_threads = 1;
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  so.function_tolerance = 1e-12;
+  so.gradient_tolerance = 1e-14;
+  so.parameter_tolerance = 1e-10;
+  ceres::Problem::Options po;
+  po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  po.enable_fast_removal = false;
+  po.disable_all_safety_checks = true;
+
+  const bool p2l = o.metric == IcpMetric::kPointToLine;
+  const Points2& tp = icp.target().points();
+  const Points2& tn = icp.target().normals();
+  double x[3] = {init.x(), init.y(), init.theta()};
+  int it = 0;
+  bool converged = false;
+  std::size_t inliers = 0;
+  while (it < o.max_iterations) {
+    ++it;
+    const SE2 T(x[0], x[1], x[2]);
+    icp.findPairs(T);
+    if (icp.pairs().size() < o.min_inliers)
+      return failure(init, Status::kTooFewInliers,
+                     fmt::format("iteration {}: {} correspondences survived the rejection, {} needed", it,
+                                 icp.pairs().size(), o.min_inliers));
+    inliers = icp.pairs().size();
+    ceres::Problem problem(po);
+    for (const Pair& pr : icp.pairs()) {
+      const Eigen::Vector2d& p = icp.source()[pr.src];
+      ceres::CostFunction* cost = p2l ? static_cast<ceres::CostFunction*>(new PointToLineCost(p, tp[pr.tgt], tn[pr.tgt]))
+                                      : new PointToPointCost(p, tp[pr.tgt]);
+      problem.AddResidualBlock(cost, loss.get(), x);
+    }
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    if (!summary.IsSolutionUsable() || !std::isfinite(x[0]) || !std::isfinite(x[1]) || !std::isfinite(x[2]))
+      return failure(init, Status::kSolverFailure, fmt::format("Ceres: {}", summary.message));
+    x[2] = wrapAngle(x[2]);
+    const Eigen::Vector3d dx(x[0] - T.x(), x[1] - T.y(), angleDiff(x[2], T.theta()));
+    if (smallStep(dx, o)) {
+      converged = true;
+      break;
+    }
+  }
+  Result res;
+  res.T_target_source = SE2(x[0], x[1], x[2]);
+  res.iterations = it;
+  res.converged = converged;
+  res.status = converged ? Status::kConverged : Status::kMaxIterations;
+  if (!converged) res.message = fmt::format("no convergence within {} iterations", o.max_iterations);
+  finish(res, icp.linearise(res.T_target_source), inliers);
+  return res;
+}
+
+}  // namespace
+
+Result alignIcp(const IcpTarget& target, const Points2& points_source, const SE2& init_T_target_source,
+                const IcpOptions& options) {
+  if (const std::string bad = options.check(); !bad.empty())
+    return failure(init_T_target_source, Status::kInvalidInput, "invalid option: " + bad);
+  if (!init_T_target_source.isFinite())
+    return failure(init_T_target_source, Status::kInvalidInput, "the initial guess is not finite");
+  const Points2 source = finitePoints(points_source);
+  if (source.size() < options.min_points || target.size() < options.min_points)
+    return failure(init_T_target_source, Status::kTooFewPoints,
+                   fmt::format("{} finite source and {} finite target points, {} needed", source.size(), target.size(),
+                               options.min_points));
+  if (allSame(source) || target.allIdentical())
+    return failure(init_T_target_source, Status::kDegenerate,
+                   allSame(source) ? "all source points are identical" : "all target points are identical");
+  Icp icp(target, source, options);
+  return options.solver == Solver::kCeres ? runCeres(icp, init_T_target_source, options)
+                                          : runGaussNewton(icp, init_T_target_source, options);
+}
+
+Result alignIcp(const Points2& points_target, const Points2& points_source, const SE2& init_T_target_source,
+                const IcpOptions& options) {
+  if (const std::string bad = options.check(); !bad.empty())
+    return failure(init_T_target_source, Status::kInvalidInput, "invalid option: " + bad);
+  return alignIcp(IcpTarget(points_target, options), points_source, init_T_target_source, options);
+}
+
+}  // namespace lidar2d::registration

@@ -1,0 +1,90 @@
+#include "lidar2d/registration/matcher.hpp"
+
+#include <utility>
+
+namespace lidar2d::registration {
+
+const char* toString(Method m) {
+  switch (m) {
+    case Method::kP2P:
+      return "p2p";
+    case Method::kP2L:
+      return "p2l";
+    case Method::kLikelihoodField:
+      return "lf";
+    case Method::kCorrelative:
+      return "corr";
+  }
+  return "unknown";
+}
+
+std::optional<Method> parseMethod(const std::string& name) {
+  for (Method m : {Method::kP2P, Method::kP2L, Method::kLikelihoodField, Method::kCorrelative})
+    if (name == toString(m)) return m;
+  return std::nullopt;
+}
+
+std::optional<Solver> parseSolver(const std::string& name) {
+  for (Solver s : {Solver::kGaussNewton, Solver::kCeres})
+    if (name == toString(s)) return s;
+  return std::nullopt;
+}
+
+namespace {
+
+IcpOptions icpOptions(const MatcherOptions& o) {
+  IcpOptions icp = o.icp;
+  icp.metric = o.method == Method::kP2P ? IcpMetric::kPointToPoint : IcpMetric::kPointToLine;
+  icp.solver = o.solver;
+  return icp;
+}
+
+Result invalid(const SE2& init, std::string message) {
+  Result r;
+  r.T_target_source = init.isFinite() ? init : SE2();
+  r.status = Status::kInvalidInput;
+  r.message = std::move(message);
+  return r;
+}
+
+}  // namespace
+
+PreparedTarget::PreparedTarget(const Points2& points_target, const MatcherOptions& options)
+    : method_(options.method), points_(points_target) {
+  switch (options.method) {
+    case Method::kP2P:
+    case Method::kP2L:
+      icp_ = std::make_unique<IcpTarget>(points_, icpOptions(options));
+      break;
+    case Method::kLikelihoodField:
+    case Method::kCorrelative:
+      break;  // not implemented yet: matchScans reports it
+  }
+}
+
+PreparedTarget::~PreparedTarget() = default;
+PreparedTarget::PreparedTarget(PreparedTarget&&) noexcept = default;
+PreparedTarget& PreparedTarget::operator=(PreparedTarget&&) noexcept = default;
+
+Result matchScans(const PreparedTarget& target, const Points2& source, const SE2& init_T_target_source,
+                  const MatcherOptions& options) {
+  if (target.method() != options.method)
+    return invalid(init_T_target_source, std::string("target prepared for method ") + toString(target.method()) +
+                                             ", matched with " + toString(options.method));
+  switch (options.method) {
+    case Method::kP2P:
+    case Method::kP2L:
+      return alignIcp(*target.icp(), source, init_T_target_source, icpOptions(options));
+    case Method::kLikelihoodField:
+    case Method::kCorrelative:
+      return invalid(init_T_target_source, "not implemented yet");
+  }
+  return invalid(init_T_target_source, "unknown method");
+}
+
+Result matchScans(const Points2& target, const Points2& source, const SE2& init_T_target_source,
+                  const MatcherOptions& options) {
+  return matchScans(PreparedTarget(target, options), source, init_T_target_source, options);
+}
+
+}  // namespace lidar2d::registration
