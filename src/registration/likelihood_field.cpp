@@ -1,0 +1,342 @@
+#include "lidar2d/registration/likelihood_field.hpp"
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <memory>
+
+#include "lidar2d/core/error.hpp"
+#include "src/registration/internal/lf_raster.hpp"
+
+namespace lidar2d::registration {
+
+namespace {
+
+using internal::NodeGrid;
+
+// Largest number of nodes one level may have: a field is a working buffer, not a canvas for
+// arbitrary extents (a 500 m x 500 m map at 5 cm is 10^8 nodes).
+constexpr double kMaxNodes = 2.0e8;
+
+void requireField(bool ok, const char* field, const std::string& what) {
+  if (!ok) throw invalidArgument(what, ErrorLocation({}, 0, field));
+}
+
+LikelihoodField::Level makeLevel(const Eigen::Vector2d& lo, const Eigen::Vector2d& hi, double res, double trunc) {
+  LikelihoodField::Level lv;
+  lv.resolution = res;
+  lv.truncation = trunc;
+  const double pad = trunc + 2.0 * res;
+  lv.origin = ((lo.array() - pad) / res).floor() * res;
+  const Eigen::Vector2d ext = hi.array() + pad - lv.origin.array();
+  const double w = std::ceil(ext.x() / res) + 1.0, h = std::ceil(ext.y() / res) + 1.0;
+  if (w * h > kMaxNodes)
+    throw invalidArgument(fmt::format("the field would need {:.0f} x {:.0f} nodes; use a coarser resolution", w, h),
+                          ErrorLocation({}, 0, "resolution_m"));
+  lv.width = static_cast<int>(w);
+  lv.height = static_cast<int>(h);
+  lv.values.assign(static_cast<std::size_t>(lv.width) * static_cast<std::size_t>(lv.height), static_cast<float>(trunc));
+  return lv;
+}
+
+float& node(LikelihoodField::Level& lv, int i, int j) {
+  return lv.values[static_cast<std::size_t>(j) * static_cast<std::size_t>(lv.width) + static_cast<std::size_t>(i)];
+}
+
+// Distance to isolated points minus `radius`, kept where it is the smallest magnitude so far.
+void splatPoints(LikelihoodField::Level& lv, const std::vector<Eigen::Vector2d>& pts, double radius = 0.0) {
+  const NodeGrid g{lv.origin, lv.resolution, lv.width, lv.height};
+  const double r = lv.truncation;
+  for (const auto& p : pts) {
+    internal::forEachNodeInBox(g, p.array() - r, p.array() + r, [&](int i, int j, const Eigen::Vector2d& q) {
+      const double d = (q - p).norm() - radius;
+      float& v = node(lv, i, j);
+      if (std::abs(d) < std::abs(v)) v = static_cast<float>(d);
+    });
+  }
+}
+
+// Signed distance to the line of each segment, positive on the sensor's side, over the nodes whose
+// projection falls on the segment extended by one node spacing at both ends (so consecutive
+// segments overlap and a wall's end does not create a sign discontinuity beside it).
+void splatSegments(LikelihoodField::Level& lv, const std::vector<internal::Segment>& segs, const Eigen::Vector2d& sensor) {
+  const NodeGrid g{lv.origin, lv.resolution, lv.width, lv.height};
+  const double r = lv.truncation, ext = lv.resolution;
+  for (const auto& s : segs) {
+    const Eigen::Vector2d ab = s.b - s.a;
+    const double len = ab.norm();
+    const Eigen::Vector2d u = ab / len;
+    Eigen::Vector2d n(-u.y(), u.x());
+    if (n.dot(sensor - s.a) < 0.0) n = -n;
+    const Eigen::Vector2d lo = s.a.cwiseMin(s.b).array() - (r + ext), hi = s.a.cwiseMax(s.b).array() + (r + ext);
+    internal::forEachNodeInBox(g, lo, hi, [&](int i, int j, const Eigen::Vector2d& q) {
+      const Eigen::Vector2d aq = q - s.a;
+      const double t = aq.dot(u);
+      if (t < -ext || t > len + ext) return;
+      const double d = aq.dot(n);
+      float& v = node(lv, i, j);
+      if (std::abs(d) < std::abs(v)) v = static_cast<float>(d);
+    });
+  }
+}
+
+double robustWeight(LfLoss loss, double r, double k) {
+  const double a = std::abs(r);
+  switch (loss) {
+    case LfLoss::kNone:
+      return 1.0;
+    case LfLoss::kHuber:
+      return a <= k ? 1.0 : k / a;
+    case LfLoss::kCauchy:
+      return 1.0 / (1.0 + (r / k) * (r / k));
+  }
+  return 1.0;
+}
+
+// One linearisation of the field cost at T over the inliers of level l.
+struct Linearisation {
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d g = Eigen::Vector3d::Zero();
+  double sq_sum = 0.0;  // sum of squared residuals of the inliers
+  std::size_t n = 0;
+};
+
+Linearisation linearise(const LikelihoodField& field, int l, const Points2& src, const SE2& T, LfLoss loss, double k) {
+  Linearisation lin;
+  for (const auto& p : src) {
+    const auto s = field.sample(T * p, l);
+    if (!s.inlier) continue;
+    const Eigen::RowVector3d J = s.gradient.transpose() * T.pointJacobian(p);
+    const double w = robustWeight(loss, s.value, k);
+    lin.H.noalias() += w * J.transpose() * J;
+    lin.g.noalias() += w * J.transpose() * s.value;
+    lin.sq_sum += s.value * s.value;
+    ++lin.n;
+  }
+  return lin;
+}
+
+// The field value at T * p as a Ceres residual with its analytic Jacobian (chain rule: field
+// gradient times SE2::pointJacobian). Points outside the inlier zone give the truncation with a
+// zero Jacobian, the value a truncated field assigns them.
+class FieldResidual final : public ceres::SizedCostFunction<1, 3> {
+ public:
+  FieldResidual(const LikelihoodField& field, int level, const Eigen::Vector2d& p) : field_(field), level_(level), p_(p) {}
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const double* x = parameters[0];
+    const SE2 T(x[0], x[1], x[2]);
+    const auto s = field_.sample(T * p_, level_);
+    residuals[0] = s.inlier ? s.value : field_.level(level_).truncation;
+    if (jacobians != nullptr && jacobians[0] != nullptr) {
+      if (s.inlier) {
+        const Eigen::RowVector3d J = s.gradient.transpose() * T.pointJacobian(p_);
+        for (int c = 0; c < 3; ++c) jacobians[0][c] = J(c);
+      } else {
+        for (int c = 0; c < 3; ++c) jacobians[0][c] = 0.0;
+      }
+    }
+    return true;
+  }
+
+ private:
+  const LikelihoodField& field_;
+  int level_;
+  Eigen::Vector2d p_;
+};
+
+Result failure(const SE2& pose, Status status, std::string message) {
+  Result r;
+  r.T_target_source = pose;
+  r.converged = false;
+  r.status = status;
+  r.message = std::move(message);
+  return r;
+}
+
+}  // namespace
+
+void LikelihoodFieldOptions::validate() const {
+  requireField(std::isfinite(resolution_m) && resolution_m > 0.0, "resolution_m", "must be finite and > 0");
+  requireField(levels >= 1 && levels <= 8, "levels", "must be in 1..8");
+  requireField(std::isfinite(truncation_m) && truncation_m >= 2.0 * resolution_m, "truncation_m",
+               "must be finite and >= 2 * resolution_m");
+  requireField(std::isfinite(connect_max_gap_m) && connect_max_gap_m >= 0.0, "connect_max_gap_m", "must be finite and >= 0");
+  requireField(occupied_min >= 1 && occupied_min <= 100, "occupied_min", "must be in 1..100");
+  requireField(solver == LfSolver::kGaussNewton || solver == LfSolver::kCeres, "solver", "unknown solver");
+  requireField(loss == LfLoss::kNone || loss == LfLoss::kHuber || loss == LfLoss::kCauchy, "loss", "unknown loss");
+  requireField(std::isfinite(loss_scale_m) && loss_scale_m > 0.0, "loss_scale_m", "must be finite and > 0");
+  requireField(max_iterations >= 1, "max_iterations", "must be >= 1");
+  requireField(std::isfinite(min_translation_step_m) && min_translation_step_m >= 0.0, "min_translation_step_m",
+               "must be finite and >= 0");
+  requireField(std::isfinite(min_rotation_step_rad) && min_rotation_step_rad >= 0.0, "min_rotation_step_rad",
+               "must be finite and >= 0");
+  requireField(min_points >= 3, "min_points", "must be >= 3");
+}
+
+LikelihoodField LikelihoodField::fromPoints(const Points2& target, const LikelihoodFieldOptions& options,
+                                            const Eigen::Vector2d& sensor_origin) {
+  options.validate();
+  LikelihoodField f;
+  Eigen::Vector2d lo, hi;
+  if (!internal::boundingBox(target, lo, hi)) return f;
+  const auto poly = internal::makePolyline(target, options.connect_max_gap_m);
+  for (int l = 0; l < options.levels; ++l) {
+    const double scale = std::ldexp(1.0, l);
+    auto lv = makeLevel(lo, hi, options.resolution_m * scale, options.truncation_m * scale);
+    splatSegments(lv, poly.segments, sensor_origin);
+    splatPoints(lv, poly.isolated);
+    f.levels_.push_back(std::move(lv));
+  }
+  return f;
+}
+
+LikelihoodField LikelihoodField::fromMap(const io::OccupancyImage& map, const LikelihoodFieldOptions& options) {
+  options.validate();
+  Points2 obstacles;
+  for (int row = 0; row < map.height(); ++row)
+    for (int col = 0; col < map.width(); ++col)
+      if (map.at(col, row) >= options.occupied_min) obstacles.push_back(map.cellCenter(col, row));
+  LikelihoodField f;
+  Eigen::Vector2d lo, hi;
+  if (!internal::boundingBox(obstacles, lo, hi)) return f;
+  for (int l = 0; l < options.levels; ++l) {
+    const double scale = std::ldexp(1.0, l);
+    auto lv = makeLevel(lo, hi, options.resolution_m * scale, options.truncation_m * scale);
+    splatPoints(lv, obstacles, 0.5 * map.resolution());
+    f.levels_.push_back(std::move(lv));
+  }
+  return f;
+}
+
+LikelihoodField::Sample LikelihoodField::sample(const Eigen::Vector2d& p, int l) const {
+  const Level& lv = levels_[static_cast<std::size_t>(l)];
+  Sample s;
+  s.value = lv.truncation;
+  const double ux = (p.x() - lv.origin.x()) / lv.resolution, uy = (p.y() - lv.origin.y()) / lv.resolution;
+  // The negated comparison also rejects NaN.
+  if (!(ux >= 0.0 && uy >= 0.0 && ux < lv.width - 1 && uy < lv.height - 1)) return s;
+  const int i = static_cast<int>(ux), j = static_cast<int>(uy);
+  const double fx = ux - i, fy = uy - j;
+  const std::size_t k = static_cast<std::size_t>(j) * static_cast<std::size_t>(lv.width) + static_cast<std::size_t>(i);
+  const float* row0 = lv.values.data() + k;
+  const float* row1 = row0 + lv.width;
+  const double v00 = row0[0], v10 = row0[1], v01 = row1[0], v11 = row1[1];
+  s.value = (1 - fx) * (1 - fy) * v00 + fx * (1 - fy) * v10 + (1 - fx) * fy * v01 + fx * fy * v11;
+  s.gradient.x() = ((1 - fy) * (v10 - v00) + fy * (v11 - v01)) / lv.resolution;
+  s.gradient.y() = ((1 - fx) * (v01 - v00) + fx * (v11 - v10)) / lv.resolution;
+  const float t = static_cast<float>(lv.truncation);
+  s.inlier = std::abs(row0[0]) < t && std::abs(row0[1]) < t && std::abs(row1[0]) < t && std::abs(row1[1]) < t;
+  return s;
+}
+
+Result matchLikelihoodField(const LikelihoodField& field, const Points2& source, const SE2& init,
+                            const LikelihoodFieldOptions& options) {
+  options.validate();
+  if (!init.isFinite()) return failure(SE2(), Status::kInvalidInput, "the initial guess is not finite");
+  Points2 src;
+  src.reserve(source.size());
+  for (const auto& p : source)
+    if (p.allFinite()) src.push_back(p);
+  if (src.size() < options.min_points)
+    return failure(init, Status::kTooFewPoints,
+                   fmt::format("the source has {} valid points, fewer than min_points = {}", src.size(), options.min_points));
+  if (field.empty()) return failure(init, Status::kTooFewPoints, "the target has no valid points");
+
+  SE2 T = init;
+  int iterations = 0;
+  bool converged = false;
+  const int levels = std::min(field.numLevels(), options.levels);
+  for (int l = levels - 1; l >= 0; --l) {
+    const double scale = std::ldexp(1.0, l);
+    const double k = options.loss_scale_m * scale;
+    const double max_step = field.level(l).truncation;
+    converged = false;
+    if (options.solver == LfSolver::kGaussNewton) {
+      for (int it = 0; it < options.max_iterations; ++it) {
+        const auto lin = linearise(field, l, src, T, options.loss, k);
+        if (lin.n < options.min_points) {
+          if (l > 0) break;  // the coarse level did not see enough; try the finer ones anyway
+          return failure(init, Status::kTooFewInliers,
+                         fmt::format("{} points lie within the field's truncation, fewer than min_points = {}", lin.n,
+                                     options.min_points));
+        }
+        // A tiny Levenberg term keeps a (nearly) singular H solvable; the degenerate direction
+        // then barely moves instead of jumping.
+        const Eigen::Matrix3d A = lin.H + 1e-9 * (lin.H.trace() + 1e-12) * Eigen::Matrix3d::Identity();
+        Eigen::Vector3d dx = -A.ldlt().solve(lin.g);
+        if (!dx.allFinite()) return failure(init, Status::kDegenerate, "the normal equations are singular");
+        // Gauss-Newton is only trusted within the field's truncation: clamp the step.
+        const double tn = dx.head<2>().norm();
+        if (tn > max_step) dx.head<2>() *= max_step / tn;
+        dx.z() = std::clamp(dx.z(), -0.3, 0.3);
+        T = SE2(T.x() + dx.x(), T.y() + dx.y(), T.theta() + dx.z());
+        ++iterations;
+        if (dx.head<2>().norm() <= options.min_translation_step_m && std::abs(dx.z()) <= options.min_rotation_step_rad) {
+          converged = true;
+          break;
+        }
+      }
+    } else {
+      double x[3] = {T.x(), T.y(), T.theta()};
+      ceres::Problem::Options po;
+      po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+      ceres::Problem problem(po);
+      std::unique_ptr<ceres::LossFunction> loss;
+      if (options.loss == LfLoss::kHuber) loss = std::make_unique<ceres::HuberLoss>(k);
+      if (options.loss == LfLoss::kCauchy) loss = std::make_unique<ceres::CauchyLoss>(k);
+      for (const auto& p : src) problem.AddResidualBlock(new FieldResidual(field, l, p), loss.get(), x);
+      ceres::Solver::Options so;
+      so.linear_solver_type = ceres::DENSE_QR;
+      so.max_num_iterations = options.max_iterations;
+      so.num_threads = 1;
+      so.logging_type = ceres::SILENT;
+      so.minimizer_progress_to_stdout = false;
+      so.function_tolerance = 1e-10;
+      so.gradient_tolerance = 1e-14;
+      so.parameter_tolerance = 1e-9;
+      ceres::Solver::Summary summary;
+      ceres::Solve(so, &problem, &summary);
+      iterations += static_cast<int>(summary.iterations.size()) - 1;
+      if (!std::isfinite(x[0]) || !std::isfinite(x[1]) || !std::isfinite(x[2]))
+        return failure(init, Status::kSolverFailure, "Ceres returned a non-finite pose");
+      T = SE2(x[0], x[1], x[2]);
+      converged = summary.termination_type == ceres::CONVERGENCE;
+      if (summary.termination_type == ceres::FAILURE && l == 0)
+        return failure(init, Status::kSolverFailure, summary.message);
+    }
+  }
+
+  // The final linearisation at the estimate: H, inliers, cost and covariance.
+  const auto lin = linearise(field, 0, src, T, options.loss, options.loss_scale_m);
+  if (lin.n < options.min_points)
+    return failure(init, Status::kTooFewInliers,
+                   fmt::format("{} points lie within the field's truncation at the estimate, fewer than min_points = {}",
+                               lin.n, options.min_points));
+  Result r;
+  r.T_target_source = T;
+  r.iterations = iterations;
+  r.num_inliers = lin.n;
+  r.final_cost = lin.sq_sum / static_cast<double>(lin.n);
+  r.information = lin.H;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(lin.H);
+  const double max_eig = std::max(es.eigenvalues().maxCoeff(), 0.0);
+  if (es.eigenvalues().minCoeff() > 1e-12 * max_eig && max_eig > 0.0) {
+    const double sigma2 = lin.n > 3 ? lin.sq_sum / static_cast<double>(lin.n - 3) : lin.sq_sum;
+    r.covariance = sigma2 * lin.H.inverse();
+  }
+  r.converged = converged;
+  r.status = converged ? Status::kConverged : Status::kMaxIterations;
+  if (!converged) r.message = "the last level did not converge within max_iterations";
+  return r;
+}
+
+Result matchLikelihoodField(const Points2& target, const Points2& source, const SE2& init,
+                            const LikelihoodFieldOptions& options) {
+  const auto field = LikelihoodField::fromPoints(target, options);
+  return matchLikelihoodField(field, source, init, options);
+}
+
+}  // namespace lidar2d::registration
