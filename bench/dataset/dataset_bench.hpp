@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "lidar2d/core/frame.hpp"
+#include "lidar2d/registration/icp.hpp"
 
 namespace lidar2d::bench {
 
@@ -20,6 +21,10 @@ struct MatchBenchOptions {
   double sigma_theta_deg = 5.0;     ///< RMS rotation error of the perturbed initial guess [deg]
   std::uint64_t seed = 1;           ///< seed of the perturbation
   std::vector<std::string> methods;  ///< method names to run (p2p, p2l, lf, corr); empty = all
+  std::vector<std::string> solvers;  ///< solver names to run (gn, ceres); empty = all
+  std::vector<std::string> inits{"perturbed", "identity"};  ///< initial guesses: perturbed, identity, truth
+  registration::IcpOptions icp;      ///< ICP options (metric and solver are set per row)
+  std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
 };
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);
 

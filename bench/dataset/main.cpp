@@ -23,6 +23,16 @@ int main(int argc, char** argv) {
   match->add_option("--sigma-theta", match_options.sigma_theta_deg, "RMS rotation error of the perturbed guess [deg]")->capture_default_str();
   match->add_option("--seed", match_options.seed, "seed of the perturbation")->capture_default_str();
   match->add_option("--methods", match_options.methods, "methods to run (p2p p2l lf corr; default all)");
+  match->add_option("--solvers", match_options.solvers, "solvers to run (gn ceres; default all)");
+  match->add_option("--inits", match_options.inits, "initial guesses: perturbed identity truth")->capture_default_str();
+  match->add_option("--logs", match_options.logs, "logs under --data")->capture_default_str();
+  match->add_option("--max-dist", match_options.icp.max_correspondence_dist_m, "ICP max correspondence distance [m]")->capture_default_str();
+  match->add_option("--trim", match_options.icp.trim_keep_fraction, "ICP trim keep fraction")->capture_default_str();
+  match->add_option("--loss-scale", match_options.icp.loss.scale_m, "robust loss scale [m]")->capture_default_str();
+  match->add_option("--loss", match_options.icp.loss.kind, "robust loss: 0 none, 1 huber, 2 cauchy")->capture_default_str();
+  match->add_option("--normal-k", match_options.icp.normal_neighbors, "points per line fit")->capture_default_str();
+  match->add_option("--flatness", match_options.icp.max_line_flatness, "max line flatness")->capture_default_str();
+  match->add_option("--max-iterations", match_options.icp.max_iterations, "ICP max iterations")->capture_default_str();
   match->callback([&] { lidar2d::bench::runMatchBenchmark(data, match_options); });
   try {
     app.parse(argc, argv);

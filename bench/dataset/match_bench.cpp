@@ -13,6 +13,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <cstdlib>
 #include <numbers>
 
 #include "dataset_bench.hpp"
@@ -68,13 +69,20 @@ Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, 
   }
   row.median_ms = median(ms);
   row.eval = eval::evaluatePairs(pairs, truth);
+  if (std::getenv("LIDAR2D_BENCH_DUMP"))
+    for (const auto& e : row.eval.errors)
+      if (!e.success) {
+        const SE2 rel = truth[e.pair].pose.inverse() * truth[e.pair + 1].pose;
+        std::cerr << fmt::format("fail pair {}: err {:.3f} m {:.2f} deg; motion {:.3f} m {:.2f} deg; conv {} it {} pts {} {}\n", e.pair,
+                                 e.trans_m, e.rot_rad / kDeg, rel.translation().norm(), rel.theta() / kDeg,
+                                 pairs[e.pair].converged, pairs[e.pair].iterations, points[e.pair].size(), points[e.pair + 1].size());
+      }
   return row;
 }
 
 }  // namespace
 
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo) {
-  const std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};
   const sim::OdometryNoise noise =
       sim::OdometryNoise::constant(bo.sigma_xy_m / std::sqrt(2.0), bo.sigma_xy_m / std::sqrt(2.0), bo.sigma_theta_deg * kDeg);
   std::cout << fmt::format(
@@ -84,7 +92,7 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
   std::cout << "| method | solver | dataset | init | pairs | success | median trans err [cm] | median rot err [deg] | "
                "median ms/pair | total s | not converged |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|---|---|\n";
-  for (const auto& rel : logs) {
+  for (const auto& rel : bo.logs) {
     const std::string path = (std::filesystem::path(data_dir) / rel).string();
     const std::string name = std::filesystem::path(rel).stem().stem().string();
     if (!std::filesystem::exists(path)) {
@@ -98,7 +106,8 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
       points.push_back(f.scan.toPoints(f.T_robot_laser));
       truth.push_back({f.time, *f.T_world_robot});
     }
-    std::vector<SE2> perturbed(frames.size()), identity(frames.size());
+    std::vector<SE2> perturbed(frames.size()), identity(frames.size()), exact(frames.size());
+    for (std::size_t k = 1; k < frames.size(); ++k) exact[k] = truth[k - 1].pose.inverse() * truth[k].pose;
     sim::Rng rng(bo.seed);
     std::vector<double> init_t, init_r;
     for (std::size_t k = 1; k < frames.size(); ++k) {
@@ -110,13 +119,18 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
     std::cerr << fmt::format("{}: {} scans, perturbed guess median error {:.3f} m, {:.2f} deg\n", name, frames.size(),
                              median(init_t), median(init_r));
     for (const auto& [init_name, inits] :
-         {std::pair<std::string, const std::vector<SE2>*>{"perturbed", &perturbed}, {"identity", &identity}}) {
+         {std::pair<std::string, const std::vector<SE2>*>{"perturbed", &perturbed}, {"identity", &identity},
+          {"truth", &exact}}) {
+      if (std::find(bo.inits.begin(), bo.inits.end(), init_name) == bo.inits.end()) continue;
       for (auto method : {registration::Method::kP2P, registration::Method::kP2L, registration::Method::kLikelihoodField,
                           registration::Method::kCorrelative}) {
         if (!bo.methods.empty() && std::find(bo.methods.begin(), bo.methods.end(), registration::toString(method)) == bo.methods.end())
           continue;
         for (auto solver : {registration::Solver::kGaussNewton, registration::Solver::kCeres}) {
+          if (!bo.solvers.empty() && std::find(bo.solvers.begin(), bo.solvers.end(), registration::toString(solver)) == bo.solvers.end())
+            continue;
           registration::MatcherOptions o;
+          o.icp = bo.icp;
           o.method = method;
           o.solver = solver;
           const Row row = runPairs(points, *inits, truth, o);

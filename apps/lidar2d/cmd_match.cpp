@@ -1,0 +1,151 @@
+// lidar2d match LOG --method p2p|p2l|lf|corr [--solver gn|ceres] [--init odom|identity] -o FILE [--eval]:
+// aligns every scan to the previous one.
+//
+// For each consecutive pair (previous = target, current = source), both scans are turned into points
+// in their robot frames (LaserScan::toPoints(T_robot_laser)), the initial guess is the odometry's
+// relative motion T_prev_cur = odom_prev^-1 * odom_cur (or the identity), and the matcher estimates
+// T_prev_cur. Output (io::readRelativePoses reads it): one line per pair,
+//   t_prev t_cur dx dy dtheta converged iterations    [s, s, m, m, rad, 0/1, count]
+// written atomically. --eval compares the pairs with the log's truth (eval::evaluatePairs: success =
+// error < 10 cm and < 2 deg) and prints the success rate, median errors and time per pair.
+// Exit codes: 1 for bad input (unreadable log, no odometry with --init odom, no truth with --eval,
+// unwritable output; no output file appears then), 2 for usage errors.
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <numbers>
+#include <optional>
+
+#include "commands.hpp"
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/eval/metrics.hpp"
+#include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/prefetch.hpp"
+#include "lidar2d/io/trajectory.hpp"
+#include "lidar2d/registration/matcher.hpp"
+
+namespace lidar2d::cli {
+namespace {
+
+enum class Init { kOdom, kIdentity };
+
+struct MatchArgs {
+  std::string log;
+  std::string output;
+  registration::MatcherOptions options;
+  Init init = Init::kOdom;
+  bool eval = false;
+  bool quiet = false;
+  io::ReaderOptions reader;
+};
+
+void run(const MatchArgs& a) {
+  using Clock = std::chrono::steady_clock;
+  const auto t_start = Clock::now();
+  if (const std::string bad = a.options.icp.check(); !bad.empty())
+    throw invalidArgument(fmt::format("invalid matcher option: {}", bad));
+  auto source = io::prefetch(io::openLog(a.log, a.reader));
+  io::AtomicFile out(a.output);
+  out.stream() << fmt::format("# lidar2d match: method={} solver={} init={}\n", registration::toString(a.options.method),
+                              registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity");
+  out.stream() << "# t_prev t_cur dx dy dtheta converged iterations\n";
+
+  std::optional<registration::PreparedTarget> prev;
+  std::optional<Frame> prev_frame;
+  std::vector<io::RelativePose> pairs;
+  io::Trajectory truth;
+  double match_s = 0.0;
+  std::size_t scans = 0, converged = 0;
+  while (auto f = source->next()) {
+    ++scans;
+    if (a.init == Init::kOdom && !f->T_odom_robot)
+      throw badInput(fmt::format("scan {} (time {:.6f}) has no odometry (use --init identity)", f->index, f->time),
+                     ErrorLocation(a.log));
+    if (a.eval) {
+      if (!f->T_world_robot)
+        throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
+                                   f->index, f->time),
+                       ErrorLocation(a.log));
+      truth.push_back({f->time, *f->T_world_robot});
+    }
+    const auto t0 = Clock::now();
+    registration::PreparedTarget cur(f->scan.toPoints(f->T_robot_laser), a.options);
+    if (prev) {
+      const SE2 init = a.init == Init::kOdom ? prev_frame->T_odom_robot->inverse() * *f->T_odom_robot : SE2();
+      const registration::Result r = registration::matchScans(*prev, cur.points(), init, a.options);
+      if (r.status == registration::Status::kInvalidInput)
+        throw invalidArgument(fmt::format("method {}: {}", registration::toString(a.options.method), r.message));
+      match_s += std::chrono::duration<double>(Clock::now() - t0).count();
+      const SE2& T = r.T_target_source;
+      out.stream() << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {} {}\n", prev_frame->time, f->time, T.x(), T.y(),
+                                  T.theta(), r.converged ? 1 : 0, r.iterations);
+      pairs.push_back({prev_frame->time, f->time, T, r.converged, r.iterations});
+      converged += r.converged;
+    } else {
+      match_s += std::chrono::duration<double>(Clock::now() - t0).count();
+    }
+    prev.emplace(std::move(cur));
+    f->scan = LaserScan();  // only the times and poses of the previous frame are needed
+    prev_frame = std::move(f);
+  }
+  if (scans < 2) throw badInput(fmt::format("log has {} scan(s); matching needs at least 2", scans), ErrorLocation(a.log));
+  out.commit();
+  const double total_s = std::chrono::duration<double>(Clock::now() - t_start).count();
+  const double per_pair_ms = 1e3 * match_s / static_cast<double>(pairs.size());
+  if (a.eval) {
+    const eval::PairsResult e = eval::evaluatePairs(pairs, truth);
+    constexpr double kDeg = 180.0 / std::numbers::pi;
+    std::cout << fmt::format("pairs: {}\n", e.count);
+    std::cout << fmt::format("converged: {}\n", e.converged);
+    std::cout << fmt::format("success rate: {:.1f}% (error < 10 cm and < 2 deg)\n", 100.0 * e.success_rate);
+    std::cout << fmt::format("median translation error: {:.2f} cm\n", 100.0 * e.trans_m.median);
+    std::cout << fmt::format("median rotation error: {:.3f} deg\n", e.rot_rad.median * kDeg);
+    std::cout << fmt::format("ms per pair: {:.3f} (preparation and matching, parsing excluded)\n", per_pair_ms);
+  }
+  if (!a.quiet)
+    std::cerr << fmt::format("matched {} pairs ({} converged) with {}/{} in {:.3f} s ({:.3f} ms per pair) -> {}\n",
+                             pairs.size(), converged, registration::toString(a.options.method),
+                             registration::toString(a.options.solver), total_s, per_pair_ms, a.output);
+}
+
+}  // namespace
+
+void addMatchCommand(CLI::App& app) {
+  auto a = std::make_shared<MatchArgs>();
+  auto* sub = app.add_subcommand(
+      "match",
+      "Align each scan to the previous one; writes 't_prev t_cur dx dy dtheta converged iterations' per pair (the pose "
+      "of the current scan's robot in the previous one's frame [s, s, m, m, rad])");
+  sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
+  sub->add_option("-o,--output", a->output, "output file of relative poses")->required();
+  const std::map<std::string, registration::Method> methods{{"p2p", registration::Method::kP2P},
+                                                            {"p2l", registration::Method::kP2L},
+                                                            {"lf", registration::Method::kLikelihoodField},
+                                                            {"corr", registration::Method::kCorrelative}};
+  sub->add_option("--method", a->options.method, "p2p (point-to-point ICP), p2l (point-to-line ICP), lf, corr")
+      ->transform(CLI::CheckedTransformer(methods, CLI::ignore_case))
+      ->default_str("p2l");
+  const std::map<std::string, registration::Solver> solvers{{"gn", registration::Solver::kGaussNewton},
+                                                            {"ceres", registration::Solver::kCeres}};
+  sub->add_option("--solver", a->options.solver, "gn (Gauss-Newton) or ceres (robust loss)")
+      ->transform(CLI::CheckedTransformer(solvers, CLI::ignore_case))
+      ->default_str("gn");
+  const std::map<std::string, Init> inits{{"odom", Init::kOdom}, {"identity", Init::kIdentity}};
+  sub->add_option("--init", a->init, "initial guess: odom (odometry's relative motion) or identity")
+      ->transform(CLI::CheckedTransformer(inits, CLI::ignore_case))
+      ->default_str("odom");
+  sub->add_option("--max-dist", a->options.icp.max_correspondence_dist_m, "ICP: max correspondence distance [m]")
+      ->capture_default_str();
+  sub->add_option("--max-iterations", a->options.icp.max_iterations, "ICP: max iterations")->capture_default_str();
+  sub->add_flag("--eval", a->eval,
+                "compare with the log's truth: success rate (< 10 cm and < 2 deg), median errors, ms per pair");
+  sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
+  addReaderOptions(sub, a->reader);
+  sub->callback([a] { run(*a); });
+}
+
+}  // namespace lidar2d::cli
