@@ -1,0 +1,204 @@
+// Correlative matching with branch and bound: max-grids against a brute-force window max, the
+// branch and bound against the exhaustive search of the same window, recovery on noise-free
+// simulated scans (search resolution, then exact after refinement), basin, global mode, bad input.
+
+#include "lidar2d/registration/correlative.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <random>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+#include "lidar2d/sim/path.hpp"
+#include "lidar2d/sim/simulator.hpp"
+#include "lidar2d/sim/worlds.hpp"
+#include "support/test_support.hpp"
+
+namespace lidar2d::registration {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+/// Noise-free 360-beam scans (laser at the robot's centre) of the office world.
+class Office {
+ public:
+  Office() : scenario_(sim::builtinScenario("office")) {
+    opts_ = sim::SimulatorOptions{}.noiseFree();
+    opts_.laser.beams = 360;
+    opts_.laser.fov_rad = 2.0 * std::numbers::pi;
+    opts_.laser.T_robot_laser = SE2();
+    route_ = sim::samplePath(scenario_.waypoints, sim::PathOptions{});
+    sim_ = std::make_unique<sim::Simulator>(scenario_.world, std::vector<sim::TimedPose>{{0.0, SE2()}}, opts_);
+  }
+  LaserScan makeScan(const SE2& T) const {
+    LaserScanFields f;
+    f.angle_min = opts_.laser.angleMin();
+    f.angle_increment = opts_.laser.angleIncrement();
+    f.range_min = opts_.laser.range_min_m;
+    f.range_max = opts_.laser.range_max_m;
+    f.ranges = sim_->exactRanges(T);
+    return LaserScan::create(f);
+  }
+  Points2 scanAt(const SE2& T) const { return makeScan(T).toPoints(); }
+  const std::vector<sim::TimedPose>& route() const { return route_; }
+
+ private:
+  sim::Scenario scenario_;
+  sim::SimulatorOptions opts_;
+  std::vector<sim::TimedPose> route_;
+  std::unique_ptr<sim::Simulator> sim_;
+};
+
+const Office& office() {
+  static const Office o;
+  return o;
+}
+
+TEST(CorrelativeGrid, MaxGridsEqualBruteForceWindowMax) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-2.0, 2.0);
+  Points2 pts;
+  for (int i = 0; i < 60; ++i) pts.emplace_back(u(rng), u(rng));
+  CorrelativeOptions o;
+  o.depth = 5;
+  o.connect_max_gap_m = 0.0;
+  const auto g = CorrelativeGrid::fromPoints(pts, o);
+  ASSERT_EQ(g.depth(), 5);
+  for (int h = 0; h < g.depth(); ++h) {
+    const int w = 1 << h;
+    for (int j = -w - 1; j < g.height() + 1; j += 3)
+      for (int i = -w - 1; i < g.width() + 1; i += 3) {
+        float ref = 0.0f;
+        for (int dj = 0; dj < w; ++dj)
+          for (int di = 0; di < w; ++di) ref = std::max(ref, g.value(i + di, j + dj));
+        ASSERT_EQ(g.maxValue(h, i, j), ref) << "h " << h << " cell " << i << " " << j;
+      }
+  }
+}
+
+TEST(Correlative, BranchAndBoundEqualsExhaustiveSearch) {
+  const auto& sim = office();
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  CorrelativeOptions o;
+  o.linear_window_m = 0.3;
+  o.angular_window_rad = 6.0 * kDeg;
+  o.min_score = 0.0;
+  o.refine = false;
+  for (int n = 0; n < 6; ++n) {
+    const std::size_t k = 50 + static_cast<std::size_t>(n) * sim.route().size() / 7;
+    const SE2 A = sim.route()[k].T_world_robot;
+    const SE2 delta(0.25 * u(rng), 0.25 * u(rng), 5.0 * kDeg * u(rng));
+    Points2 src = sim.scanAt(A * delta);
+    Points2 sub;  // every 4th point keeps the exhaustive reference fast
+    for (std::size_t i = 0; i < src.size(); i += 4) sub.push_back(src[i]);
+    o.depth = 2 + n;  // also a depth deeper than the window
+    const auto grid = CorrelativeGrid::fromPoints(sim.scanAt(A), o);
+    const SE2 init(0.1 * u(rng), 0.1 * u(rng), 0.02 * u(rng));
+    const auto bb = matchCorrelative(grid, sub, init, o);
+    const auto ex = matchCorrelativeExhaustive(grid, sub, init, o);
+    ASSERT_TRUE(bb.converged);
+    ASSERT_TRUE(ex.converged);
+    EXPECT_EQ(bb.score, ex.score) << "case " << n;
+    EXPECT_LT(bb.candidates_scored, ex.candidates_scored);
+  }
+}
+
+TEST(Correlative, RecoversWithinTheSearchResolutionThenExactly) {
+  const auto& sim = office();
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int n = 0; n < 6; ++n) {
+    const std::size_t k = 20 + static_cast<std::size_t>(n) * sim.route().size() / 6;
+    const SE2 A = sim.route()[k].T_world_robot;
+    // From 0.8 m and 25 degrees away.
+    const double a = u(rng) * std::numbers::pi;
+    const SE2 delta(0.8 * std::cos(a), 0.8 * std::sin(a), (n % 2 ? 25.0 : -25.0) * kDeg);
+    const auto r = matchCorrelative(sim.scanAt(A), sim.scanAt(A * delta), SE2(), CorrelativeOptions{});
+    ASSERT_TRUE(r.converged) << toString(r.status) << " " << r.message;
+    EXPECT_TRUE(test::IsNearPose(delta, r.T_search, 0.05, 1.0)) << "route index " << k;
+    EXPECT_TRUE(r.refined) << r.message;
+    EXPECT_TRUE(test::IsNearPose(delta, r.T_target_source, 0.01, 0.2)) << "route index " << k;
+    EXPECT_GT(r.score, 0.5);
+    EXPECT_EQ(r.final_cost, r.score);
+  }
+}
+
+TEST(Correlative, GlobalSearchFindsTheScanInAMap) {
+  const auto& sim = office();
+  mapping::MapOptions mo;
+  mo.resolution_m = 0.1;
+  auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
+  for (std::size_t k = 0; k < sim.route().size(); k += 5) map->insert(sim.makeScan(sim.route()[k].T_world_robot), sim.route()[k].T_world_robot);
+  const auto image = mapping::toOccupancyImage(*map);
+  CorrelativeOptions o;
+  o.resolution_m = 0.1;
+  o.blur_sigma_m = 0.1;
+  o.refinement.resolution_m = 0.1;
+  o.refinement.truncation_m = 0.3;
+  const auto grid = CorrelativeGrid::fromMap(image, o);
+  const auto field = LikelihoodField::fromMap(image, o.refinement);
+  for (std::size_t k : {100u, 900u}) {
+    const SE2 truth = sim.route()[k].T_world_robot;
+    const auto r = matchCorrelativeGlobal(grid, sim.scanAt(truth), o, &field);
+    ASSERT_TRUE(r.converged) << r.message;
+    // Within two search cells: the 10 cm map quantises the walls, and refinement against it is not
+    // always accepted (then the search pose is returned).
+    EXPECT_TRUE(test::IsNearPose(truth, r.T_target_source, 0.2, 1.5)) << "route index " << k << " " << r.message;
+  }
+}
+
+TEST(Correlative, BadInputGivesAFiniteFailedResult) {
+  const auto& sim = office();
+  const auto target = sim.scanAt(sim.route()[10].T_world_robot);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  CorrelativeOptions o;
+  auto r = matchCorrelative(target, Points2{}, SE2(0.1, 0.2, 0.3), o);
+  EXPECT_FALSE(r.converged);
+  EXPECT_EQ(r.status, Status::kTooFewPoints);
+  EXPECT_TRUE(r.T_target_source.isApprox(SE2(0.1, 0.2, 0.3)));
+  r = matchCorrelative(Points2{}, target, SE2(), o);
+  EXPECT_EQ(r.status, Status::kTooFewPoints);
+  r = matchCorrelative(target, Points2(40, Eigen::Vector2d(nan, 1.0)), SE2(), o);
+  EXPECT_EQ(r.status, Status::kTooFewPoints);
+  r = matchCorrelative(target, target, SE2(0, nan, 0), o);
+  EXPECT_EQ(r.status, Status::kInvalidInput);
+  EXPECT_TRUE(r.T_target_source.isFinite());
+  r = matchCorrelative(target, Points2(40, Eigen::Vector2d(300, 300)), SE2(), o);
+  EXPECT_FALSE(r.converged);
+  EXPECT_EQ(r.status, Status::kTooFewInliers);
+  EXPECT_TRUE(r.T_target_source.isFinite());
+
+  auto expectField = [&](CorrelativeOptions bad, const std::string& field) {
+    try {
+      (void)matchCorrelative(target, target, SE2(), bad);
+      ADD_FAILURE() << "no error for " << field;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument);
+      EXPECT_EQ(e.where().field, field);
+    }
+  };
+  CorrelativeOptions b;
+  b.resolution_m = -1;
+  expectField(b, "resolution_m");
+  b = {};
+  b.depth = 0;
+  expectField(b, "depth");
+  b = {};
+  b.angular_window_rad = 4.0;
+  expectField(b, "angular_window_rad");
+  b = {};
+  b.min_score = 2.0;
+  expectField(b, "min_score");
+  b = {};
+  b.refinement.levels = 0;
+  expectField(b, "levels");
+}
+
+}  // namespace
+}  // namespace lidar2d::registration
