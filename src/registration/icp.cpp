@@ -340,6 +340,18 @@ void finish(Result& r, const Linearisation& L, std::size_t inliers) {
   }
 }
 
+// The final linearisation: correspondences searched again at the final estimate, so that H, the
+// covariance, the cost and the inlier count describe the returned pose (and do not depend on the
+// solver's path to it).
+void finishAt(Result& r, Icp& icp, const IcpOptions& o) {
+  icp.findPairs(r.T_target_source);
+  if (icp.pairs().size() < o.min_inliers) {
+    r.num_inliers = icp.pairs().size();
+    return;  // keeps the infinite covariance and zero information
+  }
+  finish(r, icp.linearise(r.T_target_source), icp.pairs().size());
+}
+
 bool smallStep(const Eigen::Vector3d& dx, const IcpOptions& o) {
   return std::hypot(dx.x(), dx.y()) < o.translation_eps_m && std::abs(dx.z()) < o.rotation_eps_rad;
 }
@@ -347,8 +359,6 @@ bool smallStep(const Eigen::Vector3d& dx, const IcpOptions& o) {
 Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
   Result res;
   Eigen::Vector3d x = init.vector();
-  Linearisation L;
-  std::size_t inliers = 0;
   int it = 0;
   bool converged = false;
   while (it < o.max_iterations) {
@@ -359,8 +369,7 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
       return failure(init, Status::kTooFewInliers,
                      fmt::format("iteration {}: {} correspondences survived the rejection, {} needed", it,
                                  icp.pairs().size(), o.min_inliers));
-    L = icp.linearise(T);
-    inliers = icp.pairs().size();
+    const Linearisation L = icp.linearise(T);
     Eigen::Vector3d dx;
     if (!solveStep(L.H, L.g, dx))
       return failure(init, Status::kDegenerate, "the normal equations carry no information");
@@ -377,7 +386,7 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
   res.converged = converged;
   res.status = converged ? Status::kConverged : Status::kMaxIterations;
   if (!converged) res.message = fmt::format("no convergence within {} iterations", o.max_iterations);
-  finish(res, L, inliers);
+  finishAt(res, icp, o);
   return res;
 }
 
@@ -463,7 +472,6 @@ Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
   double x[3] = {init.x(), init.y(), init.theta()};
   int it = 0;
   bool converged = false;
-  std::size_t inliers = 0;
   while (it < o.max_iterations) {
     ++it;
     const SE2 T(x[0], x[1], x[2]);
@@ -472,7 +480,6 @@ Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
       return failure(init, Status::kTooFewInliers,
                      fmt::format("iteration {}: {} correspondences survived the rejection, {} needed", it,
                                  icp.pairs().size(), o.min_inliers));
-    inliers = icp.pairs().size();
     ceres::Problem problem(po);
     for (const Pair& pr : icp.pairs()) {
       const Eigen::Vector2d& p = icp.source()[pr.src];
@@ -497,7 +504,7 @@ Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
   res.converged = converged;
   res.status = converged ? Status::kConverged : Status::kMaxIterations;
   if (!converged) res.message = fmt::format("no convergence within {} iterations", o.max_iterations);
-  finish(res, icp.linearise(res.T_target_source), inliers);
+  finishAt(res, icp, o);
   return res;
 }
 
