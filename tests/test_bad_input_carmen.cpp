@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <ostream>
+
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -48,6 +50,9 @@ struct Case {
   std::string message;     // expected message text in what()
   bool cli = false;        // also checked through `lidar2d info`
 };
+// gtest prints parameters in test listings; a name instead of a byte dump keeps ctest readable.
+[[maybe_unused]] void PrintTo(const Case&, std::ostream* os) { *os << "Case"; }
+
 
 std::string log180() {
   std::string s = "# header\nPARAM robot_frontlaser_offset 0.0\n";

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <ostream>
+
 #include <cctype>
 #include <cmath>
 #include <limits>
@@ -74,6 +76,9 @@ struct RealLog {
   std::vector<OdomSampleExpect> odom;
   const char* warning;  // expected SourceNotes warning, or "" for none about time
 };
+// gtest prints parameters in test listings; a name instead of a byte dump keeps ctest readable.
+[[maybe_unused]] void PrintTo(const RealLog&, std::ostream* os) { *os << "RealLog"; }
+
 
 // Counts, first/last time:
 //   zcat F | awk '$1=="FLASER"{n=$2; t=$(n+9); if(c>0){if(t==p)r++; if(t<p)b++};

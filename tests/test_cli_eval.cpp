@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <ostream>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -172,6 +174,9 @@ struct BadInput {
   const char* truth_name;
   const char* expected;  // substring of stderr after the file path
 };
+// gtest prints parameters in test listings; a name instead of a byte dump keeps ctest readable.
+[[maybe_unused]] void PrintTo(const BadInput&, std::ostream* os) { *os << "BadInput"; }
+
 
 class CliEvalMalformed : public ::testing::TestWithParam<BadInput> {};
 

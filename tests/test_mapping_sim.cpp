@@ -14,6 +14,9 @@
 #include "lidar2d/sim/worlds.hpp"
 
 namespace lidar2d::mapping {
+
+void PrintTo(MapModel m, std::ostream* os) { *os << toString(m); }
+
 namespace {
 
 struct SimData {

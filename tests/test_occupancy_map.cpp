@@ -10,6 +10,9 @@
 #include "lidar2d/mapping/occupancy_map.hpp"
 
 namespace lidar2d::mapping {
+
+void PrintTo(MapModel m, std::ostream* os) { *os << toString(m); }
+
 namespace {
 
 // Room [x0, x1] x [y0, y1]; walls at non-grid-aligned positions so sub-cell accuracy matters.

@@ -5,6 +5,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <ostream>
+
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -54,6 +56,9 @@ struct BagFacts {
   double relation_t1 = 0.0;    // first t1 of the bag's .relations file (0: none)
   bool mount_warning = false;  // no mounting in tf: identity and a warning
 };
+// gtest prints parameters in test listings; a name instead of a byte dump keeps ctest readable.
+[[maybe_unused]] void PrintTo(const BagFacts&, std::ostream* os) { *os << "BagFacts"; }
+
 
 // Obtained with `/usr/bin/python3 tools/extract-bag-facts.py ../shared/data` (python3-rosbag reads
 // the bags; scan time = header stamp; odometry interpolated linearly at the scan stamp, yaw along

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <ostream>
+
 #include <cmath>
 #include <filesystem>
 #include <numbers>
@@ -116,6 +118,9 @@ struct BadCase {
   const char* content;
   std::vector<std::string> expected;  // substrings of what()
 };
+// gtest prints parameters in test listings; a name instead of a byte dump keeps ctest readable.
+[[maybe_unused]] void PrintTo(const BadCase&, std::ostream* os) { *os << "BadCase"; }
+
 
 class MalformedTrajectory : public ::testing::TestWithParam<BadCase> {};
 
