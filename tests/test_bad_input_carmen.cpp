@@ -212,7 +212,6 @@ TEST_P(BadCarmen, LibraryThrowsErrorNamingFileLineField) {
 
 TEST_P(BadCarmen, CliPrintsOneLineAndExits1) {
   const Case& c = GetParam();
-  if (!c.cli) GTEST_SKIP() << "library-only case";
   const std::string path = prepare(c);
   const CliResult r = runCli({"info", path});
   EXPECT_EQ(r.exit_code, 1);

@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
   match->add_option("--normal-k", match_options.icp.normal_neighbors, "points per line fit")->capture_default_str();
   match->add_option("--flatness", match_options.icp.max_line_flatness, "max line flatness")->capture_default_str();
   match->add_option("--max-iterations", match_options.icp.max_iterations, "ICP max iterations")->capture_default_str();
+  match->add_option("--gn-inner", match_options.icp.gn_inner_iterations, "Gauss-Newton steps per correspondence search")->capture_default_str();
   match->callback([&] { lidar2d::bench::runMatchBenchmark(data, match_options); });
   try {
     app.parse(argc, argv);

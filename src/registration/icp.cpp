@@ -78,6 +78,7 @@ std::string IcpOptions::check() const {
   if (!finite_pos(normal_max_radius_m)) return "normal_max_radius_m must be finite and > 0";
   if (!(max_line_flatness >= 0.0 && max_line_flatness <= 1.0)) return "max_line_flatness must be in [0, 1]";
   if (ceres_max_inner_iterations < 1) return "ceres_max_inner_iterations must be >= 1";
+  if (gn_inner_iterations < 1) return "gn_inner_iterations must be >= 1";
   return {};
 }
 
@@ -363,19 +364,25 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
   bool converged = false;
   while (it < o.max_iterations) {
     ++it;
-    const SE2 T = SE2::fromVector(x);
-    icp.findPairs(T);
+    icp.findPairs(SE2::fromVector(x));
     if (icp.pairs().size() < o.min_inliers)
       return failure(init, Status::kTooFewInliers,
                      fmt::format("iteration {}: {} correspondences survived the rejection, {} needed", it,
                                  icp.pairs().size(), o.min_inliers));
-    const Linearisation L = icp.linearise(T);
-    Eigen::Vector3d dx;
-    if (!solveStep(L.H, L.g, dx))
-      return failure(init, Status::kDegenerate, "the normal equations carry no information");
-    x += dx;
-    x.z() = wrapAngle(x.z());
-    if (!x.allFinite()) return failure(init, Status::kSolverFailure, "the estimate became non-finite");
+    // A few Gauss-Newton steps on this set of pairs (the nearest-neighbour search costs far more
+    // than a linearisation), then search again; converged when the whole outer step is small.
+    const Eigen::Vector3d x_outer = x;
+    for (int inner = 0; inner < o.gn_inner_iterations; ++inner) {
+      const Linearisation L = icp.linearise(SE2::fromVector(x));
+      Eigen::Vector3d dx;
+      if (!solveStep(L.H, L.g, dx))
+        return failure(init, Status::kDegenerate, "the normal equations carry no information");
+      x += dx;
+      x.z() = wrapAngle(x.z());
+      if (!x.allFinite()) return failure(init, Status::kSolverFailure, "the estimate became non-finite");
+      if (smallStep(dx, o)) break;
+    }
+    const Eigen::Vector3d dx(x.x() - x_outer.x(), x.y() - x_outer.y(), angleDiff(x.z(), x_outer.z()));
     if (smallStep(dx, o)) {
       converged = true;
       break;

@@ -73,9 +73,10 @@ struct IcpOptions {
   double max_correspondence_dist_m = 1.0;  ///< pairs whose points are farther apart are rejected [m], > 0
   double trim_keep_fraction = 0.9;  ///< keep this fraction of the distance-gated pairs, the closest ones
                                     ///< (trimmed ICP), in (0, 1]
-  int max_iterations = 50;          ///< outer iterations (correspondence searches), >= 1
-  double translation_eps_m = 1e-5;  ///< converged when the translation increment is below this [m], >= 0
-  double rotation_eps_rad = 1e-5;   ///< ... and the rotation increment below this [rad], >= 0
+  int max_iterations = 50;          ///< outer iterations (correspondence searches), >= 1; the result's
+                                    ///< `iterations` counts these
+  double translation_eps_m = 1e-4;  ///< converged when the translation increment is below this [m], >= 0
+  double rotation_eps_rad = 1e-4;   ///< ... and the rotation increment below this [rad], >= 0
   RobustLoss loss;                  ///< robust loss of both solvers (IRLS weights for Gauss-Newton)
   std::size_t min_points = 10;      ///< fewer finite source or target points: kTooFewPoints, >= 3
   std::size_t min_inliers = 8;      ///< fewer surviving pairs in an iteration: kTooFewInliers, >= 3
@@ -84,6 +85,7 @@ struct IcpOptions {
   double max_line_flatness = 0.2;   ///< a fit whose smaller/larger spread ratio (sqrt of the eigenvalue
                                     ///< ratio) exceeds this is no line: that target point gets no normal
                                     ///< and is not used by point-to-line, in [0, 1]
+  int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
 
   /// Empty when every option is in its domain, else a message naming the first bad field.
