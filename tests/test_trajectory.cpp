@@ -201,6 +201,35 @@ TEST(ReadRelations, IntelFileHasEveryLine) {
   EXPECT_TRUE(test::IsNearPose(SE2(-0.056990, -0.128430, -1.682210), r[0].T_1_2, 1e-12, 1e-9));
 }
 
+TEST(ReadRelations, EveryRelationsFileOfTheSharedData) {
+  // Counts: `grep -vc '^#' FILE`; first and last data lines: `grep -v '^#' FILE | head -1`, `tail -1 FILE`.
+  struct Expect {
+    const char* file;
+    std::size_t count;
+    double t1_first, t2_first, dx_first, dy_first, dyaw_first;
+    double t1_last, t2_last, dx_last, dy_last, dyaw_last;
+  };
+  const Expect files[] = {
+      {"raw/fr079.relations", 1685, 1216.630413, 1217.490267, 0.407950, -0.016330, -0.069620, 2085.180238, 2249.930901,
+       0.743610, 0.263510, 3.119120},
+      {"raw/mit-csail.relations", 1172, 1134864645.90321, 1134864646.32420, 0.31293, 0.02935, 0.24198, 1134864686.65618,
+       1134865034.47520, 0.69012, 0.56141, -0.57907},
+      {"raw/intel.relations", 2984, 976052905.167303, 976052911.885496, -0.056990, -0.128430, -1.682210, 976054744.377487,
+       976055538.433137, 0.881540, 0.001790, 0.075760},
+  };
+  for (const Expect& e : files) {
+    if (!std::filesystem::exists(test::dataFile(e.file))) GTEST_SKIP() << test::dataFile(e.file) << " is missing";
+    const Relations r = readRelations(test::dataFile(e.file).string());
+    ASSERT_EQ(r.size(), e.count) << e.file;
+    EXPECT_EQ(r.front().t1, e.t1_first) << e.file;
+    EXPECT_EQ(r.front().t2, e.t2_first) << e.file;
+    EXPECT_TRUE(test::IsNearPose(SE2(e.dx_first, e.dy_first, e.dyaw_first), r.front().T_1_2, 1e-12, 1e-9)) << e.file;
+    EXPECT_EQ(r.back().t1, e.t1_last) << e.file;
+    EXPECT_EQ(r.back().t2, e.t2_last) << e.file;
+    EXPECT_TRUE(test::IsNearPose(SE2(e.dx_last, e.dy_last, e.dyaw_last), r.back().T_1_2, 1e-12, 1e-9)) << e.file;
+  }
+}
+
 TEST(ReadRelativePoses, SevenAndFiveFields) {
   TempDir tmp;
   const auto p = (tmp / "pairs.txt").string();
