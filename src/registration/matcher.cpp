@@ -2,6 +2,8 @@
 
 #include <utility>
 
+#include "lidar2d/core/error.hpp"
+
 namespace lidar2d::registration {
 
 const char* toString(Method m) {
@@ -39,6 +41,20 @@ IcpOptions icpOptions(const MatcherOptions& o) {
   return icp;
 }
 
+LfSolver lfSolver(Solver s) { return s == Solver::kCeres ? LfSolver::kCeres : LfSolver::kGaussNewton; }
+
+LikelihoodFieldOptions lfOptions(const MatcherOptions& o) {
+  LikelihoodFieldOptions lf = o.lf;
+  lf.solver = lfSolver(o.solver);
+  return lf;
+}
+
+CorrelativeOptions corrOptions(const MatcherOptions& o) {
+  CorrelativeOptions c = o.corr;
+  c.refinement.solver = lfSolver(o.solver);
+  return c;
+}
+
 Result invalid(const SE2& init, std::string message) {
   Result r;
   r.T_target_source = init.isFinite() ? init : SE2();
@@ -58,7 +74,21 @@ PreparedTarget::PreparedTarget(const Points2& points_target, const MatcherOption
       break;
     case Method::kLikelihoodField:
     case Method::kCorrelative:
-      break;  // not implemented yet: matchScans reports it
+      // The field and grid builders throw for out-of-domain options; a PreparedTarget never
+      // throws, so the reason is kept and reported by matchScans.
+      try {
+        if (options.method == Method::kLikelihoodField) {
+          field_ = std::make_unique<LikelihoodField>(LikelihoodField::fromPoints(points_, lfOptions(options)));
+        } else {
+          const CorrelativeOptions corr = corrOptions(options);
+          grid_ = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(points_, corr));
+          if (corr.refine)
+            field_ = std::make_unique<LikelihoodField>(LikelihoodField::fromPoints(points_, corr.refinement));
+        }
+      } catch (const Error& e) {
+        error_ = e.what();
+      }
+      break;
   }
 }
 
@@ -77,7 +107,14 @@ Result matchScans(const PreparedTarget& target, const Points2& source, const SE2
       return alignIcp(*target.icp(), source, init_T_target_source, icpOptions(options));
     case Method::kLikelihoodField:
     case Method::kCorrelative:
-      return invalid(init_T_target_source, "not implemented yet");
+      if (!target.error().empty()) return invalid(init_T_target_source, target.error());
+      try {
+        if (options.method == Method::kLikelihoodField)
+          return matchLikelihoodField(*target.field(), source, init_T_target_source, lfOptions(options));
+        return matchCorrelative(*target.grid(), source, init_T_target_source, corrOptions(options), target.field());
+      } catch (const Error& e) {
+        return invalid(init_T_target_source, e.what());
+      }
   }
   return invalid(init_T_target_source, "unknown method");
 }

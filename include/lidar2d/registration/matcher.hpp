@@ -13,7 +13,9 @@
 
 #include "lidar2d/core/laser_scan.hpp"
 #include "lidar2d/core/se2.hpp"
+#include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
+#include "lidar2d/registration/likelihood_field.hpp"
 #include "lidar2d/registration/result.hpp"
 
 namespace lidar2d::registration {
@@ -38,6 +40,11 @@ struct MatcherOptions {
   Solver solver = Solver::kGaussNewton;  ///< optimiser of the methods that offer several
   /// kP2P and kP2L. Its `metric` and `solver` fields are ignored: `method` and `solver` above win.
   IcpOptions icp;
+  /// kLikelihoodField. Its `solver` field is ignored: `solver` above wins.
+  LikelihoodFieldOptions lf;
+  /// kCorrelative (search window, grid, and the likelihood-field refinement; `solver` above wins
+  /// for the refinement too).
+  CorrelativeOptions corr;
 };
 
 /// A target prepared once for matching several sources against it (the k-d tree and line normals
@@ -59,11 +66,20 @@ class PreparedTarget {
   const Points2& points() const { return points_; }
   /// The ICP target (kP2P, kP2L), else nullptr.
   const IcpTarget* icp() const { return icp_.get(); }
+  /// The likelihood field (kLikelihoodField; kCorrelative with refinement), else nullptr.
+  const LikelihoodField* field() const { return field_.get(); }
+  /// The correlative score grid (kCorrelative), else nullptr.
+  const CorrelativeGrid* grid() const { return grid_.get(); }
+  /// Why preparing failed (out-of-domain options), or empty.
+  const std::string& error() const { return error_; }
 
  private:
   Method method_;
   Points2 points_;
   std::unique_ptr<IcpTarget> icp_;
+  std::unique_ptr<LikelihoodField> field_;
+  std::unique_ptr<CorrelativeGrid> grid_;
+  std::string error_;  // why the target could not be prepared (bad options), reported by matchScans
 };
 
 /// Matches `source` against a prepared target from `init_T_target_source`. When `options.method`
