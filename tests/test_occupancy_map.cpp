@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <random>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
@@ -114,6 +115,98 @@ TEST_P(ModelTest, AbsurdPoseIsAnErrorAndLeavesTheMapUnchanged) {
   EXPECT_THROW(map->insert(roomScan(SE2()), SE2(1e12, 0, 0)), Error);
   EXPECT_THROW(map->insert(roomScan(SE2()), SE2(std::nan(""), 0, 0)), Error);
   EXPECT_EQ(map->cellUpdates(), updates);
+}
+
+// Random scans for the threads=1 vs threads=2 comparison: random ranges (some NaN, below
+// range_min, +inf, beyond max_range or at range_max) over a full turn, so beams cross split lines
+// in every direction; beam 0 points exactly along the laser's x axis.
+LaserScan randomScan(std::mt19937& rng, std::size_t beams) {
+  LaserScanFields f;
+  f.angle_min = 0;
+  f.angle_increment = 2 * std::numbers::pi / static_cast<double>(beams);
+  f.range_min = 0.1;
+  f.range_max = 15;
+  std::uniform_real_distribution<double> ur(0.0, 14.0), u01(0, 1);
+  for (std::size_t i = 0; i < beams; ++i) {
+    const double p = u01(rng);
+    f.ranges.push_back(p < 0.03   ? std::nan("")
+                       : p < 0.06 ? 0.05
+                       : p < 0.10 ? std::numeric_limits<double>::infinity()
+                       : p < 0.13 ? 15.0
+                                  : ur(rng));
+  }
+  return LaserScan::create(f);
+}
+
+// Every observable of two maps, cell by cell (bit-identical probabilities, not "near").
+void expectIdentical(const OccupancyMap& a, const OccupancyMap& b) {
+  ASSERT_EQ(a.bounds().min, b.bounds().min);
+  ASSERT_EQ(a.bounds().max, b.bounds().max);
+  EXPECT_EQ(a.cellUpdates(), b.cellUpdates());
+  EXPECT_EQ(a.cellVisits(), b.cellVisits());
+  EXPECT_EQ(a.memoryBytes(), b.memoryBytes());
+  const CellBox box = a.bounds();
+  std::size_t differing = 0, observed = 0;
+  for (int y = box.min.y - 1; y <= box.max.y + 1; ++y)
+    for (int x = box.min.x - 1; x <= box.max.x + 1; ++x) {
+      const auto pa = a.probability({x, y}), pb = b.probability({x, y});
+      observed += pa.has_value();
+      differing += pa != pb || a.state({x, y}) != b.state({x, y});
+    }
+  EXPECT_EQ(differing, 0u);
+  EXPECT_GT(observed, 1000u);
+  if (a.model() == MapModel::kTsdf) {
+    const auto sa = tsdfSurface(a), sb = tsdfSurface(b);
+    ASSERT_EQ(sa.size(), sb.size());
+    for (std::size_t i = 0; i < sa.size(); ++i) {
+      EXPECT_EQ(sa[i].p_world, sb[i].p_world);
+      EXPECT_EQ(sa[i].weight, sb[i].weight);
+    }
+  }
+}
+
+// Two threads split each scan's cells by a line on a tile border; the result must be exactly the
+// single-threaded map. Resolution 1/8 m makes tile borders (8 m) and cell corners exact in
+// floating point, so the poses below put the laser exactly on borders and corners and send beams
+// exactly along them (theta 0, beam 0) or through cell corners (45 degrees).
+TEST_P(ModelTest, TwoThreadsGiveTheSingleThreadedMapExactly) {
+  for (const double res : {0.125, 0.05}) {
+    MapOptions o1;
+    o1.resolution_m = res;
+    o1.insert.threads = 1;
+    MapOptions o2 = o1;
+    o2.insert.threads = 2;
+    o2.insert.adaptive_threads = false;  // split every scan worth it, however busy the machine
+    auto one = makeMap(GetParam(), o1), two = makeMap(GetParam(), o2);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> ux(-12, 12), ua(-std::numbers::pi, std::numbers::pi);
+    std::vector<std::pair<LaserScan, SE2>> scans;
+    for (const SE2& T : {SE2(0, 0, 0), SE2(8, 8, 0), SE2(8, -8, std::numbers::pi / 4), SE2(-8, 0.5, std::numbers::pi / 2),
+                         SE2(7.999, 8.001, 0), SE2(16, 0, -std::numbers::pi / 4)})
+      scans.emplace_back(randomScan(rng, 360), T);
+    for (int i = 0; i < 40; ++i) {
+      const SE2 T(ux(rng), ux(rng), ua(rng));
+      scans.emplace_back(randomScan(rng, i % 5 == 0 ? 24 : 360), T);  // some scans too small to split
+    }
+    for (const SE2& T : kPoses) scans.emplace_back(roomScan(T), T);  // dense, overlapping: many cells per scan
+    for (int rep = 0; rep < 2; ++rep)
+      for (const auto& [scan, T] : scans) {
+        one->insert(scan, T);
+        two->insert(scan, T);
+      }
+    EXPECT_EQ(one->parallelScans(), 0u);
+    EXPECT_GT(two->parallelScans(), scans.size());  // most scans (of both passes) were split
+    expectIdentical(*one, *two);
+  }
+}
+
+TEST_P(ModelTest, ManyMapsWithWorkersComeAndGo) {
+  // Each map owns its worker; creating, using and destroying maps must not leak or hang.
+  for (int i = 0; i < 20; ++i) {
+    auto map = makeMap(GetParam());
+    map->insert(roomScan(SE2(0.1 * i, 0, 0)), SE2(0.1 * i, 0, 0));
+    EXPECT_EQ(map->parallelScans(), 1u);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, ModelTest, ::testing::Values(MapModel::kLogOdds, MapModel::kCount, MapModel::kTsdf),
@@ -235,6 +328,9 @@ TEST(MakeMap, RejectsOutOfDomainOptions) {
   o = {};
   o.insert.max_range_m = 1e9;
   expectField(o, "max_range_m");
+  o = {};
+  o.insert.threads = 0;
+  expectField(o, "threads");
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 // Mapping on the corrected Radish logs with their truth poses:
-// - speed: all scans inserted, per model: ms per scan and cell updates per second (one core);
+// - speed: all scans inserted, per model and thread count (InsertOptions::threads; the maps are
+//   identical): ms per scan, cell updates per second, share of scans split between two threads;
 // - consistency: a map from the even-numbered scans must explain the odd-numbered ones: the
 //   fraction of their beam endpoints (ranges under 20 m) within one cell of an occupied cell.
 
@@ -69,40 +70,45 @@ Consistency consistency(const io::OccupancyImage& map, const std::vector<Frame>&
 void runMapBenchmark(const std::string& data_dir) {
   const std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz",
                                       "corrected/infinite-corridor.log.gz"};
-  std::cout << "| dataset | model | scans | ms/scan | M cells traversed/s | M cell updates/s | map cells | odd endpoints "
-               "explained | odd free space occupied |\n";
-  std::cout << "|---|---|---|---|---|---|---|---|---|\n";
+  std::cout << "| dataset | model | threads | scans | split scans | ms/scan | M cells traversed/s | M cell updates/s | "
+               "map cells | odd endpoints explained | odd free space occupied |\n";
+  std::cout << "|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& rel : logs) {
     const std::string path = (std::filesystem::path(data_dir) / rel).string();
     if (!std::filesystem::exists(path)) {
-      std::cout << "| " << rel << " | missing: skipped | | | | | |\n";
+      std::cout << "| " << rel << " | missing: skipped | | | | | | | | | |\n";
       continue;
     }
     const std::vector<Frame> frames = loadFrames(path);
     for (auto model : {mapping::MapModel::kLogOdds, mapping::MapModel::kCount, mapping::MapModel::kTsdf}) {
       mapping::MapOptions o;
-      // Speed: every scan; best of 3 runs to damp the noise of a shared machine.
-      double best = 1e30;
-      std::uint64_t updates = 0, visits = 0;
-      for (int rep = 0; rep < 3; ++rep) {
-        auto map = mapping::makeMap(model, o);
-        const auto t0 = std::chrono::steady_clock::now();
-        for (const Frame& f : frames) map->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
-        best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-        updates = map->cellUpdates();
-        visits = map->cellVisits();
-      }
-      // Consistency: even scans build, odd scans test.
+      // Consistency: even scans build, odd scans test (the same map for any thread count).
       auto even = mapping::makeMap(model, o);
       for (std::size_t i = 0; i < frames.size(); i += 2)
         even->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
       const io::OccupancyImage image = mapping::toOccupancyImage(*even);
       const Consistency c = consistency(image, frames, 1, 20.0);
-      std::cout << fmt::format("| {} | {} | {} | {:.3f} | {:.0f} | {:.0f} | {} x {} | {:.1f}% | {:.2f}% |\n",
-                               std::filesystem::path(rel).stem().stem().string(), mapping::toString(model), frames.size(),
-                               1e3 * best / static_cast<double>(frames.size()), static_cast<double>(visits) / best / 1e6,
-                               static_cast<double>(updates) / best / 1e6, image.width(), image.height(),
-                               100.0 * c.explained, 100.0 * c.free_occupied);
+      for (const unsigned threads : {1u, 2u}) {
+        o.insert.threads = threads;
+        // Speed: every scan; best of 3 runs to damp the noise of a shared machine.
+        double best = 1e30;
+        std::uint64_t updates = 0, visits = 0, split = 0;
+        for (int rep = 0; rep < 3; ++rep) {
+          auto map = mapping::makeMap(model, o);
+          const auto t0 = std::chrono::steady_clock::now();
+          for (const Frame& f : frames) map->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
+          best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+          updates = map->cellUpdates();
+          visits = map->cellVisits();
+          split = map->parallelScans();
+        }
+        std::cout << fmt::format("| {} | {} | {} | {} | {:.0f}% | {:.3f} | {:.0f} | {:.0f} | {} x {} | {:.1f}% | {:.2f}% |\n",
+                                 std::filesystem::path(rel).stem().stem().string(), mapping::toString(model), threads,
+                                 frames.size(), 100.0 * static_cast<double>(split) / static_cast<double>(frames.size()),
+                                 1e3 * best / static_cast<double>(frames.size()), static_cast<double>(visits) / best / 1e6,
+                                 static_cast<double>(updates) / best / 1e6, image.width(), image.height(),
+                                 100.0 * c.explained, 100.0 * c.free_occupied);
+      }
     }
   }
 }

@@ -2,7 +2,12 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <exception>
+#include <system_error>
+#include <thread>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/mapping/ray_trace.hpp"
@@ -14,6 +19,54 @@ double logit(double p) { return std::log(p / (1.0 - p)); }
 
 Error badOption(const std::string& field, const std::string& msg) {
   return invalidArgument(msg, ErrorLocation("", 0, field));
+}
+
+CellIndex cellOfCoords(const Eigen::Vector2d& p) {
+  return {static_cast<std::int32_t>(std::floor(p.x())), static_cast<std::int32_t>(std::floor(p.y()))};
+}
+
+// `traceRay` restricted to the cells of `slab`: calls on_pass for the passed cells (all but the end
+// cell) that lie in the slab, in order. The arithmetic is traceRay's step for step, so the cells
+// and their order are exactly traceRay's; a segment is monotone along each axis, so it is inside
+// the slab for one run of steps: the steps before it are only walked (no cell access), the walk
+// stops at the exit. (Jumping straight to the entry would recompute t_max differently from
+// traceRay's running sums and could pick the other cell at a near-corner crossing.)
+template <typename F>
+void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int axis, std::int32_t lo, std::int32_t hi,
+                 F&& on_pass) {
+  if (axis < 0) {
+    traceRay(start, end, on_pass);
+    return;
+  }
+  std::int32_t x = static_cast<std::int32_t>(std::floor(start.x()));
+  std::int32_t y = static_cast<std::int32_t>(std::floor(start.y()));
+  const auto ex = static_cast<std::int32_t>(std::floor(end.x()));
+  const auto ey = static_cast<std::int32_t>(std::floor(end.y()));
+  const double dx = end.x() - start.x(), dy = end.y() - start.y();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const std::int32_t step_x = dx > 0 ? 1 : -1, step_y = dy > 0 ? 1 : -1;
+  const double t_delta_x = dx != 0 ? 1.0 / std::abs(dx) : kInf;
+  const double t_delta_y = dy != 0 ? 1.0 / std::abs(dy) : kInf;
+  double t_max_x = dx > 0 ? (x + 1 - start.x()) * t_delta_x : (dx < 0 ? (start.x() - x) * t_delta_x : kInf);
+  double t_max_y = dy > 0 ? (y + 1 - start.y()) * t_delta_y : (dy < 0 ? (start.y() - y) * t_delta_y : kInf);
+  std::int32_t left_x = std::abs(ex - x), left_y = std::abs(ey - y);
+  const std::int32_t& v = axis == 0 ? x : y;
+  auto step = [&] {
+    if (left_y == 0 || (left_x > 0 && t_max_x < t_max_y)) {
+      x += step_x;
+      t_max_x += t_delta_x;
+      --left_x;
+    } else {
+      y += step_y;
+      t_max_y += t_delta_y;
+      --left_y;
+    }
+  };
+  while (left_x + left_y > 0 && (v < lo || v >= hi)) step();
+  while (left_x + left_y > 0 && v >= lo && v < hi) {
+    on_pass(CellIndex{x, y});
+    step();
+  }
 }
 
 CellBox unite(CellBox a, const CellBox& b) {
@@ -69,14 +122,16 @@ class LogOddsMap final : public OccupancyMap {
   std::size_t memoryBytes() const override { return grid_.numAllocatedCells() * sizeof(LogOddsCell); }
 
  protected:
-  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams,
-                            const CellBox& box) override {
+  void beginScan(const CellBox& box) override {
     grid_.reserve(box);
+    ++scan_;
+  }
+  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams, const Slab& slab,
+                            int /*part*/) override {
     // Each cell is updated at most once per scan, hits first (as Cartographer's update marker,
     // Hess et al. 2016, section IV-B): a wall cell hit by one beam is not cleared by another beam of
     // the same scan that grazes it, and cells near the sensor crossed by many beams get one miss,
     // not dozens. A per-cell scan stamp says whether the cell was updated in this scan.
-    ++scan_;
     std::uint64_t updates = 0;
     auto update = [this, &updates](LogOddsCell& cell, float delta) {
       if (cell.stamp == scan_) return;
@@ -86,12 +141,10 @@ class LogOddsMap final : public OccupancyMap {
       ++updates;
     };
     for (const Beam& b : beams)
-      if (b.hit) update(grid_.cellUnchecked(CellIndex{static_cast<std::int32_t>(std::floor(b.end.x())),
-                                                       static_cast<std::int32_t>(std::floor(b.end.y()))}),
-                        hit_);
+      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), hit_);
     for (const Beam& b : beams) {
-      const CellIndex end = traceRay(origin, b.end, [&](CellIndex c) { update(grid_.cellUnchecked(c), miss_); });
-      if (!b.hit) update(grid_.cellUnchecked(end), miss_);
+      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, [&](CellIndex c) { update(grid_.cellUnchecked(c), miss_); });
+      if (!b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), miss_);
     }
     return updates;
   }
@@ -128,35 +181,35 @@ class CountMap final : public OccupancyMap {
   std::size_t memoryBytes() const override { return grid_.numAllocatedCells() * sizeof(HitMiss); }
 
  protected:
-  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams,
-                            const CellBox& box) override {
-    grid_.reserve(box);
+  void beginScan(const CellBox& box) override { grid_.reserve(box); }
+  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams, const Slab& slab,
+                            int part) override {
     // At most one update per cell per scan, hits first, as for log-odds; the top bit of `misses`
-    // marks the cells updated in this scan. Counts saturate below that bit.
-    touched_.clear();
-    auto update = [this](HitMiss& h, bool hit) {
+    // marks the cells updated in this scan. Counts saturate below that bit. Each part clears the
+    // markers of its own cells (no other part touches them).
+    std::vector<HitMiss*>& touched = touched_[static_cast<std::size_t>(part)];
+    touched.clear();
+    auto update = [&touched](HitMiss& h, bool hit) {
       if (h.misses & kMarker) return;
       std::uint32_t& v = hit ? h.hits : h.misses;
       v += (v < kMarker - 1) ? 1u : 0u;
       h.misses |= kMarker;
-      touched_.push_back(&h);
+      touched.push_back(&h);
     };
     for (const Beam& b : beams)
-      if (b.hit) update(grid_.cellUnchecked(CellIndex{static_cast<std::int32_t>(std::floor(b.end.x())),
-                                                       static_cast<std::int32_t>(std::floor(b.end.y()))}),
-                        true);
+      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), true);
     for (const Beam& b : beams) {
-      const CellIndex end = traceRay(origin, b.end, [&](CellIndex c) { update(grid_.cellUnchecked(c), false); });
-      if (!b.hit) update(grid_.cellUnchecked(end), false);
+      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, [&](CellIndex c) { update(grid_.cellUnchecked(c), false); });
+      if (!b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), false);
     }
-    for (HitMiss* h : touched_) h->misses &= ~kMarker;
-    return touched_.size();
+    for (HitMiss* h : touched) h->misses &= ~kMarker;
+    return touched.size();
   }
 
  private:
   static constexpr std::uint32_t kMarker = 0x80000000u;
   TiledGrid<HitMiss> grid_;
-  std::vector<HitMiss*> touched_;  // cells updated in the current scan
+  std::array<std::vector<HitMiss*>, 2> touched_;  // cells updated in the current scan, per part
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -211,9 +264,11 @@ class TsdfMap final : public OccupancyMap {
   const TiledGrid<TsdfCell>& grid() const { return grid_; }
 
  protected:
-  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams,
-                            const CellBox& box) override {
-    grid_.reserve(box);
+  void beginScan(const CellBox& box) override { grid_.reserve(box); }
+  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams, const Slab& slab,
+                            int /*part*/) override {
+    // One update per beam and cell, in beam order; a cell's updates all come from the part whose
+    // slab holds it, in that order, so a split scan averages exactly as an unsplit one.
     std::uint64_t updates = 0;
     const float t = trunc_cells_;
     for (const Beam& b : beams) {
@@ -239,8 +294,8 @@ class TsdfMap final : public OccupancyMap {
         ++updates;
       };
       // For a return, b.end already lies `truncation` behind the surface (see insert()).
-      const CellIndex end = traceRay(origin, b.end, update);
-      update(end);
+      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, update);
+      if (slab.contains(cellOfCoords(b.end))) update(cellOfCoords(b.end));
     }
     return updates;
   }
@@ -266,7 +321,202 @@ const char* toString(MapModel m) {
   return "unknown";
 }
 
+// ---------------------------------------------------------------------------------------------
+// Two-thread insertion. The scan's cells are split by a line on a tile border (so each tile, and
+// each cell, belongs to one thread and lazy tile allocation cannot race); each thread runs the
+// model's insertion restricted to its side. A cell's updates thus happen on one thread and in the
+// single-threaded order (hits phase, then beams in order), so the map is bit-identical.
+
+namespace {
+
+void cpuRelax() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#endif
+}
+
+// Waits until `a` differs from `old`: busy for up to `spin` first (the other side is normally only
+// microseconds away) - pausing for the first microseconds, then yielding the core so that a thread
+// it is shared with (the other half of the scan, the log reader) runs - and then sleeps in the
+// kernel (futex), so an idle worker costs no CPU.
+std::uint32_t waitChange(const std::atomic<std::uint32_t>& a, std::uint32_t old, std::chrono::microseconds spin) {
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0;; ++i) {
+    const std::uint32_t v = a.load(std::memory_order_acquire);
+    if (v != old) return v;
+    if ((i & 15) == 15) {
+      const auto waited = std::chrono::steady_clock::now() - t0;
+      if (waited > spin) break;
+      if (waited > std::chrono::microseconds(2)) std::this_thread::yield();
+    }
+    cpuRelax();
+  }
+  for (;;) {
+    a.wait(old, std::memory_order_acquire);
+    const std::uint32_t v = a.load(std::memory_order_acquire);
+    if (v != old) return v;
+  }
+}
+
+// Handshake spin times, measured on freiburg-079 (2 cores, reader thread running): long enough to
+// cover the gap between consecutive scans when the reader keeps up, short enough not to starve it.
+constexpr std::chrono::microseconds kWorkerSpin{50};
+constexpr std::chrono::microseconds kCallerSpin{200};
+
+}  // namespace
+
+struct OccupancyMap::Worker {
+  explicit Worker(OccupancyMap* map) : thread([this, map] { run(map); }) {}
+  ~Worker() {
+    stop = true;
+    job.fetch_add(1, std::memory_order_release);
+    job.notify_one();
+    thread.join();
+  }
+  Worker(const Worker&) = delete;
+  Worker& operator=(const Worker&) = delete;
+
+  void run(OccupancyMap* map) {
+    std::uint32_t seen = 0;
+    for (;;) {
+      seen = waitChange(job, seen, kWorkerSpin);
+      if (stop) return;
+      try {
+        updates = map->insertBeams(*origin, map->beams_, slab, 1);
+      } catch (...) {
+        error = std::current_exception();
+      }
+      done.store(seen, std::memory_order_release);
+      done.notify_one();
+    }
+  }
+  // Runs the worker's part of a scan; returns the job number to pass to `wait`.
+  std::uint32_t start(const Eigen::Vector2d& o, const Slab& s) {
+    origin = &o;
+    slab = s;
+    updates = 0;
+    error = nullptr;
+    const std::uint32_t n = job.fetch_add(1, std::memory_order_release) + 1;
+    job.notify_one();
+    return n;
+  }
+  void wait(std::uint32_t n) {
+    std::uint32_t d = done.load(std::memory_order_acquire);
+    while (d != n) d = waitChange(done, d, kCallerSpin);
+  }
+
+  // The job, written by the caller before `job` is bumped, read by the worker after.
+  const Eigen::Vector2d* origin = nullptr;
+  Slab slab;
+  bool stop = false;
+  // The result, written by the worker before `done` is set.
+  std::uint64_t updates = 0;
+  std::exception_ptr error;
+  std::atomic<std::uint32_t> job{0};   // number of the last job posted
+  std::atomic<std::uint32_t> done{0};  // number of the last job finished
+  std::thread thread;                  // last member: starts once the others exist
+};
+
 OccupancyMap::OccupancyMap(const MapOptions& options) : options_(options), geometry_(options.resolution_m) {}
+
+OccupancyMap::~OccupancyMap() = default;
+
+std::optional<std::pair<OccupancyMap::Slab, OccupancyMap::Slab>> OccupancyMap::chooseSplit(const Eigen::Vector2d& origin,
+                                                                                             const CellBox& box) {
+  // Below this much work (cells traversed) the handshake (a few microseconds) does not pay.
+  constexpr double kMinWork = 3000;
+  // Walking a far part's cells before the split line without touching them costs about this
+  // fraction of visiting a cell (measured with bench_mapping).
+  constexpr double kSkipCost = 0.25;
+  // Split only when the smaller part has at least this share of the work.
+  constexpr double kMinShare = 0.2;
+  constexpr int kBits = TiledGrid<int>::kTileBits;
+  double total = 0;
+  for (const Beam& b : beams_) total += std::abs(b.end.x() - origin.x()) + std::abs(b.end.y() - origin.y());
+  if (total < kMinWork) return std::nullopt;
+  // For a line at coordinate X on axis a, a beam ending beyond it has the share |end - X| / |end -
+  // origin| of its cells beyond. Per tile column (row) of the beam ends, sums of w/|d| and
+  // w/|d| * end give the far work at every tile border in one sweep.
+  double best_cost = total;
+  Slab best_near, best_far;
+  for (int axis = 0; axis < 2; ++axis) {
+    const double o = origin[axis];
+    const std::int32_t lo_tile = (axis == 0 ? box.min.x : box.min.y) >> kBits;
+    const std::int32_t hi_tile = (axis == 0 ? box.max.x : box.max.y) >> kBits;
+    const std::int32_t o_tile = static_cast<std::int32_t>(std::floor(o)) >> kBits;
+    const auto n = static_cast<std::size_t>(hi_tile - lo_tile + 1);
+    split_sums_.assign(2 * n, 0.0);
+    for (const Beam& b : beams_) {
+      const double d = std::abs(b.end[axis] - o);
+      if (d == 0) continue;
+      const double a = (std::abs(b.end.x() - origin.x()) + std::abs(b.end.y() - origin.y())) / d;
+      const auto k = static_cast<std::size_t>((static_cast<std::int32_t>(std::floor(b.end[axis])) >> kBits) - lo_tile);
+      split_sums_[2 * k] += a;
+      split_sums_[2 * k + 1] += a * b.end[axis];
+    }
+    auto consider = [&](std::int32_t tile, double s0, double s1, bool upper) {
+      const double X = static_cast<double>(tile) * (1 << kBits);
+      const double far = (upper ? s1 - X * s0 : X * s0 - s1) + kSkipCost * std::abs(X - o) * s0;
+      const double cost = std::max(far, total - far);
+      if (cost >= best_cost) return;
+      best_cost = cost;
+      const std::int32_t line = tile * (1 << kBits);
+      constexpr std::int32_t kMin = std::numeric_limits<std::int32_t>::min(), kMax = std::numeric_limits<std::int32_t>::max();
+      best_far = upper ? Slab{axis, line, kMax} : Slab{axis, kMin, line};
+      best_near = upper ? Slab{axis, kMin, line} : Slab{axis, line, kMax};
+    };
+    // Lines above the origin's cell: the far side is tiles >= t.
+    double s0 = 0, s1 = 0;
+    for (std::int32_t t = hi_tile; t > o_tile; --t) {
+      s0 += split_sums_[2 * static_cast<std::size_t>(t - lo_tile)];
+      s1 += split_sums_[2 * static_cast<std::size_t>(t - lo_tile) + 1];
+      consider(t, s0, s1, true);
+    }
+    // Lines at or below the origin's cell: the far side is tiles < t.
+    s0 = s1 = 0;
+    for (std::int32_t t = lo_tile + 1; t <= o_tile; ++t) {
+      s0 += split_sums_[2 * static_cast<std::size_t>(t - 1 - lo_tile)];
+      s1 += split_sums_[2 * static_cast<std::size_t>(t - 1 - lo_tile) + 1];
+      consider(t, s0, s1, false);
+    }
+  }
+  if (best_cost > (1 - kMinShare) * total) return std::nullopt;
+  return std::make_pair(best_near, best_far);
+}
+
+std::uint64_t OccupancyMap::insertParallel(const Eigen::Vector2d& origin, const Slab& mine, const Slab& theirs) {
+  if (!worker_) {
+    try {
+      worker_ = std::make_unique<Worker>(this);
+    } catch (const std::system_error&) {  // no thread to be had: stay single-threaded
+      return insertBeams(origin, beams_, Slab{}, 0);
+    }
+  }
+  ++parallel_scans_;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::uint32_t job = worker_->start(origin, theirs);
+  std::uint64_t updates = 0;
+  std::exception_ptr error;
+  try {
+    updates = insertBeams(origin, beams_, mine, 0);
+  } catch (...) {
+    error = std::current_exception();
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  worker_->wait(job);  // always: the worker reads beams_
+  // When the cores are busy with other work the worker may get its time slice late and the scan
+  // takes longer than on one thread (waiting longer than the own part took). Then insert the next
+  // scans on one thread, doubling the pause while it keeps happening.
+  if (options_.insert.adaptive_threads && std::chrono::steady_clock::now() - t1 > t1 - t0) {
+    backoff_ = std::min<std::uint32_t>(std::max<std::uint32_t>(2 * backoff_, 8), 1024);
+    single_left_ = backoff_;
+  } else {
+    backoff_ /= 2;
+  }
+  if (error) std::rethrow_exception(error);
+  if (worker_->error) std::rethrow_exception(std::exchange(worker_->error, nullptr));
+  return updates + worker_->updates;
+}
 
 void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   if (!T_world_laser.isFinite()) throw badInput("laser pose is not finite", ErrorLocation("", 0, "pose"));
@@ -308,7 +558,15 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
     beams_.push_back(Beam{end, r * inv_res, hit});
   }
   if (beams_.empty()) return;
-  cell_updates_ += insertBeams(origin, beams_, box);
+  beginScan(box);
+  std::optional<std::pair<Slab, Slab>> split;
+  if (options_.insert.threads >= 2) {
+    if (single_left_ > 0)
+      --single_left_;
+    else
+      split = chooseSplit(origin, box);
+  }
+  cell_updates_ += split ? insertParallel(origin, split->first, split->second) : insertBeams(origin, beams_, Slab{}, 0);
   const auto ox = static_cast<std::int64_t>(std::floor(origin.x())), oy = static_cast<std::int64_t>(std::floor(origin.y()));
   for (const Beam& b : beams_)
     cell_visits_ += static_cast<std::uint64_t>(std::abs(static_cast<std::int64_t>(std::floor(b.end.x())) - ox) +
@@ -325,6 +583,7 @@ std::unique_ptr<OccupancyMap> makeMap(MapModel model, const MapOptions& o) {
     throw badOption("min_probability", "clamp bounds must satisfy 0 < min < max < 1");
   if (!(o.tsdf.truncation_m > 0) || !std::isfinite(o.tsdf.truncation_m))
     throw badOption("truncation_m", "must be positive");
+  if (o.insert.threads < 1) throw badOption("threads", "must be at least 1");
   if (!(o.tsdf.max_weight >= 1 && o.tsdf.max_weight <= 1e6)) throw badOption("max_weight", "must be in [1, 1e6]");
   if (!(o.insert.max_range_m > 0 && o.insert.max_range_m <= 1e4))
     throw badOption("max_range_m", "must be in (0, 10000] m");

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "lidar2d/core/laser_scan.hpp"
@@ -31,6 +32,16 @@ struct InsertOptions {
   /// this distance and mark nothing occupied; 0 ignores them [m].
   double no_return_clear_m = 5.0;
   std::size_t cell_budget = 1'000'000'000;  ///< most cells the map may span [cells]
+  /// Threads inserting one scan: 1 = the calling thread only; 2 = the calling thread and one
+  /// worker thread owned by the map, splitting the scan's cells by a line (each cell is updated by
+  /// one thread, in the single-threaded order, so the map is identical). Scans too small or too
+  /// lopsided to split run on the calling thread, and so do the next scans after a split that
+  /// was slower than one thread (busy cores). Larger values currently use 2 threads.
+  unsigned threads = 2;
+  /// With threads > 1: after a split scan that took longer than one thread would have (cores busy
+  /// with other work, so the worker got its time slice late), insert the next scans on one thread
+  /// (8 at first, doubling up to 1024 while it recurs). False splits every scan worth splitting.
+  bool adaptive_threads = true;
 };
 
 /// Log-odds model. Defaults follow Cartographer's 2D probability grid.
@@ -78,10 +89,12 @@ struct SurfacePoint {
   double weight = 0.0;      ///< smaller of the two cells' weights
 };
 
-/// Base class of the three models. Non-copyable; options are fixed at construction.
+/// Base class of the three models. Non-copyable; options are fixed at construction. With
+/// `InsertOptions::threads` > 1 the map owns a worker thread (started by the first scan worth
+/// splitting, joined by the destructor); a map is still used by one thread at a time.
 class OccupancyMap {
  public:
-  virtual ~OccupancyMap() = default;
+  virtual ~OccupancyMap();
   OccupancyMap(const OccupancyMap&) = delete;
   OccupancyMap& operator=(const OccupancyMap&) = delete;
 
@@ -108,6 +121,8 @@ class OccupancyMap {
   /// Total cells traversed by beams so far (each beam's cells, counted once per beam): the work
   /// measure of the ray tracing, for benchmarks.
   std::uint64_t cellVisits() const { return cell_visits_; }
+  /// Scans inserted by two threads so far (see `InsertOptions::threads`), for benchmarks and tests.
+  std::uint64_t parallelScans() const { return parallel_scans_; }
   /// Memory held by the cells [bytes].
   virtual std::size_t memoryBytes() const = 0;
 
@@ -119,17 +134,45 @@ class OccupancyMap {
     double range_cells;   ///< length of the beam up to the return [cells]
     bool hit;             ///< true: a return at `end`; false: no return (clear only)
   };
-  virtual std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams,
-                                    const CellBox& box) = 0;
+  /// The cells of one thread's share of a scan: those with coordinate `axis` (0 = x, 1 = y) in
+  /// [lo, hi); axis -1 means all cells. Slabs are bounded by tile borders, so a tile is wholly
+  /// inside one slab.
+  struct Slab {
+    int axis = -1;
+    std::int32_t lo = 0, hi = 0;
+    bool contains(CellIndex c) const {
+      if (axis < 0) return true;
+      const std::int32_t v = axis == 0 ? c.x : c.y;
+      return v >= lo && v < hi;
+    }
+  };
+  /// Called once per scan before any `insertBeams`: reserves `box` (every cell the scan touches)
+  /// and starts the scan's per-cell bookkeeping. May throw (cell budget); the map is unchanged then.
+  virtual void beginScan(const CellBox& box) = 0;
+  /// Model-specific insertion of prepared beams (all in continuous cell coordinates), restricted to
+  /// the cells in `slab`; returns the cell updates made. Two calls with disjoint slabs may run
+  /// concurrently; `part` (0 or 1) tells them apart for per-thread scratch space.
+  virtual std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams, const Slab& slab,
+                                    int part) = 0;
 
   const MapOptions options_;
   const GridGeometry geometry_;
 
  private:
+  struct Worker;
+  // The split of a scan between two threads, or std::nullopt to insert it on one thread.
+  std::optional<std::pair<Slab, Slab>> chooseSplit(const Eigen::Vector2d& origin, const CellBox& box);
+  std::uint64_t insertParallel(const Eigen::Vector2d& origin, const Slab& mine, const Slab& theirs);
+
   std::uint64_t cell_updates_ = 0;
   std::uint64_t cell_visits_ = 0;
+  std::uint64_t parallel_scans_ = 0;
   CellBox bounds_;
   std::vector<Beam> beams_;  // scratch buffer reused between scans
+  std::vector<double> split_sums_;  // scratch of chooseSplit
+  std::unique_ptr<Worker> worker_;  // started on the first scan inserted by two threads
+  std::uint32_t backoff_ = 0;      // scans to insert single-threaded after a split that did not pay
+  std::uint32_t single_left_ = 0;  // scans still to insert single-threaded
 };
 
 /// Creates a map of the given model. Throws `lidar2d::Error` (kInvalidArgument, naming the field)

@@ -67,6 +67,10 @@ class GridGeometry {
 /// Sparse grid of `Cell` values in 64 x 64 tiles. Unallocated cells read as the default value
 /// given at construction. A cell budget bounds both the allocated cells and the extent the tile
 /// table may cover, so absurd coordinates become an `Error` instead of an out-of-memory crash.
+///
+/// Concurrency: after `reserve`, threads may call `cellUnchecked` at the same time as long as no
+/// two threads touch cells of the same tile (each tile is allocated by the one thread touching it,
+/// and no grid-wide counter is written on allocation).
 template <typename Cell>
 class TiledGrid {
  public:
@@ -119,9 +123,12 @@ class TiledGrid {
     return static_cast<bool>(table_[static_cast<std::size_t>(ty * table_w_ + tx)]);
   }
 
-  /// Number of allocated tiles and cells.
-  std::size_t numTiles() const { return num_tiles_; }
-  std::size_t numAllocatedCells() const { return num_tiles_ * kTileCells; }
+  /// Number of allocated tiles and cells. Counted over the tile table (one pointer per tile), so
+  /// that allocating a tile writes nothing shared between tiles (see the class comment).
+  std::size_t numTiles() const {
+    return static_cast<std::size_t>(std::count_if(table_.begin(), table_.end(), [](const auto& t) { return t != nullptr; }));
+  }
+  std::size_t numAllocatedCells() const { return numTiles() * kTileCells; }
   std::size_t cellBudget() const { return budget_; }
   const Cell& defaultValue() const { return default_; }
 
@@ -164,7 +171,6 @@ class TiledGrid {
   void allocate(std::unique_ptr<Cell[]>& tile) {
     tile = std::make_unique<Cell[]>(kTileCells);
     std::fill(tile.get(), tile.get() + kTileCells, default_);
-    ++num_tiles_;
   }
 
   void grow(std::int64_t tx0, std::int64_t ty0, std::int64_t tx1, std::int64_t ty1) {
@@ -206,7 +212,6 @@ class TiledGrid {
   std::vector<std::unique_ptr<Cell[]>> table_;  // dense table of tile pointers, row-major
   std::int64_t tx0_ = 0, ty0_ = 0;              // tile index of table_[0]
   std::int64_t table_w_ = 0, table_h_ = 0;      // table size in tiles
-  std::size_t num_tiles_ = 0;
 };
 
 }  // namespace lidar2d::mapping
