@@ -202,8 +202,10 @@ TEST_P(ModelTest, TwoThreadsGiveTheSingleThreadedMapExactly) {
 
 TEST_P(ModelTest, ManyMapsWithWorkersComeAndGo) {
   // Each map owns its worker; creating, using and destroying maps must not leak or hang.
+  MapOptions o;
+  o.insert.threads = 2;
   for (int i = 0; i < 20; ++i) {
-    auto map = makeMap(GetParam());
+    auto map = makeMap(GetParam(), o);
     map->insert(roomScan(SE2(0.1 * i, 0, 0)), SE2(0.1 * i, 0, 0));
     EXPECT_EQ(map->parallelScans(), 1u);
   }

@@ -1,6 +1,6 @@
 // Mapping on the corrected Radish logs with their truth poses:
 // - speed: all scans inserted, per model and thread count (InsertOptions::threads; the maps are
-//   identical): ms per scan, cell updates per second, share of scans split between two threads;
+//   identical; 2 with and without the adaptive back-off): ms per scan, cell updates per second, share of scans split between two threads;
 // - consistency: a map from the even-numbered scans must explain the odd-numbered ones: the
 //   fraction of their beam endpoints (ranges under 20 m) within one cell of an occupied cell.
 
@@ -9,6 +9,8 @@
 #include <chrono>
 #include <filesystem>
 #include <iostream>
+#include <string>
+#include <utility>
 
 #include "dataset_bench.hpp"
 #include "lidar2d/io/frame_source.hpp"
@@ -88,8 +90,10 @@ void runMapBenchmark(const std::string& data_dir) {
         even->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
       const io::OccupancyImage image = mapping::toOccupancyImage(*even);
       const Consistency c = consistency(image, frames, 1, 20.0);
-      for (const unsigned threads : {1u, 2u}) {
+      // Threads 2 twice: with the adaptive back-off (default) and splitting every scan worth it.
+      for (const auto& [threads, adaptive] : {std::pair{1u, true}, std::pair{2u, true}, std::pair{2u, false}}) {
         o.insert.threads = threads;
+        o.insert.adaptive_threads = adaptive;
         // Speed: every scan; best of 3 runs to damp the noise of a shared machine.
         double best = 1e30;
         std::uint64_t updates = 0, visits = 0, split = 0;
@@ -103,7 +107,8 @@ void runMapBenchmark(const std::string& data_dir) {
           split = map->parallelScans();
         }
         std::cout << fmt::format("| {} | {} | {} | {} | {:.0f}% | {:.3f} | {:.0f} | {:.0f} | {} x {} | {:.1f}% | {:.2f}% |\n",
-                                 std::filesystem::path(rel).stem().stem().string(), mapping::toString(model), threads,
+                                 std::filesystem::path(rel).stem().stem().string(), mapping::toString(model),
+                                 threads == 1 ? std::string("1") : (adaptive ? "2" : "2 (no back-off)"),
                                  frames.size(), 100.0 * static_cast<double>(split) / static_cast<double>(frames.size()),
                                  1e3 * best / static_cast<double>(frames.size()), static_cast<double>(visits) / best / 1e6,
                                  static_cast<double>(updates) / best / 1e6, image.width(), image.height(),
