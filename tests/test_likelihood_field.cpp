@@ -20,6 +20,9 @@
 #include "support/test_support.hpp"
 
 namespace lidar2d::registration {
+
+void PrintTo(LfSolver s, std::ostream* os) { *os << (s == LfSolver::kCeres ? "Ceres" : "GaussNewton"); }
+
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
