@@ -1,6 +1,7 @@
 #!/bin/sh
 # make demo: the most complete pipeline that exists, on the built-in simulator's office world:
-# simulate -> summary -> occupancy map from the true poses -> odometry drift against the truth.
+# simulate -> summary -> occupancy maps from the true poses -> scan matching -> odometry drift
+# against the truth.
 set -eu
 BIN=${1:-build/lidar2d}
 OUT=${2:-out}
@@ -12,6 +13,8 @@ echo "== summary"
 echo "== occupancy maps from the true poses (log-odds, TSDF)"
 "$BIN" map "$OUT/office.log" --model logodds -o "$OUT/office-logodds" >/dev/null
 "$BIN" map "$OUT/office.log" --model tsdf -o "$OUT/office-tsdf" >/dev/null
+echo "== scan matching (point-to-line ICP, odometry guess) against the truth"
+"$BIN" match "$OUT/office.log" --method p2l --eval -o "$OUT/office-pairs.txt" 2>&1 | grep -E 'success|median'
 echo "== odometry against the truth"
 "$BIN" eval "$OUT/office.log" --truth "$OUT/office.log" --estimate-from odometry -o "$OUT/odometry-eval.json" |
   grep -E '"(ate_rmse_m|rpe_trans_rmse_m|matched)"' || true
@@ -19,6 +22,6 @@ echo
 echo "demo wrote:"
 for f in "$OUT"/office.log "$OUT"/office-logodds.pgm "$OUT"/office-logodds.yaml "$OUT"/office-logodds.png \
   "$OUT"/office-tsdf.pgm "$OUT"/office-tsdf.yaml "$OUT"/office-tsdf.png "$OUT"/office-tsdf.surface.txt \
-  "$OUT"/odometry-eval.json; do
+  "$OUT"/office-pairs.txt "$OUT"/odometry-eval.json; do
   echo "  $f"
 done
