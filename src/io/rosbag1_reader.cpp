@@ -191,19 +191,13 @@ class Ros1Source final : public FrameSource {
       throw badInput("internal: topic vanished", {path_});
     };
 
-    const auto scan = chooseRosTopic(infos, {kLaserScanType}, options.scan_topic, false, "LaserScan", "--scan-topic",
-                                     path_, notes_.warnings);
-    if (!scan) {
-      std::string all;
-      for (const auto& t : infos) all += fmt::format("{}{} ({})", all.empty() ? "" : ", ", t.name, t.type);
-      throw badInput(fmt::format("no {} topic in the bag (topics: {})", kLaserScanType, all.empty() ? "none" : all),
-                     {path_});
-    }
+    const RosTopicChoice choice =
+        chooseScanAndOdometry(infos, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
+    const RosTopicInfo* scan = &choice.scan;
+    const std::optional<RosTopicInfo>& odom = choice.odom;
     checkMd5(find(scan->name), kLaserScanMd5);
     scan_topic_ = scan->name;
 
-    const auto odom = chooseRosTopic(infos, {kOdometryType}, options.odom_topic, true, "Odometry", "--odom-topic",
-                                     path_, notes_.warnings);
     if (odom) {
       checkMd5(find(odom->name), kOdometryMd5);
       odom_topic_ = odom->name;

@@ -245,19 +245,13 @@ class Ros2Source final : public FrameSource {
       throw badInput("internal: topic vanished", {db_file_});
     };
 
-    const auto scan = chooseRosTopic(infos, {kLaserScanType}, options.scan_topic, false, "LaserScan", "--scan-topic",
-                                     path_, notes_.warnings);
-    if (!scan) {
-      std::string all;
-      for (const auto& t : infos) all += fmt::format("{}{} ({})", all.empty() ? "" : ", ", t.name, t.type);
-      throw badInput(fmt::format("no {} topic in the bag (topics: {})", kLaserScanType, all.empty() ? "none" : all),
-                     {path_});
-    }
+    const RosTopicChoice choice =
+        chooseScanAndOdometry(infos, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
+    const RosTopicInfo* scan = &choice.scan;
+    const std::optional<RosTopicInfo>& odom = choice.odom;
     const Topic& scan_topic = find(scan->name);
     checkCdr(scan_topic);
     scan_topic_ = scan_topic;
-    const auto odom = chooseRosTopic(infos, {kOdometryType}, options.odom_topic, true, "Odometry", "--odom-topic",
-                                     path_, notes_.warnings);
     if (odom) {
       checkCdr(find(odom->name));
       odom_topic_ = find(odom->name);

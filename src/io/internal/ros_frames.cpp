@@ -264,4 +264,18 @@ std::vector<std::string> RosFrameAssembler::warnings() const {
   return w;
 }
 
+RosTopicChoice chooseScanAndOdometry(const std::vector<RosTopicInfo>& topics, const std::string& scan_type,
+                                     const std::string& odom_type, const ReaderOptions& options,
+                                     const std::string& path, std::vector<std::string>& warnings) {
+  const auto scan =
+      chooseRosTopic(topics, {scan_type}, options.scan_topic, false, "LaserScan", "--scan-topic", path, warnings);
+  if (!scan) {
+    std::string all;
+    for (const auto& t : topics) all += fmt::format("{}{} ({})", all.empty() ? "" : ", ", t.name, t.type);
+    throw badInput(fmt::format("no {} topic in the bag (topics: {})", scan_type, all.empty() ? "none" : all),
+                   ErrorLocation(path));
+  }
+  return {*scan, chooseRosTopic(topics, {odom_type}, options.odom_topic, true, "Odometry", "--odom-topic", path, warnings)};
+}
+
 }  // namespace lidar2d::io::internal

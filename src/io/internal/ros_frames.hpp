@@ -40,6 +40,17 @@ std::optional<RosTopicInfo> chooseRosTopic(const std::vector<RosTopicInfo>& topi
                                            bool allow_none, const std::string& what, const std::string& option,
                                            const std::string& path, std::vector<std::string>& warnings);
 
+/// The LaserScan and Odometry topics of a bag (shared by the ROS1 and ROS2 readers): `chooseRosTopic`
+/// for each, with `options.scan_topic` / `options.odom_topic`; a bag without a LaserScan topic is an
+/// error naming `path` and listing every topic with its type.
+struct RosTopicChoice {
+  RosTopicInfo scan;
+  std::optional<RosTopicInfo> odom;
+};
+RosTopicChoice chooseScanAndOdometry(const std::vector<RosTopicInfo>& topics, const std::string& scan_type,
+                                     const std::string& odom_type, const ReaderOptions& options,
+                                     const std::string& path, std::vector<std::string>& warnings);
+
 /// Planar projection of a 3D transform: (x, y, yaw), yaw from the quaternion (ZYX convention).
 SE2 projectToPlane(const RosTransform3& t);
 /// Angle between the transform's z axis and the parent's z axis [rad] (0 for a planar transform).
