@@ -26,46 +26,24 @@ CellIndex cellOfCoords(const Eigen::Vector2d& p) {
 }
 
 // `traceRay` restricted to the cells of `slab`: calls on_pass for the passed cells (all but the end
-// cell) that lie in the slab, in order. The arithmetic is traceRay's step for step, so the cells
-// and their order are exactly traceRay's; a segment is monotone along each axis, so it is inside
-// the slab for one run of steps: the steps before it are only walked (no cell access), the walk
-// stops at the exit. (Jumping straight to the entry would recompute t_max differently from
-// traceRay's running sums and could pick the other cell at a near-corner crossing.)
+// cell) that lie in the slab, in order. It is the same RayWalk, so the cells and their order are
+// exactly traceRay's; a segment is monotone along each axis, so it is inside the slab for one run
+// of steps: the steps before it are only walked (no cell access), the walk stops at the exit.
+// (Jumping straight to the entry would recompute t_max differently from the walk's running sums and
+// could pick the other cell at a near-corner crossing.)
 template <int kAxis, typename F>
 void traceInSlabAlong(const Eigen::Vector2d& start, const Eigen::Vector2d& end, std::int32_t lo, std::int32_t hi,
                       F&& on_pass) {
-  std::int32_t x = static_cast<std::int32_t>(std::floor(start.x()));
-  std::int32_t y = static_cast<std::int32_t>(std::floor(start.y()));
-  const auto ex = static_cast<std::int32_t>(std::floor(end.x()));
-  const auto ey = static_cast<std::int32_t>(std::floor(end.y()));
-  const double dx = end.x() - start.x(), dy = end.y() - start.y();
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  const std::int32_t step_x = dx > 0 ? 1 : -1, step_y = dy > 0 ? 1 : -1;
-  const double t_delta_x = dx != 0 ? 1.0 / std::abs(dx) : kInf;
-  const double t_delta_y = dy != 0 ? 1.0 / std::abs(dy) : kInf;
-  double t_max_x = dx > 0 ? (x + 1 - start.x()) * t_delta_x : (dx < 0 ? (start.x() - x) * t_delta_x : kInf);
-  double t_max_y = dy > 0 ? (y + 1 - start.y()) * t_delta_y : (dy < 0 ? (start.y() - y) * t_delta_y : kInf);
-  std::int32_t left_x = std::abs(ex - x), left_y = std::abs(ey - y);
-  auto step = [&] {
-    if (left_y == 0 || (left_x > 0 && t_max_x < t_max_y)) {
-      x += step_x;
-      t_max_x += t_delta_x;
-      --left_x;
-    } else {
-      y += step_y;
-      t_max_y += t_delta_y;
-      --left_y;
-    }
-  };
-  // (kAxis a template parameter: the slab test then reads a register, not a reference to x or y.)
+  RayWalk walk(start, end);
+  // (kAxis a template parameter: the slab test then reads one coordinate without a branch.)
   auto inside = [&] {
-    const std::int32_t v = kAxis == 0 ? x : y;
+    const std::int32_t v = kAxis == 0 ? walk.x() : walk.y();
     return v >= lo && v < hi;
   };
-  while (left_x + left_y > 0 && !inside()) step();
-  while (left_x + left_y > 0 && inside()) {
-    on_pass(CellIndex{x, y});
-    step();
+  while (!walk.done() && !inside()) walk.step();
+  while (!walk.done() && inside()) {
+    on_pass(walk.cell());
+    walk.step();
   }
 }
 

@@ -13,41 +13,67 @@
 
 namespace lidar2d::mapping {
 
-/// Visits the cells crossed by the segment from `start` to `end`, both in continuous cell
-/// coordinates (cell (x, y) spans [x, x+1) x [y, y+1); see `GridGeometry::toCellCoords`).
-/// `on_pass(CellIndex)` is called for each cell before the end cell, in order from the start; the
-/// end cell is returned (not passed to `on_pass`). A segment through a cell corner continues into
-/// one of the two side cells (the traversal stays 4-connected). Preconditions: finite inputs.
-template <typename F>
-CellIndex traceRay(const Eigen::Vector2d& start, const Eigen::Vector2d& end, F&& on_pass) {
-  std::int32_t x = static_cast<std::int32_t>(std::floor(start.x()));
-  std::int32_t y = static_cast<std::int32_t>(std::floor(start.y()));
-  const auto ex = static_cast<std::int32_t>(std::floor(end.x()));
-  const auto ey = static_cast<std::int32_t>(std::floor(end.y()));
-  const double dx = end.x() - start.x(), dy = end.y() - start.y();
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  const std::int32_t step_x = dx > 0 ? 1 : -1, step_y = dy > 0 ? 1 : -1;
-  // Parameter t in [0, 1] along the segment at which the next x (y) cell boundary is crossed.
-  const double t_delta_x = dx != 0 ? 1.0 / std::abs(dx) : kInf;
-  const double t_delta_y = dy != 0 ? 1.0 / std::abs(dy) : kInf;
-  double t_max_x = dx > 0 ? (x + 1 - start.x()) * t_delta_x : (dx < 0 ? (start.x() - x) * t_delta_x : kInf);
-  double t_max_y = dy > 0 ? (y + 1 - start.y()) * t_delta_y : (dy < 0 ? (start.y() - y) * t_delta_y : kInf);
-  // The number of steps is fixed by the end cell; forcing the remaining axis once the other one has
-  // arrived makes the walk end exactly at the end cell despite rounding near corners.
-  std::int32_t left_x = std::abs(ex - x), left_y = std::abs(ey - y);
-  while (left_x + left_y > 0) {
-    on_pass(CellIndex{x, y});
-    if (left_y == 0 || (left_x > 0 && t_max_x < t_max_y)) {
-      x += step_x;
-      t_max_x += t_delta_x;
-      --left_x;
+/// The state of an exact traversal of the segment `start` -> `end`, both in continuous cell
+/// coordinates (cell (x, y) spans [x, x+1) x [y, y+1); see `GridGeometry::toCellCoords`). It starts
+/// in the start cell; each `step()` moves to the next cell the segment enters; `done()` is true in
+/// the end cell. A segment through a cell corner continues into one of the two side cells (the walk
+/// stays 4-connected). The number of steps is fixed by the end cell; once one axis has arrived the
+/// other is forced, so the walk ends exactly in the end cell despite rounding near corners.
+/// Preconditions: finite inputs. Every traversal in lidar2d uses this one walk, so that all of them
+/// visit the same cells in the same order.
+class RayWalk {
+ public:
+  RayWalk(const Eigen::Vector2d& start, const Eigen::Vector2d& end)
+      : x_(static_cast<std::int32_t>(std::floor(start.x()))), y_(static_cast<std::int32_t>(std::floor(start.y()))) {
+    const auto ex = static_cast<std::int32_t>(std::floor(end.x()));
+    const auto ey = static_cast<std::int32_t>(std::floor(end.y()));
+    const double dx = end.x() - start.x(), dy = end.y() - start.y();
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    step_x_ = dx > 0 ? 1 : -1;
+    step_y_ = dy > 0 ? 1 : -1;
+    // Parameter t in [0, 1] along the segment at which the next x (y) cell boundary is crossed.
+    t_delta_x_ = dx != 0 ? 1.0 / std::abs(dx) : kInf;
+    t_delta_y_ = dy != 0 ? 1.0 / std::abs(dy) : kInf;
+    t_max_x_ = dx > 0 ? (x_ + 1 - start.x()) * t_delta_x_ : (dx < 0 ? (start.x() - x_) * t_delta_x_ : kInf);
+    t_max_y_ = dy > 0 ? (y_ + 1 - start.y()) * t_delta_y_ : (dy < 0 ? (start.y() - y_) * t_delta_y_ : kInf);
+    left_x_ = std::abs(ex - x_);
+    left_y_ = std::abs(ey - y_);
+  }
+  bool done() const { return left_x_ + left_y_ == 0; }
+  std::int32_t x() const { return x_; }
+  std::int32_t y() const { return y_; }
+  CellIndex cell() const { return CellIndex{x_, y_}; }
+  /// Moves to the next cell. Precondition: !done().
+  void step() {
+    if (left_y_ == 0 || (left_x_ > 0 && t_max_x_ < t_max_y_)) {
+      x_ += step_x_;
+      t_max_x_ += t_delta_x_;
+      --left_x_;
     } else {
-      y += step_y;
-      t_max_y += t_delta_y;
-      --left_y;
+      y_ += step_y_;
+      t_max_y_ += t_delta_y_;
+      --left_y_;
     }
   }
-  return CellIndex{x, y};
+
+ private:
+  std::int32_t x_, y_;
+  std::int32_t step_x_, step_y_;
+  double t_delta_x_, t_delta_y_, t_max_x_, t_max_y_;
+  std::int32_t left_x_, left_y_;
+};
+
+/// Visits the cells crossed by the segment from `start` to `end` (see `RayWalk`): `on_pass(CellIndex)`
+/// is called for each cell before the end cell, in order from the start; the end cell is returned
+/// (not passed to `on_pass`).
+template <typename F>
+CellIndex traceRay(const Eigen::Vector2d& start, const Eigen::Vector2d& end, F&& on_pass) {
+  RayWalk walk(start, end);
+  while (!walk.done()) {
+    on_pass(walk.cell());
+    walk.step();
+  }
+  return walk.cell();
 }
 
 }  // namespace lidar2d::mapping
