@@ -11,6 +11,7 @@
 #include <limits>
 #include <vector>
 
+#include "internal/ceres_common.hpp"
 #include "internal/kdtree2.hpp"
 
 namespace lidar2d::registration {
@@ -459,15 +460,7 @@ std::unique_ptr<ceres::LossFunction> makeLoss(const RobustLoss& loss) {
 // (a few Levenberg-Marquardt iterations), then the pairs are searched again at the new pose.
 Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
   const std::unique_ptr<ceres::LossFunction> loss = makeLoss(o.loss);
-  ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_QR;
-  so.max_num_iterations = o.ceres_max_inner_iterations;
-  so.num_threads = 1;
-  so.logging_type = ceres::SILENT;
-  so.minimizer_progress_to_stdout = false;
-  so.function_tolerance = 1e-12;
-  so.gradient_tolerance = 1e-14;
-  so.parameter_tolerance = 1e-10;
+  const ceres::Solver::Options so = internal::poseSolverOptions(o.ceres_max_inner_iterations, 1e-12, 1e-10);
   ceres::Problem::Options po;
   po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   po.enable_fast_removal = false;

@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "lidar2d/core/error.hpp"
+#include "src/registration/internal/ceres_common.hpp"
 #include "src/registration/internal/lf_raster.hpp"
 
 namespace lidar2d::registration {
@@ -288,15 +289,7 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
       if (options.loss == LfLoss::kHuber) loss = std::make_unique<ceres::HuberLoss>(k);
       if (options.loss == LfLoss::kCauchy) loss = std::make_unique<ceres::CauchyLoss>(k);
       for (const auto& p : src) problem.AddResidualBlock(new FieldResidual(field, l, p), loss.get(), x);
-      ceres::Solver::Options so;
-      so.linear_solver_type = ceres::DENSE_QR;
-      so.max_num_iterations = options.max_iterations;
-      so.num_threads = 1;
-      so.logging_type = ceres::SILENT;
-      so.minimizer_progress_to_stdout = false;
-      so.function_tolerance = 1e-10;
-      so.gradient_tolerance = 1e-14;
-      so.parameter_tolerance = 1e-9;
+      const ceres::Solver::Options so = internal::poseSolverOptions(options.max_iterations, 1e-10, 1e-9);
       ceres::Solver::Summary summary;
       ceres::Solve(so, &problem, &summary);
       iterations += static_cast<int>(summary.iterations.size()) - 1;
