@@ -13,6 +13,7 @@ void addSimulateCommand(CLI::App& app);
 void addPerturbCommand(CLI::App& app);
 void addEvalCommand(CLI::App& app);
 void addMapCommand(CLI::App& app);
+void addPosesCommand(CLI::App& app);
 void addMatchCommand(CLI::App& app);
 
 /// Adds the reader flags shared by every command that reads a log (--scan-topic, --odom-topic,

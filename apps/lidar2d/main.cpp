@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   lidar2d::cli::addPerturbCommand(app);
   lidar2d::cli::addEvalCommand(app);
   lidar2d::cli::addMapCommand(app);
+  lidar2d::cli::addPosesCommand(app);
   lidar2d::cli::addMatchCommand(app);
   try {
     app.parse(argc, argv);
