@@ -1,8 +1,9 @@
 #!/usr/bin/python3
-"""Writes the small ROS1 fixture bags in tests/data/ (used by tests/test_rosbag1_reader.cpp and
-tests/test_bad_input_bags.cpp) with Debian's python3-rosbag. Messages are serialized here by hand
+"""Writes the small ROS1 fixture bags (used by tests/test_rosbag1_reader.cpp and
+tests/test_bad_input_bags.cpp) into the folder given as the first argument, with Debian's
+python3-rosbag. The build runs it (tests/CMakeLists.txt), so no bag file is tracked in git. Messages are serialized here by hand
 (ROS1 wire format: packed little-endian; strings are uint32 length + bytes) and written raw, so no
-message packages are needed. Run from the repository root: /usr/bin/python3 tools/make-test-bags.py
+message packages are needed. By hand: /usr/bin/python3 tools/make-test-bags.py OUT_DIR
 
 Fixtures:
 - tf_chain.bag (lz4 chunks): two LaserScan topics (/scan_front 10 messages, /scan_rear 4), /odom,
@@ -127,9 +128,9 @@ def corrupt_scan(path):
 
 
 if __name__ == "__main__":
-    os.makedirs("tests/data", exist_ok=True)
-    tf_chain("tests/data/tf_chain.bag")
-    no_scan("tests/data/no_scan.bag")
-    corrupt_scan("tests/data/corrupt_scan.bag")
-    for f in sorted(os.listdir("tests/data")):
-        print(f, os.path.getsize(os.path.join("tests/data", f)))
+    import sys
+    out = sys.argv[1] if len(sys.argv) > 1 else "tests/data"
+    os.makedirs(out, exist_ok=True)
+    tf_chain(os.path.join(out, "tf_chain.bag"))
+    no_scan(os.path.join(out, "no_scan.bag"))
+    corrupt_scan(os.path.join(out, "corrupt_scan.bag"))
