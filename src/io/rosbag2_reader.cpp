@@ -137,13 +137,7 @@ class Ros2Source final : public FrameSource {
   const std::string& path() const override { return path_; }
 
   SourceNotes notes() const override {
-    SourceNotes n = notes_;
-    for (auto& w : assembler_.warnings()) n.warnings.push_back(std::move(w));
-    if (negative_ranges_)
-      n.warnings.push_back(fmt::format("{} negative ranges (treated as invalid beams)", negative_ranges_));
-    if (zero_stamps_)
-      n.warnings.push_back(fmt::format("{} messages have a zero header stamp; their bag time is used", zero_stamps_));
-    return n;
+    return rosNotes(notes_, assembler_.warnings(), negative_ranges_, zero_stamps_);
   }
 
  private:

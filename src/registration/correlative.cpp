@@ -272,6 +272,30 @@ CorrelativeGrid CorrelativeGrid::fromMap(const io::OccupancyImage& map, const Co
   return CorrelativeGridBuilder::build(poly, poly.isolated, options);
 }
 
+namespace {
+
+// Branch and bound over a discretised window (Hess et al. 2016, algorithm 3): the coarsest-level
+// candidates over translations [-nx, nx] x [-ny, ny] cells and every discretised angle, then the
+// depth-first search, then the result (with refinement). Shared by the local and global searches.
+CorrelativeResult searchDiscretised(const CorrelativeGrid& grid, const Discretised& d, int nx, int ny,
+                                    const Points2& src, const CorrelativeOptions& options,
+                                    const LikelihoodField* refine_field, const SE2& init) {
+  const int H = grid.depth() - 1;
+  std::vector<Candidate> top;
+  std::size_t scored = 0;
+  for (int k = 0; k < static_cast<int>(d.angles.size()); ++k)
+    for (int ix = -nx; ix <= nx; ix += 1 << H)
+      for (int iy = -ny; iy <= ny; iy += 1 << H) {
+        top.push_back({k, ix, iy, scoreAt(grid, d, k, ix, iy, H)});
+        ++scored;
+      }
+  Candidate best{0, 0, 0, -1.0};
+  branchAndBound(grid, d, top, H, best, scored);
+  return finish(grid, d, best, src, options, refine_field, init, scored);
+}
+
+}  // namespace
+
 CorrelativeResult matchCorrelative(const CorrelativeGrid& grid, const Points2& source, const SE2& init,
                                    const CorrelativeOptions& options, const LikelihoodField* refine_field) {
   options.validate();
@@ -283,18 +307,7 @@ CorrelativeResult matchCorrelative(const CorrelativeGrid& grid, const Points2& s
   const int na = static_cast<int>(std::ceil(options.angular_window_rad / step - 1e-9));
   const int nl = static_cast<int>(std::ceil(options.linear_window_m / grid.resolution() - 1e-9));
   const auto d = discretise(grid, src, init, step, -na, na, nl, nl);
-  const int H = grid.depth() - 1;
-  std::vector<Candidate> top;
-  std::size_t scored = 0;
-  for (int k = 0; k < static_cast<int>(d.angles.size()); ++k)
-    for (int ix = -nl; ix <= nl; ix += 1 << H)
-      for (int iy = -nl; iy <= nl; iy += 1 << H) {
-        top.push_back({k, ix, iy, scoreAt(grid, d, k, ix, iy, H)});
-        ++scored;
-      }
-  Candidate best{0, 0, 0, -1.0};
-  branchAndBound(grid, d, top, H, best, scored);
-  return finish(grid, d, best, src, options, refine_field, init, scored);
+  return searchDiscretised(grid, d, nl, nl, src, options, refine_field, init);
 }
 
 CorrelativeResult matchCorrelativeGlobal(const CorrelativeGrid& grid, const Points2& source,
@@ -309,18 +322,7 @@ CorrelativeResult matchCorrelativeGlobal(const CorrelativeGrid& grid, const Poin
   const int na = static_cast<int>(std::ceil(std::numbers::pi / step));
   const int nx = grid.width() / 2 + 1, ny = grid.height() / 2 + 1;
   const auto d = discretise(grid, src, centre, step, -na, na - 1, nx, ny);
-  const int H = grid.depth() - 1;
-  std::vector<Candidate> top;
-  std::size_t scored = 0;
-  for (int k = 0; k < static_cast<int>(d.angles.size()); ++k)
-    for (int ix = -nx; ix <= nx; ix += 1 << H)
-      for (int iy = -ny; iy <= ny; iy += 1 << H) {
-        top.push_back({k, ix, iy, scoreAt(grid, d, k, ix, iy, H)});
-        ++scored;
-      }
-  Candidate best{0, 0, 0, -1.0};
-  branchAndBound(grid, d, top, H, best, scored);
-  return finish(grid, d, best, src, options, refine_field, SE2(), scored);
+  return searchDiscretised(grid, d, nx, ny, src, options, refine_field, SE2());
 }
 
 CorrelativeResult matchCorrelative(const Points2& target, const Points2& source, const SE2& init,

@@ -278,4 +278,14 @@ RosTopicChoice chooseScanAndOdometry(const std::vector<RosTopicInfo>& topics, co
   return {*scan, chooseRosTopic(topics, {odom_type}, options.odom_topic, true, "Odometry", "--odom-topic", path, warnings)};
 }
 
+SourceNotes rosNotes(SourceNotes base, std::vector<std::string> assembler_warnings, std::size_t negative_ranges,
+                     std::size_t zero_stamps) {
+  for (auto& w : assembler_warnings) base.warnings.push_back(std::move(w));
+  if (negative_ranges)
+    base.warnings.push_back(fmt::format("{} negative ranges (treated as invalid beams)", negative_ranges));
+  if (zero_stamps)
+    base.warnings.push_back(fmt::format("{} messages have a zero header stamp; their bag time is used", zero_stamps));
+  return base;
+}
+
 }  // namespace lidar2d::io::internal

@@ -40,6 +40,11 @@ std::optional<RosTopicInfo> chooseRosTopic(const std::vector<RosTopicInfo>& topi
                                            bool allow_none, const std::string& what, const std::string& option,
                                            const std::string& path, std::vector<std::string>& warnings);
 
+/// The SourceNotes of a ROS reader: `base` plus the frame assembler's warnings and the counts of
+/// negative ranges and zero header stamps (shared by the ROS1 and ROS2 readers).
+SourceNotes rosNotes(SourceNotes base, std::vector<std::string> assembler_warnings, std::size_t negative_ranges,
+                     std::size_t zero_stamps);
+
 /// The LaserScan and Odometry topics of a bag (shared by the ROS1 and ROS2 readers): `chooseRosTopic`
 /// for each, with `options.scan_topic` / `options.odom_topic`; a bag without a LaserScan topic is an
 /// error naming `path` and listing every topic with its type.
