@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
+#include "map_output.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
@@ -57,21 +58,6 @@ class TrajectoryPoses {
   eval::TimeIndex index_;
   double max_dt_;
 };
-
-std::string writePng(const std::string& path, const io::OccupancyImage& map) {
-  // Occupied black, free white, unknown grey; image row 0 is the top (largest y).
-  cv::Mat img(map.height(), map.width(), CV_8UC1);
-  for (int row = 0; row < map.height(); ++row)
-    for (int col = 0; col < map.width(); ++col) {
-      const std::int8_t v = map.at(col, row);
-      img.at<std::uint8_t>(map.height() - 1 - row, col) =
-          v == io::OccupancyImage::kOccupied ? 0 : (v == io::OccupancyImage::kFree ? 255 : 160);
-    }
-  std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", img, png)) throw ioError("PNG encoding failed", ErrorLocation(path));
-  io::writeFileAtomically(path, std::string(png.begin(), png.end()));
-  return path;
-}
 
 io::OccupancyImage readPriorImage(const std::string& path, const io::OccupancyImage& map, std::size_t& overridden) {
   io::OccupancyImage out = map;
@@ -132,13 +118,7 @@ void run(const MapArgs& a) {
   io::OccupancyImage image = mapping::toOccupancyImage(*map);
   std::size_t overridden = 0;
   if (!a.prior.empty()) image = readPriorImage(a.prior, image, overridden);
-  const std::string yaml = a.prefix + ".yaml";
-  const std::string pgm = a.prefix + ".pgm";
-  const std::string png = a.prefix + ".png";
-  // Our images are already trinary (-1/0/100), so the writer's thresholds only pass them through.
-  io::writeMap(yaml, image, pgm);
-  writePng(png, image);
-  std::vector<std::string> written{pgm, yaml, png};
+  std::vector<std::string> written = writeMapFiles(a.prefix, image);
   if (a.model == mapping::MapModel::kTsdf) {
     const auto surface = mapping::tsdfSurface(*map);
     io::AtomicFile f(a.prefix + ".surface.txt");

@@ -1,0 +1,326 @@
+// lidar2d slam LOG -o DIR: full 2D SLAM; writes DIR/trajectory.txt, DIR/map.{pgm,yaml,png},
+// DIR/graph.txt, DIR/summary.json and DIR/report.html.
+
+#include <fmt/format.h>
+#include <unistd.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <iostream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <variant>
+
+#include "commands.hpp"
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/prefetch.hpp"
+#include "lidar2d/io/trajectory.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+#include "lidar2d/slam/slam.hpp"
+#include "map_output.hpp"
+#include "slam_report.hpp"
+
+namespace lidar2d::cli {
+namespace {
+
+using Json = nlohmann::ordered_json;
+using Clock = std::chrono::steady_clock;
+
+struct SlamArgs {
+  std::string log;
+  std::string dir;
+  std::string config;
+  bool no_odometry = false;
+  bool quiet = false;
+  mapping::MapModel model = mapping::MapModel::kLogOdds;
+  double resolution = 0.05;
+  io::ReaderOptions reader;
+};
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// Every SlamOptions field by its name in the YAML config (angles in degrees there: `_deg`).
+using FieldRef = std::variant<double*, int*, std::size_t*, bool*>;
+struct AngleRef {
+  double* rad;
+};
+std::map<std::string, std::variant<FieldRef, AngleRef>> configFields(slam::SlamOptions& o) {
+  return {
+      {"use_odometry", FieldRef(&o.use_odometry)},
+      {"max_range_m", FieldRef(&o.max_range_m)},
+      {"min_points", FieldRef(&o.min_points)},
+      {"node_min_translation_m", FieldRef(&o.node_min_translation_m)},
+      {"node_min_rotation_deg", AngleRef{&o.node_min_rotation_rad}},
+      {"node_max_interval_s", FieldRef(&o.node_max_interval_s)},
+      {"local_map_nodes", FieldRef(&o.local_map_nodes)},
+      {"icp_max_correspondence_m", FieldRef(&o.icp_max_correspondence_m)},
+      {"scan_voxel_m", FieldRef(&o.scan_voxel_m)},
+      {"map_voxel_m", FieldRef(&o.map_voxel_m)},
+      {"match_inlier_distance_m", FieldRef(&o.match_inlier_distance_m)},
+      {"min_explained_fraction", FieldRef(&o.min_explained_fraction)},
+      {"alternative_start_m", FieldRef(&o.alternative_start_m)},
+      {"alternative_start_deg", AngleRef{&o.alternative_start_rad}},
+      {"fallback_linear_window_m", FieldRef(&o.fallback_linear_window_m)},
+      {"fallback_angular_window_deg", AngleRef{&o.fallback_angular_window_rad}},
+      {"degeneracy_threshold", FieldRef(&o.degeneracy_threshold)},
+      {"odometry_jump_m", FieldRef(&o.odometry_jump_m)},
+      {"odometry_jump_deg", AngleRef{&o.odometry_jump_rad}},
+      {"time_gap_s", FieldRef(&o.time_gap_s)},
+      {"submap_nodes", FieldRef(&o.submap_nodes)},
+      {"loop_search_radius_m", FieldRef(&o.loop_search_radius_m)},
+      {"loop_search_every_nodes", FieldRef(&o.loop_search_every_nodes)},
+      {"loop_searches_per_node", FieldRef(&o.loop_searches_per_node)},
+      {"loop_linear_window_m", FieldRef(&o.loop_linear_window_m)},
+      {"loop_angular_window_deg", AngleRef{&o.loop_angular_window_rad}},
+      {"loop_min_score", FieldRef(&o.loop_min_score)},
+      {"loop_min_explained_fraction", FieldRef(&o.loop_min_explained_fraction)},
+      {"loop_link_memory_nodes", FieldRef(&o.loop_link_memory_nodes)},
+      {"loop_confirm_window_nodes", FieldRef(&o.loop_confirm_window_nodes)},
+      {"loop_confirm_tolerance_m", FieldRef(&o.loop_confirm_tolerance_m)},
+      {"loop_confirm_tolerance_deg", AngleRef{&o.loop_confirm_tolerance_rad}},
+      {"sequential_sigma_m", FieldRef(&o.sequential_sigma_m)},
+      {"sequential_sigma_deg", AngleRef{&o.sequential_sigma_rad}},
+      {"loop_sigma_m", FieldRef(&o.loop_sigma_m)},
+      {"loop_sigma_deg", AngleRef{&o.loop_sigma_rad}},
+      {"loop_huber", FieldRef(&o.loop_huber)},
+      {"odometry_sigma_m", FieldRef(&o.odometry_sigma_m)},
+      {"odometry_sigma_deg", AngleRef{&o.odometry_sigma_rad}},
+      {"optimize_every_nodes", FieldRef(&o.optimize_every_nodes)},
+      {"intermediate_iterations", FieldRef(&o.intermediate_iterations)},
+      {"graph_max_iterations", FieldRef(&o.graph.max_iterations)},
+      {"graph_threads", FieldRef(&o.graph.threads)},
+  };
+}
+
+/// Reads a flat YAML mapping of option names to values over the defaults. Unknown keys and values
+/// of the wrong type are errors naming the file, line and key.
+slam::SlamOptions readConfig(const std::string& path) {
+  slam::SlamOptions o;
+  if (path.empty()) return o;
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    throw ioError("cannot read the config file", ErrorLocation(path));
+  } catch (const YAML::Exception& e) {
+    throw badInput(fmt::format("not valid YAML: {}", e.msg), ErrorLocation(path, static_cast<std::size_t>(e.mark.line + 1)));
+  }
+  if (root.IsNull()) return o;
+  if (!root.IsMap()) throw badInput("expected a mapping of option names to values", ErrorLocation(path, 1));
+  auto fields = configFields(o);
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    const auto line = static_cast<std::size_t>(kv.first.Mark().line + 1);
+    auto it = fields.find(key);
+    if (it == fields.end()) throw badInput("unknown option (see docs/slam.md for the list)", ErrorLocation(path, line, key));
+    try {
+      if (const auto* a = std::get_if<AngleRef>(&it->second)) {
+        *a->rad = kv.second.as<double>() * std::numbers::pi / 180.0;
+      } else {
+        std::visit([&](auto* p) { *p = kv.second.as<std::remove_pointer_t<decltype(p)>>(); }, std::get<FieldRef>(it->second));
+      }
+    } catch (const YAML::Exception&) {
+      throw badInput("value of the wrong type", ErrorLocation(path, line, key));
+    }
+  }
+  try {
+    o.validate();
+  } catch (const Error& e) {
+    throw badInput(e.message(), ErrorLocation(path, 0, e.where().field));
+  }
+  return o;
+}
+
+/// A progress bar on stderr, redrawn at most ten times a second.
+class ProgressBar {
+ public:
+  ProgressBar(bool enabled, std::size_t total) : enabled_(enabled), total_(std::max<std::size_t>(total, 1)) {}
+  void update(std::size_t done, const slam::SlamStats& s) {
+    if (!enabled_) return;
+    const auto now = Clock::now();
+    if (done < total_ && now - last_ < std::chrono::milliseconds(100)) return;
+    last_ = now;
+    const int width = 30;
+    const int filled = static_cast<int>(static_cast<double>(width) * static_cast<double>(done) / static_cast<double>(total_));
+    std::cerr << fmt::format("\rslam [{}{}] {:3.0f}% {}/{} scans, {} nodes, {} loop closures ", std::string(filled, '#'),
+                             std::string(width - filled, '.'), 100.0 * static_cast<double>(done) / static_cast<double>(total_),
+                             done, total_, s.nodes, s.loop_accepted)
+              << std::flush;
+  }
+  void done() {
+    if (enabled_) std::cerr << "\n";
+  }
+
+ private:
+  bool enabled_;
+  std::size_t total_;
+  Clock::time_point last_{};
+};
+
+void writeGraph(const std::string& path, const slam::Slam& slam) {
+  io::AtomicFile f(path);
+  auto& o = f.stream();
+  o << "# lidar2d slam pose graph\n"
+       "# NODE id scan_index time x y theta submap degenerate(0/1) degenerate_dir_rad\n"
+       "# EDGE kind from to dx dy dtheta accepted(0/1) searched(0/1) score explained reason\n";
+  const auto& nodes = slam.nodes();
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    const auto& n = nodes[i];
+    o << fmt::format("NODE {} {} {:.6f} {:.6f} {:.6f} {:.6f} {} {} {:.6f}\n", i, n.scan, n.time, n.T_world_robot.x(),
+                     n.T_world_robot.y(), n.T_world_robot.theta(), n.submap, n.degenerate ? 1 : 0, n.degenerate_dir_rad);
+  }
+  for (const auto& c : slam.constraints())
+    o << fmt::format("EDGE {} {} {} {:.6f} {:.6f} {:.6f} {} {} {:.3f} {:.3f} {}\n", slam::toString(c.kind), c.from, c.to,
+                     c.T_from_to.x(), c.T_from_to.y(), c.T_from_to.theta(), c.accepted ? 1 : 0, c.searched ? 1 : 0,
+                     c.score, c.explained, c.reason.empty() ? "-" : c.reason);
+  f.commit();
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const auto i = static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5);
+  return v[std::min(i, v.size() - 1)];
+}
+
+void run(const SlamArgs& a) {
+  const auto t_start = Clock::now();
+  slam::SlamOptions options = readConfig(a.config);
+  if (a.no_odometry) options.use_odometry = false;
+  if (!(a.resolution > 0.0) || a.resolution > 10.0)
+    throw badInput("must be in (0, 10] m", ErrorLocation("command line", 0, "--resolution"));
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(a.dir, ec) && !fs::is_directory(a.dir, ec))
+    throw ioError("exists and is not a directory", ErrorLocation(a.dir, 0, "-o"));
+  const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
+
+  // Read the whole log first: the map is drawn from every scan at its final pose, and the progress
+  // bar needs the total. Parsing runs on its own thread (prefetch).
+  std::vector<Frame> frames;
+  {
+    auto source = io::prefetch(io::openLog(a.log, a.reader));
+    if (progress) std::cerr << "reading " << a.log << " ..." << std::flush;
+    while (auto f = source->next()) frames.push_back(std::move(*f));
+    if (progress) std::cerr << "\r";
+  }
+  const double read_seconds = secondsSince(t_start);
+  if (frames.empty()) throw badInput("log has no scans", ErrorLocation(a.log));
+
+  slam::Slam slam(options);
+  ProgressBar bar(progress, frames.size());
+  const auto t_slam = Clock::now();
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    slam.add(frames[i]);
+    bar.update(i + 1, slam.stats());
+  }
+  slam.finish();
+  bar.update(frames.size(), slam.stats());
+  bar.done();
+  const double slam_seconds = secondsSince(t_slam);
+  const auto trajectory = slam.trajectory();
+
+  // Map from every scan at its optimised pose.
+  const auto t_map = Clock::now();
+  mapping::MapOptions mo;
+  mo.resolution_m = a.resolution;
+  mo.insert.max_range_m = options.max_range_m;
+  auto map = mapping::makeMap(a.model, mo);
+  for (std::size_t i = 0; i < frames.size(); ++i)
+    map->insert(frames[i].scan, trajectory[i].T_world_robot * frames[i].T_robot_laser);
+  const io::OccupancyImage image = mapping::toOccupancyImage(*map);
+  const double map_seconds = secondsSince(t_map);
+
+  fs::create_directories(a.dir, ec);
+  if (ec) throw ioError(fmt::format("cannot create the output folder: {}", ec.message()), ErrorLocation(a.dir));
+  const std::string dir = a.dir;
+  io::Trajectory traj;
+  traj.reserve(trajectory.size());
+  for (const auto& e : trajectory) traj.push_back({e.time, e.T_world_robot});
+  io::writeTrajectory(dir + "/trajectory.txt", traj);
+  std::vector<std::string> written{dir + "/trajectory.txt"};
+  for (const auto& w : writeMapFiles(dir + "/map", image)) written.push_back(w);
+  writeGraph(dir + "/graph.txt", slam);
+  written.push_back(dir + "/graph.txt");
+
+  const slam::SlamStats& s = slam.stats();
+  std::vector<double> per_scan;
+  per_scan.reserve(trajectory.size());
+  for (const auto& e : trajectory) per_scan.push_back(e.seconds * 1e3);
+  Json j;
+  j["log"] = a.log;
+  j["scans"] = s.scans;
+  j["nodes"] = s.nodes;
+  j["submaps"] = s.submaps;
+  j["matched"] = s.matched;
+  j["unmatched"] = s.unmatched;
+  j["correlative_fallbacks"] = s.correlative_fallbacks;
+  j["degenerate_scans"] = s.degenerate;
+  j["loop_searches"] = s.loop_searches;
+  j["loop_closures_accepted"] = s.loop_accepted;
+  j["loop_closures_rejected"] = s.loop_rejected;
+  j["optimizations"] = s.optimizations;
+  j["optimization_s"] = s.optimization_seconds;
+  j["read_s"] = read_seconds;
+  j["slam_s"] = slam_seconds;
+  j["map_s"] = map_seconds;
+  j["ms_per_scan_mean"] = slam_seconds * 1e3 / static_cast<double>(frames.size());
+  j["ms_per_scan_median"] = percentile(per_scan, 0.5);
+  j["ms_per_scan_p95"] = percentile(per_scan, 0.95);
+  j["ms_per_scan_max"] = percentile(per_scan, 1.0);
+  j["used_odometry"] = options.use_odometry;
+  Json ev = Json::array();
+  for (const auto& e : slam.events()) ev.push_back({{"scan", e.frame_index}, {"time", e.time}, {"what", e.what}});
+  j["events"] = ev;
+
+  ReportInput report{a.log, slam, trajectory, image, j};
+  {
+    io::AtomicFile f(dir + "/report.html");
+    f.stream() << slamReportHtml(report);
+    f.commit();
+  }
+  written.push_back(dir + "/report.html");
+  j["total_s"] = secondsSince(t_start);
+  {
+    io::AtomicFile f(dir + "/summary.json");
+    f.stream() << j.dump(2) << "\n";
+    f.commit();
+  }
+  written.push_back(dir + "/summary.json");
+  if (!a.quiet) {
+    std::cerr << fmt::format(
+        "slam: {} scans, {} nodes, {} loop closures ({} rejected), {} events; {:.2f} s ({:.2f} ms per scan), total "
+        "{:.2f} s\n",
+        s.scans, s.nodes, s.loop_accepted, s.loop_rejected, slam.events().size(), slam_seconds,
+        slam_seconds * 1e3 / static_cast<double>(frames.size()), secondsSince(t_start));
+    for (const auto& w : written) std::cout << w << "\n";
+  }
+}
+
+}  // namespace
+
+void addSlamCommand(CLI::App& app) {
+  auto a = std::make_shared<SlamArgs>();
+  auto* sub = app.add_subcommand("slam", "Full 2D SLAM: trajectory of every scan, map, pose graph and an HTML report");
+  sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
+  sub->add_option("-o,--output", a->dir, "output folder (created if missing)")->required();
+  sub->add_option("--config", a->config, "YAML file of SLAM options overriding the defaults (docs/slam.md)");
+  sub->add_flag("--no-odometry", a->no_odometry, "ignore the log's odometry (scan matching only)");
+  const std::map<std::string, mapping::MapModel> models{
+      {"logodds", mapping::MapModel::kLogOdds}, {"count", mapping::MapModel::kCount}, {"tsdf", mapping::MapModel::kTsdf}};
+  sub->add_option("--map-model", a->model, "model of the output map: logodds, count or tsdf")
+      ->transform(CLI::CheckedTransformer(models, CLI::ignore_case))
+      ->default_str("logodds");
+  sub->add_option("--resolution", a->resolution, "cell size of the output map [m]")->default_val(0.05);
+  sub->add_flag("-q,--quiet", a->quiet, "no progress bar and no summary");
+  addReaderOptions(sub, a->reader);
+  sub->callback([a] { run(*a); });
+}
+
+}  // namespace lidar2d::cli

@@ -1,0 +1,35 @@
+#include "map_output.hpp"
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/io/atomic_file.hpp"
+
+namespace lidar2d::cli {
+
+std::vector<std::uint8_t> encodeMapPng(const io::OccupancyImage& map, const std::string& path) {
+  cv::Mat img(map.height(), map.width(), CV_8UC1);
+  for (int row = 0; row < map.height(); ++row)
+    for (int col = 0; col < map.width(); ++col) {
+      const std::int8_t v = map.at(col, row);
+      img.at<std::uint8_t>(map.height() - 1 - row, col) =
+          v == io::OccupancyImage::kOccupied ? 0 : (v == io::OccupancyImage::kFree ? 255 : 160);
+    }
+  std::vector<std::uint8_t> png;
+  if (!cv::imencode(".png", img, png)) throw ioError("PNG encoding failed", ErrorLocation(path));
+  return png;
+}
+
+std::vector<std::string> writeMapFiles(const std::string& prefix, const io::OccupancyImage& map) {
+  const std::string yaml = prefix + ".yaml";
+  const std::string pgm = prefix + ".pgm";
+  const std::string png = prefix + ".png";
+  // Our images are already trinary (-1/0/100), so the writer's thresholds only pass them through.
+  io::writeMap(yaml, map, pgm);
+  const auto bytes = encodeMapPng(map, png);
+  io::writeFileAtomically(png, std::string(bytes.begin(), bytes.end()));
+  return {pgm, yaml, png};
+}
+
+}  // namespace lidar2d::cli

@@ -1,0 +1,192 @@
+#include "slam_report.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <sstream>
+
+#include "map_output.hpp"
+
+namespace lidar2d::cli {
+namespace {
+
+// Base64 for the data: URI of the embedded PNG. Written here because none of the project's
+// dependencies exposes an encoder (OpenCV's is internal); it is the RFC 4648 alphabet with padding.
+std::string base64(const std::vector<std::uint8_t>& in) {
+  static constexpr char kAlphabet[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((in.size() + 2) / 3 * 4);
+  std::size_t i = 0;
+  for (; i + 2 < in.size(); i += 3) {
+    const std::uint32_t v = (std::uint32_t{in[i]} << 16) | (std::uint32_t{in[i + 1]} << 8) | in[i + 2];
+    out += kAlphabet[(v >> 18) & 63];
+    out += kAlphabet[(v >> 12) & 63];
+    out += kAlphabet[(v >> 6) & 63];
+    out += kAlphabet[v & 63];
+  }
+  if (i < in.size()) {
+    std::uint32_t v = std::uint32_t{in[i]} << 16;
+    if (i + 1 < in.size()) v |= std::uint32_t{in[i + 1]} << 8;
+    out += kAlphabet[(v >> 18) & 63];
+    out += kAlphabet[(v >> 12) & 63];
+    out += i + 1 < in.size() ? kAlphabet[(v >> 6) & 63] : '=';
+    out += '=';
+  }
+  return out;
+}
+
+std::string escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '&':
+        out += "&amp;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string slamReportHtml(const ReportInput& in) {
+  const io::OccupancyImage& map = in.map;
+  const double res = map.resolution();
+  const SE2 T_map_world = map.origin().inverse();
+  const int W = map.width(), H = map.height();
+  // World point -> image pixel (row 0 at the top).
+  auto px = [&](const Eigen::Vector2d& p_world) {
+    const Eigen::Vector2d m = T_map_world * p_world;
+    return Eigen::Vector2d(m.x() / res, static_cast<double>(H) - m.y() / res);
+  };
+  const double stroke = std::max(1.0, std::max(W, H) / 600.0);
+
+  std::ostringstream svg;
+  svg << fmt::format(R"(<svg class="overlay" viewBox="0 0 {} {}" preserveAspectRatio="none" xmlns="http://www.w3.org/2000/svg">)", W, H);
+  // Trajectory of every scan.
+  svg << fmt::format(R"(<polyline id="trajectory" fill="none" stroke="#1f77b4" stroke-width="{:.2f}" points=")", stroke);
+  for (const auto& e : in.trajectory) {
+    const auto p = px(e.T_world_robot.translation());
+    svg << fmt::format("{:.1f},{:.1f} ", p.x(), p.y());
+  }
+  svg << "\"/>\n";
+  const auto& nodes = in.slam.nodes();
+  // Loop closures: accepted green, rejected red (dashed).
+  std::size_t accepted = 0, rejected = 0;
+  for (const auto& c : in.slam.constraints()) {
+    if (c.kind != slam::Constraint::Kind::kLoop) continue;
+    if (c.accepted && !c.searched) continue;  // routine link-following constraints would hide the map
+    const auto a = px(nodes[c.from].T_world_robot.translation());
+    const auto b = px(nodes[c.to].T_world_robot.translation());
+    (c.accepted ? accepted : rejected)++;
+    svg << fmt::format(R"(<line class="{}" x1="{:.1f}" y1="{:.1f}" x2="{:.1f}" y2="{:.1f}" stroke="{}" stroke-width="{:.2f}"{}/>)",
+                       c.accepted ? "loop" : "loop-rejected", a.x(), a.y(), b.x(), b.y(), c.accepted ? "#2ca02c" : "#d62728",
+                       stroke, c.accepted ? "" : R"( stroke-dasharray="4 3")")
+        << "\n";
+  }
+  // Degenerate stretches: nodes whose match could not pin a direction, with that direction.
+  std::size_t degenerate = 0;
+  for (const auto& n : nodes) {
+    if (!n.degenerate) continue;
+    ++degenerate;
+    const auto p = px(n.T_world_robot.translation());
+    const double a = n.T_world_robot.theta() + n.degenerate_dir_rad;
+    const double L = 0.5 / res;
+    svg << fmt::format(R"(<line class="degenerate" x1="{:.1f}" y1="{:.1f}" x2="{:.1f}" y2="{:.1f}" stroke="#ff7f0e" stroke-width="{:.2f}"/>)",
+                       p.x() - L * std::cos(a), p.y() + L * std::sin(a), p.x() + L * std::cos(a), p.y() - L * std::sin(a),
+                       2 * stroke)
+        << "\n";
+  }
+  svg << "</svg>";
+
+  // Time per scan plot.
+  std::ostringstream plot;
+  const double n_scans = static_cast<double>(std::max<std::size_t>(in.trajectory.size(), 2) - 1);
+  double tmax = 1e-6;
+  for (const auto& e : in.trajectory) tmax = std::max(tmax, e.seconds * 1e3);
+  const double PW = 800, PH = 200;
+  plot << fmt::format(R"(<svg id="time-plot" viewBox="0 0 {} {}" width="100%" xmlns="http://www.w3.org/2000/svg">)", PW + 60, PH + 30);
+  plot << fmt::format(R"(<rect x="50" y="0" width="{}" height="{}" fill="#fafafa" stroke="#999"/>)", PW, PH);
+  plot << fmt::format(R"(<polyline fill="none" stroke="#1f77b4" stroke-width="1" points=")");
+  for (std::size_t i = 0; i < in.trajectory.size(); ++i)
+    plot << fmt::format("{:.1f},{:.1f} ", 50 + PW * static_cast<double>(i) / n_scans,
+                        PH - PH * in.trajectory[i].seconds * 1e3 / tmax);
+  plot << "\"/>";
+  plot << fmt::format(R"(<text x="45" y="12" text-anchor="end" font-size="11">{:.1f} ms</text>)", tmax);
+  plot << fmt::format(R"(<text x="45" y="{}" text-anchor="end" font-size="11">0</text>)", PH);
+  plot << fmt::format(R"(<text x="{}" y="{}" text-anchor="middle" font-size="11">scan (1 .. {})</text>)", 50 + PW / 2, PH + 20,
+                      in.trajectory.size());
+  plot << "</svg>";
+
+  const auto png = encodeMapPng(map, "report.html");
+  const auto& j = in.summary;
+  std::ostringstream html;
+  html << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>lidar2d slam: "
+       << escape(in.log) << "</title>\n"
+       << R"(<style>
+body{font-family:sans-serif;margin:1.5em;max-width:1100px;color:#222}
+.mapbox{position:relative;display:inline-block;width:100%;max-width:1000px;border:1px solid #999}
+.mapbox img{display:block;width:100%;image-rendering:pixelated}
+.overlay{position:absolute;left:0;top:0;width:100%;height:100%}
+table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-align:left}
+.legend span{display:inline-block;width:1.5em;height:0.3em;margin:0 0.3em 0.2em 1em;vertical-align:middle}
+</style></head><body>
+)";
+  html << "<h1>lidar2d slam</h1>\n<p id=\"log\">" << escape(in.log) << "</p>\n";
+  html << "<table id=\"summary\">\n";
+  auto row = [&](const std::string& k, const std::string& v) { html << "<tr><th>" << k << "</th><td>" << v << "</td></tr>\n"; };
+  row("scans", fmt::format("{}", j.value("scans", 0)));
+  row("nodes / submaps", fmt::format("{} / {}", j.value("nodes", 0), j.value("submaps", 0)));
+  row("odometry", j.value("used_odometry", false) ? "used as the prediction" : "not used (scan matching only)");
+  row("scans matched / unmatched / correlative fallbacks",
+      fmt::format("{} / {} / {}", j.value("matched", 0), j.value("unmatched", 0), j.value("correlative_fallbacks", 0)));
+  row("degenerate scans", fmt::format("{} ({} nodes, orange on the map)", j.value("degenerate_scans", 0), degenerate));
+  row("loop closures", fmt::format("{} accepted, {} rejected; {} searched by branch and bound (drawn: {} accepted, {} rejected)",
+                                   j.value("loop_closures_accepted", 0), j.value("loop_closures_rejected", 0),
+                                   j.value("loop_searches", 0), accepted, rejected));
+  row("pose-graph optimisations", fmt::format("{} ({:.2f} s)", j.value("optimizations", 0), j.value("optimization_s", 0.0)));
+  row("time", fmt::format("read {:.2f} s, slam {:.2f} s, map {:.2f} s", j.value("read_s", 0.0), j.value("slam_s", 0.0),
+                          j.value("map_s", 0.0)));
+  row("time per scan", fmt::format("mean {:.2f} ms, median {:.2f} ms, p95 {:.2f} ms, max {:.1f} ms",
+                                   j.value("ms_per_scan_mean", 0.0), j.value("ms_per_scan_median", 0.0),
+                                   j.value("ms_per_scan_p95", 0.0), j.value("ms_per_scan_max", 0.0)));
+  row("map", fmt::format("{} x {} cells of {} m", W, H, res));
+  html << "</table>\n";
+  html << "<h2>Map and trajectory</h2>\n<p class=\"legend\"><span style=\"background:#1f77b4\"></span>trajectory"
+          "<span style=\"background:#2ca02c\"></span>loop closure found by search"
+          "<span style=\"background:#d62728\"></span>rejected closure"
+          "<span style=\"background:#ff7f0e\"></span>degenerate direction</p>\n";
+  html << "<div class=\"mapbox\"><img id=\"map\" alt=\"occupancy map\" src=\"data:image/png;base64," << base64(png)
+       << "\">" << svg.str() << "</div>\n";
+  html << "<h2>Time per scan</h2>\n" << plot.str() << "\n";
+  html << "<h2>Events</h2>\n";
+  const auto& events = in.slam.events();
+  if (events.empty()) {
+    html << "<p id=\"events\">None: no gaps, no time going backwards, no missing or jumping odometry, no lost tracking.</p>\n";
+  } else {
+    html << "<table id=\"events\"><tr><th>scan</th><th>time [s]</th><th>what</th></tr>\n";
+    const std::size_t shown = std::min<std::size_t>(events.size(), 500);
+    for (std::size_t i = 0; i < shown; ++i)
+      html << fmt::format("<tr><td>{}</td><td>{:.3f}</td><td>{}</td></tr>\n", events[i].frame_index, events[i].time,
+                          escape(events[i].what));
+    html << "</table>\n";
+    if (shown < events.size()) html << fmt::format("<p>... and {} more (summary.json lists all).</p>\n", events.size() - shown);
+  }
+  html << "</body></html>\n";
+  return html.str();
+}
+
+}  // namespace lidar2d::cli

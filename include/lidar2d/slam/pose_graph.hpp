@@ -1,0 +1,58 @@
+#pragma once
+/// @file
+/// An SE(2) pose graph solved with Ceres: nodes are poses `T_world_node`, edges are measured
+/// relative poses `T_from_to` (so that `T_world_to = T_world_from * T_from_to`) with a square-root
+/// information matrix and an optional robust loss. Used by the SLAM back end; usable on its own.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "lidar2d/core/se2.hpp"
+
+namespace lidar2d::slam {
+
+/// One relative-pose measurement between two nodes.
+struct PoseGraphEdge {
+  std::size_t from = 0;  ///< node index
+  std::size_t to = 0;    ///< node index
+  SE2 T_from_to;         ///< measured pose of `to` in the frame of `from`
+  /// Square root of the information matrix of (x, y, theta) of the residual, expressed in the frame
+  /// of `from` [1/m, 1/m, 1/rad]. The residual is
+  ///   r = sqrt_information * (R_from^T (t_to - t_from) - t_meas, wrap(theta_to - theta_from - theta_meas)).
+  Eigen::Matrix3d sqrt_information = Eigen::Matrix3d::Identity();
+  /// > 0: a Huber loss with this scale on the whitened residual's squared norm (a loop closure that
+  /// may be wrong); 0: plain least squares (trusted edges).
+  double huber_scale = 0.0;
+};
+
+/// Solver settings.
+struct PoseGraphOptions {
+  int max_iterations = 50;      ///< Levenberg-Marquardt iterations, >= 1
+  int threads = 2;              ///< Ceres threads for the Jacobian evaluation, >= 1
+  double function_tolerance = 1e-7;  ///< relative cost change that ends the solve, > 0
+};
+
+/// What a solve did.
+struct PoseGraphSummary {
+  double initial_cost = 0.0;  ///< 0.5 * sum of robustified squared residuals before
+  double final_cost = 0.0;    ///< ... and after
+  int iterations = 0;
+  bool usable = false;        ///< Ceres returned a usable solution (the poses were updated)
+  double seconds = 0.0;       ///< wall time of the solve
+  std::string message;        ///< Ceres' brief report
+};
+
+/// Optimises `poses` in place given `edges`; node `fixed` is held constant (gauge freedom). Nodes
+/// no edge touches keep their pose. Throws `lidar2d::Error` (kInvalidArgument) when an edge names
+/// a node outside `poses`, `fixed` is out of range, a pose or measurement is not finite, or an
+/// option is out of its domain.
+PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges, std::size_t fixed,
+                                   const PoseGraphOptions& options = {});
+
+/// The whitened residual of one edge at the given poses (the quantity the solver minimises, before
+/// the robust loss); for diagnostics and tests.
+Eigen::Vector3d edgeResidual(const SE2& T_world_from, const SE2& T_world_to, const PoseGraphEdge& edge);
+
+}  // namespace lidar2d::slam

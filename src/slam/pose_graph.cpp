@@ -1,0 +1,120 @@
+#include "lidar2d/slam/pose_graph.hpp"
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+
+#include "lidar2d/core/error.hpp"
+
+namespace lidar2d::slam {
+namespace {
+
+/// Wraps an angle to [-pi, pi) in a form automatic differentiation can carry (the derivative of
+/// the wrap is 1 almost everywhere).
+template <typename T>
+T wrap(const T& a) {
+  using std::floor;
+  const T two_pi = T(2.0 * std::numbers::pi);
+  return a - two_pi * floor((a + T(std::numbers::pi)) / two_pi);
+}
+
+/// The residual of one edge (Ceres' slam_2d example formulation): the measured translation compared
+/// in the `from` frame, and the wrapped angle difference, whitened by the square-root information.
+struct EdgeCost {
+  EdgeCost(const SE2& meas, const Eigen::Matrix3d& sqrt_info) : meas_(meas), sqrt_info_(sqrt_info) {}
+
+  template <typename T>
+  bool operator()(const T* a, const T* b, T* residual) const {
+    using std::cos;
+    using std::sin;
+    const T c = cos(a[2]), s = sin(a[2]);
+    const T dx = b[0] - a[0], dy = b[1] - a[1];
+    Eigen::Matrix<T, 3, 1> r;
+    r(0) = c * dx + s * dy - T(meas_.x());
+    r(1) = -s * dx + c * dy - T(meas_.y());
+    r(2) = wrap(b[2] - a[2] - T(meas_.theta()));
+    const Eigen::Matrix<T, 3, 1> w = sqrt_info_.cast<T>() * r;
+    residual[0] = w(0);
+    residual[1] = w(1);
+    residual[2] = w(2);
+    return true;
+  }
+
+  SE2 meas_;
+  Eigen::Matrix3d sqrt_info_;
+};
+
+}  // namespace
+
+Eigen::Vector3d edgeResidual(const SE2& T_world_from, const SE2& T_world_to, const PoseGraphEdge& edge) {
+  const std::array<double, 3> a{T_world_from.x(), T_world_from.y(), T_world_from.theta()};
+  const std::array<double, 3> b{T_world_to.x(), T_world_to.y(), T_world_to.theta()};
+  Eigen::Vector3d r;
+  EdgeCost(edge.T_from_to, edge.sqrt_information)(a.data(), b.data(), r.data());
+  return r;
+}
+
+PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges, std::size_t fixed,
+                                   const PoseGraphOptions& options) {
+  if (options.max_iterations < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "max_iterations"});
+  if (options.threads < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "threads"});
+  if (!(options.function_tolerance > 0.0))
+    throw invalidArgument("must be > 0", {"PoseGraphOptions", 0, "function_tolerance"});
+  if (poses.empty()) return {.usable = true, .message = "empty graph"};
+  if (fixed >= poses.size())
+    throw invalidArgument(fmt::format("fixed node {} of {} nodes", fixed, poses.size()), {"pose graph", 0, "fixed"});
+  for (std::size_t i = 0; i < poses.size(); ++i)
+    if (!poses[i].isFinite()) throw invalidArgument(fmt::format("node {} is not finite", i), {"pose graph", 0, "poses"});
+
+  std::vector<std::array<double, 3>> params(poses.size());
+  for (std::size_t i = 0; i < poses.size(); ++i) params[i] = {poses[i].x(), poses[i].y(), poses[i].theta()};
+
+  ceres::Problem::Options po;
+  po.loss_function_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem problem(po);
+  for (std::size_t k = 0; k < edges.size(); ++k) {
+    const PoseGraphEdge& e = edges[k];
+    if (e.from >= poses.size() || e.to >= poses.size() || e.from == e.to)
+      throw invalidArgument(fmt::format("edge {} joins nodes {} and {} of {}", k, e.from, e.to, poses.size()),
+                            {"pose graph", 0, "edges"});
+    if (!e.T_from_to.isFinite() || !e.sqrt_information.allFinite() || !std::isfinite(e.huber_scale) ||
+        e.huber_scale < 0.0)
+      throw invalidArgument(fmt::format("edge {} is not finite", k), {"pose graph", 0, "edges"});
+    auto* cost = new ceres::AutoDiffCostFunction<EdgeCost, 3, 3, 3>(new EdgeCost(e.T_from_to, e.sqrt_information));
+    ceres::LossFunction* loss = e.huber_scale > 0.0 ? new ceres::HuberLoss(e.huber_scale) : nullptr;
+    problem.AddResidualBlock(cost, loss, params[e.from].data(), params[e.to].data());
+  }
+  if (problem.HasParameterBlock(params[fixed].data())) problem.SetParameterBlockConstant(params[fixed].data());
+
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  so.max_num_iterations = options.max_iterations;
+  so.num_threads = options.threads;
+  so.function_tolerance = options.function_tolerance;
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  ceres::Solver::Summary summary;
+  const auto t0 = std::chrono::steady_clock::now();
+  ceres::Solve(so, &problem, &summary);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  PoseGraphSummary out;
+  out.initial_cost = summary.initial_cost;
+  out.final_cost = summary.final_cost;
+  out.iterations = static_cast<int>(summary.iterations.size());
+  out.usable = summary.IsSolutionUsable();
+  out.seconds = seconds;
+  out.message = summary.BriefReport();
+  if (out.usable)
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      const auto& p = params[i];
+      if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) poses[i] = SE2(p[0], p[1], wrapAngle(p[2]));
+    }
+  return out;
+}
+
+}  // namespace lidar2d::slam

@@ -1,0 +1,697 @@
+#include "lidar2d/slam/slam.hpp"
+
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <deque>
+#include <unordered_map>
+#include <optional>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/registration/correlative.hpp"
+#include "lidar2d/registration/icp.hpp"
+
+namespace lidar2d::slam {
+namespace {
+
+using registration::alignIcp;
+using registration::CorrelativeGrid;
+using registration::CorrelativeOptions;
+using registration::IcpOptions;
+using registration::IcpTarget;
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+void requirePositive(double v, const char* field) {
+  if (!(v > 0.0) || !std::isfinite(v)) throw invalidArgument("must be a finite value > 0", {"SlamOptions", 0, field});
+}
+void requireNonNegative(double v, const char* field) {
+  if (!(v >= 0.0) || !std::isfinite(v)) throw invalidArgument("must be a finite value >= 0", {"SlamOptions", 0, field});
+}
+void requireFraction(double v, const char* field) {
+  if (!(v > 0.0 && v <= 1.0)) throw invalidArgument("must be in (0, 1]", {"SlamOptions", 0, field});
+}
+
+/// Centroid of the points in each `cell_m` square. Stacked scans of the same wall would otherwise
+/// give each target point near-duplicate neighbours from other scans, and a line fit over a
+/// neighbourhood of duplicates has no direction (no normal): point-to-line ICP then loses its
+/// correspondences exactly where the robot stands still or turns on the spot.
+Points2 voxelFilter(const Points2& pts, double cell_m) {
+  struct Acc {
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    int n = 0;
+  };
+  std::unordered_map<std::uint64_t, std::size_t> index;
+  std::vector<Acc> acc;
+  index.reserve(pts.size());
+  acc.reserve(pts.size());
+  for (const auto& p : pts) {
+    const auto ix = static_cast<std::int64_t>(std::floor(p.x() / cell_m));
+    const auto iy = static_cast<std::int64_t>(std::floor(p.y() / cell_m));
+    const std::uint64_t key = (static_cast<std::uint64_t>(ix) << 32) ^ (static_cast<std::uint64_t>(iy) & 0xffffffffULL);
+    auto [it, inserted] = index.try_emplace(key, acc.size());
+    if (inserted) acc.emplace_back();
+    acc[it->second].sum += p;
+    ++acc[it->second].n;
+  }
+  Points2 out;
+  out.reserve(acc.size());
+  for (const auto& a : acc) out.push_back(a.sum / a.n);
+  return out;
+}
+
+/// One scan's record: the node it hangs off and its pose relative to that node.
+struct ScanRecord {
+  std::size_t frame_index = 0;
+  double time = 0.0;
+  std::size_t node = 0;
+  SE2 T_node_scan;
+  bool is_node = false;
+  bool matched = false;
+  bool degenerate = false;
+  double seconds = 0.0;
+};
+
+/// A submap: consecutive nodes, their points in the frame of the first (anchor) node.
+struct Submap {
+  std::size_t anchor = 0;
+  std::vector<std::size_t> nodes;
+  bool finished = false;
+  Points2 points_anchor;
+  Eigen::Vector2d center_anchor = Eigen::Vector2d::Zero();
+  std::unique_ptr<IcpTarget> icp;
+  std::unique_ptr<CorrelativeGrid> grid;  // built at the first branch-and-bound search
+  std::optional<std::size_t> last_link_node;
+  SE2 last_link_T_anchor_node;
+  std::optional<Constraint> pending;  // searched closure awaiting confirmation
+};
+
+}  // namespace
+
+const char* toString(Constraint::Kind k) {
+  switch (k) {
+    case Constraint::Kind::kSequential:
+      return "sequential";
+    case Constraint::Kind::kOdometry:
+      return "odometry";
+    case Constraint::Kind::kLoop:
+      return "loop";
+  }
+  return "unknown";
+}
+
+void SlamOptions::validate() const {
+  requirePositive(max_range_m, "max_range_m");
+  if (min_points < 3) throw invalidArgument("must be >= 3", {"SlamOptions", 0, "min_points"});
+  requireNonNegative(node_min_translation_m, "node_min_translation_m");
+  requireNonNegative(node_min_rotation_rad, "node_min_rotation_rad");
+  requirePositive(node_max_interval_s, "node_max_interval_s");
+  if (local_map_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "local_map_nodes"});
+  requirePositive(icp_max_correspondence_m, "icp_max_correspondence_m");
+  requirePositive(map_voxel_m, "map_voxel_m");
+  requirePositive(scan_voxel_m, "scan_voxel_m");
+  requirePositive(match_inlier_distance_m, "match_inlier_distance_m");
+  requireFraction(min_explained_fraction, "min_explained_fraction");
+  requirePositive(fallback_linear_window_m, "fallback_linear_window_m");
+  requirePositive(fallback_angular_window_rad, "fallback_angular_window_rad");
+  requireNonNegative(degeneracy_threshold, "degeneracy_threshold");
+  requireNonNegative(alternative_start_m, "alternative_start_m");
+  requireNonNegative(alternative_start_rad, "alternative_start_rad");
+  requirePositive(odometry_jump_m, "odometry_jump_m");
+  requirePositive(odometry_jump_rad, "odometry_jump_rad");
+  requirePositive(time_gap_s, "time_gap_s");
+  if (submap_nodes < 2) throw invalidArgument("must be >= 2", {"SlamOptions", 0, "submap_nodes"});
+  requirePositive(loop_search_radius_m, "loop_search_radius_m");
+  if (loop_search_every_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "loop_search_every_nodes"});
+  if (loop_searches_per_node < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "loop_searches_per_node"});
+  if (intermediate_iterations < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "intermediate_iterations"});
+  requirePositive(loop_linear_window_m, "loop_linear_window_m");
+  requirePositive(loop_angular_window_rad, "loop_angular_window_rad");
+  requireFraction(loop_min_score, "loop_min_score");
+  requireFraction(loop_min_explained_fraction, "loop_min_explained_fraction");
+  if (loop_confirm_window_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "loop_confirm_window_nodes"});
+  requirePositive(loop_confirm_tolerance_m, "loop_confirm_tolerance_m");
+  requirePositive(loop_confirm_tolerance_rad, "loop_confirm_tolerance_rad");
+  if (loop_link_memory_nodes < 0) throw invalidArgument("must be >= 0", {"SlamOptions", 0, "loop_link_memory_nodes"});
+  requirePositive(sequential_sigma_m, "sequential_sigma_m");
+  requirePositive(sequential_sigma_rad, "sequential_sigma_rad");
+  requirePositive(loop_sigma_m, "loop_sigma_m");
+  requirePositive(loop_sigma_rad, "loop_sigma_rad");
+  requirePositive(loop_huber, "loop_huber");
+  requirePositive(odometry_sigma_m, "odometry_sigma_m");
+  requirePositive(odometry_sigma_rad, "odometry_sigma_rad");
+  if (optimize_every_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "optimize_every_nodes"});
+}
+
+struct Slam::Impl {
+  explicit Impl(const SlamOptions& o) : opt(o) {
+    opt.validate();
+    icp.max_correspondence_dist_m = opt.icp_max_correspondence_m;
+    icp.max_iterations = 30;
+    loop_icp = icp;
+    loop_icp.max_correspondence_dist_m = std::min(opt.icp_max_correspondence_m, 0.3);
+    fallback.linear_window_m = opt.fallback_linear_window_m;
+    fallback.angular_window_rad = opt.fallback_angular_window_rad;
+    fallback.refine = false;
+    fallback.min_score = 0.0;
+    // A fixed 0.5 degree step: derived from the farthest point (Hess 2016, eq. 7) it would be ~0.1
+    // degree for 30 m returns, five times the work; ICP refines the answer anyway.
+    fallback.angular_step_rad = 0.5 * kDeg;
+    loop_search = fallback;
+    loop_search.linear_window_m = opt.loop_linear_window_m;
+    loop_search.angular_window_rad = opt.loop_angular_window_rad;
+    loop_search.min_score = 0.0;
+  }
+
+  SlamOptions opt;
+  IcpOptions icp, loop_icp;
+  CorrelativeOptions fallback, loop_search;
+
+  std::vector<ScanRecord> scans;
+  std::vector<Node> nodes;
+  std::vector<Points2> node_points;  // robot frame
+  std::vector<std::optional<SE2>> node_odometry;
+  std::vector<Constraint> constraints;
+  std::vector<PoseGraphEdge> edges;  // of the accepted constraints
+  std::vector<Event> events;
+  SlamStats stats;
+  std::vector<Submap> submaps;
+
+  // Front-end state.
+  bool have_prev = false;
+  SE2 T_local_prev;
+  std::optional<SE2> odom_prev;
+  bool odometry_seen = false, odometry_missing = false;
+  std::size_t odometry_missing_count = 0;
+  double time_prev = 0.0;
+  SE2 last_delta;
+  int consecutive_failures = 0;
+  std::deque<std::size_t> local_nodes;
+  std::unique_ptr<IcpTarget> local_target;
+  Points2 local_points;
+  std::unique_ptr<CorrelativeGrid> local_grid;
+
+  // Back-end state.
+  SE2 T_world_local;
+  std::size_t nodes_since_optimization = 0;
+  std::size_t loops_since_optimization = 0;
+  bool searched_loop_pending = false;
+  bool finished = false;
+
+  void event(const Frame& f, std::string what) { events.push_back({f.index, f.time, std::move(what)}); }
+
+  /// The share of `pts` that lie within match_inlier_distance_m of a target point once moved by T.
+  double explainedFraction(const IcpTarget& target, const Points2& pts, const SE2& T) const {
+    if (pts.empty()) return 0.0;
+    const double d2max = opt.match_inlier_distance_m * opt.match_inlier_distance_m;
+    std::size_t n = 0;
+    for (const auto& p : pts) {
+      double d2 = 0.0;
+      if (target.nearest(T * p, &d2) < target.size() && d2 <= d2max) ++n;
+    }
+    return static_cast<double>(n) / static_cast<double>(pts.size());
+  }
+
+  Points2 scanPoints(const Frame& f) const {
+    Points2 pts;
+    const LaserScan& s = f.scan;
+    pts.reserve(s.size());
+    for (std::size_t i : s.validIndices()) {
+      const double r = s.ranges()[i];
+      if (!(r < opt.max_range_m)) continue;
+      const double a = s.angle(i);
+      pts.push_back(f.T_robot_laser * Eigen::Vector2d(r * std::cos(a), r * std::sin(a)));
+    }
+    return pts;
+  }
+
+  void rebuildLocalMap() {
+    local_points.clear();
+    for (std::size_t n : local_nodes)
+      for (const auto& p : node_points[n]) local_points.push_back(nodes[n].T_local_robot * p);
+    local_points = voxelFilter(local_points, opt.map_voxel_m);
+    local_target = std::make_unique<IcpTarget>(local_points, icp);
+    local_grid.reset();
+  }
+
+  /// Front-end match of `pts` against the local map from `T_pred`. Returns the pose, or nothing
+  /// when the scan could not be matched; sets `degenerate`/`dir` (local frame) and `used_fallback`.
+  std::optional<SE2> frontEndMatch(const Points2& pts, const SE2& T_pred, const std::vector<SE2>& alternatives,
+                                   bool& degenerate, Eigen::Vector2d& dir, bool& used_fallback) {
+    degenerate = false;
+    used_fallback = false;
+    if (!local_target || local_target->size() < opt.min_points || pts.size() < opt.min_points) return std::nullopt;
+    auto tryFrom = [&](const SE2& init, registration::Result& out, double& explained) {
+      out = alignIcp(*local_target, pts, init, icp);
+      const bool ok = out.status == registration::Status::kConverged || out.status == registration::Status::kMaxIterations;
+      explained = ok && out.T_target_source.isFinite() ? explainedFraction(*local_target, pts, out.T_target_source) : 0.0;
+    };
+    registration::Result res;
+    double explained = 0.0;
+    tryFrom(T_pred, res, explained);
+    // Other starting points (no motion, constant velocity) when the prediction may be wrong: wheel
+    // odometry interpolated at badly stamped scans can be tens of degrees off, and ICP from there
+    // settles in a wrong minimum that still explains much of the scan. Another start wins when its
+    // result explains clearly more points (2% of the scan) than the prediction's.
+    for (const SE2& alt : alternatives) {
+      registration::Result r;
+      double e = 0.0;
+      tryFrom(alt, r, e);
+      if (e > explained + 0.02) {
+        res = r;
+        explained = e;
+      }
+    }
+    if (explained < opt.min_explained_fraction) {
+      // Olson's correlative search over a window around the prediction, then ICP from its answer.
+      if (!local_grid) local_grid = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(local_points, fallback));
+      const auto cr = registration::matchCorrelative(*local_grid, pts, T_pred, fallback);
+      used_fallback = true;
+      if (!cr.T_search.isFinite()) return std::nullopt;
+      tryFrom(cr.T_search, res, explained);
+      if (explained < opt.min_explained_fraction) return std::nullopt;
+    }
+    SE2 T = res.T_target_source;
+    // Degeneracy (Zhang, Kaess & Singh 2016): the translational block of the information matrix per
+    // matched point; a weak eigen-direction is not pinned by the scan, so the translation along it
+    // is taken from the prediction (solution remapping) instead of whatever the solver slid to.
+    if (res.num_inliers > 0) {
+      const Eigen::Matrix2d Ht = res.information.topLeftCorner<2, 2>() / static_cast<double>(res.num_inliers);
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(Ht);
+      if (es.info() == Eigen::Success && es.eigenvalues()(0) < opt.degeneracy_threshold) {
+        degenerate = true;
+        dir = es.eigenvectors().col(0).normalized();
+        const Eigen::Vector2d t = T.translation() - dir * dir.dot(T.translation() - T_pred.translation());
+        T = SE2(t, T.theta());
+      }
+    }
+    return T;
+  }
+
+  void addEdge(Constraint c, const Eigen::Matrix3d& sqrt_info, double huber) {
+    if (c.accepted) edges.push_back({c.from, c.to, c.T_from_to, sqrt_info, huber});
+    constraints.push_back(std::move(c));
+  }
+
+  static Eigen::Matrix3d diagSqrtInfo(double sm, double sr) {
+    return Eigen::Vector3d(1.0 / sm, 1.0 / sm, 1.0 / sr).asDiagonal();
+  }
+
+  void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, bool degenerate,
+               const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
+    const std::size_t n = nodes.size();
+    Node node;
+    node.scan = scan_index;
+    node.time = f.time;
+    node.T_local_robot = T_local;
+    node.T_world_robot = T_world_local * T_local;
+    node.degenerate = degenerate;
+    if (degenerate) {
+      const Eigen::Vector2d d = T_local.rotation().transpose() * dir_local;
+      node.degenerate_dir_rad = std::atan2(d.y(), d.x());
+    }
+    if (submaps.empty() || submaps.back().finished) {
+      submaps.emplace_back();
+      submaps.back().anchor = n;
+    }
+    node.submap = submaps.size() - 1;
+    submaps.back().nodes.push_back(n);
+    nodes.push_back(node);
+    node_points.push_back(std::move(pts));
+    node_odometry.push_back(f.T_odom_robot && odom_trusted ? f.T_odom_robot : std::nullopt);
+
+    if (n > 0) {
+      const Node& prev = nodes[n - 1];
+      Constraint c;
+      c.kind = Constraint::Kind::kSequential;
+      c.from = n - 1;
+      c.to = n;
+      c.T_from_to = prev.T_local_robot.inverse() * T_local;
+      Eigen::Matrix3d sqrt_info = diagSqrtInfo(opt.sequential_sigma_m, opt.sequential_sigma_rad);
+      if (restart) {
+        // Tracking was lost: the link is only the prediction.
+        sqrt_info = diagSqrtInfo(opt.odometry_sigma_m * 20.0, opt.odometry_sigma_rad * 20.0);
+      } else if (degenerate) {
+        // Along the degenerate direction the relative pose is as good as the prediction.
+        const Eigen::Vector2d v = prev.T_local_robot.rotation().transpose() * dir_local;
+        const Eigen::Vector2d p(-v.y(), v.x());
+        sqrt_info.setZero();
+        sqrt_info.block<1, 2>(0, 0) = v.transpose() / (opt.odometry_sigma_m * 2.0);
+        sqrt_info.block<1, 2>(1, 0) = p.transpose() / opt.sequential_sigma_m;
+        sqrt_info(2, 2) = 1.0 / opt.sequential_sigma_rad;
+      }
+      addEdge(std::move(c), sqrt_info, 0.0);
+      if (node_odometry[n - 1] && node_odometry[n]) {
+        Constraint o;
+        o.kind = Constraint::Kind::kOdometry;
+        o.from = n - 1;
+        o.to = n;
+        o.T_from_to = node_odometry[n - 1]->inverse() * *node_odometry[n];
+        const double sm = opt.odometry_sigma_m + 0.1 * o.T_from_to.translation().norm();
+        const double sr = opt.odometry_sigma_rad + 0.1 * std::abs(o.T_from_to.theta());
+        addEdge(std::move(o), diagSqrtInfo(sm, sr), 0.0);
+      }
+    }
+
+    if (restart) local_nodes.clear();
+    local_nodes.push_back(n);
+    while (static_cast<int>(local_nodes.size()) > opt.local_map_nodes) local_nodes.pop_front();
+    rebuildLocalMap();
+
+    Submap& sm = submaps.back();
+    if (static_cast<int>(sm.nodes.size()) >= opt.submap_nodes) finishSubmap(sm);
+
+    ++nodes_since_optimization;
+    searchLoops(n);
+    // A closure found by search may move the global estimate a lot (later searches are centred on
+    // it): optimise soon. Closures that follow a link refine what is known: optimise now and then.
+    const bool prompt = searched_loop_pending && static_cast<int>(nodes_since_optimization) >= opt.optimize_every_nodes;
+    const bool periodic = loops_since_optimization > 0 && static_cast<int>(nodes_since_optimization) >= 10 * opt.optimize_every_nodes;
+    if (periodic || prompt) optimize(opt.intermediate_iterations);
+  }
+
+  void finishSubmap(Submap& sm) {
+    const SE2 T_anchor_local = nodes[sm.anchor].T_local_robot.inverse();
+    sm.points_anchor.clear();
+    Eigen::Vector2d center = Eigen::Vector2d::Zero();
+    for (std::size_t n : sm.nodes) {
+      const SE2 T = T_anchor_local * nodes[n].T_local_robot;
+      center += T.translation();
+      for (const auto& p : node_points[n]) sm.points_anchor.push_back(T * p);
+    }
+    sm.center_anchor = center / static_cast<double>(sm.nodes.size());
+    sm.points_anchor = voxelFilter(sm.points_anchor, opt.map_voxel_m);
+    sm.icp = std::make_unique<IcpTarget>(sm.points_anchor, loop_icp);
+    sm.finished = true;
+  }
+
+  void searchLoops(std::size_t n) {
+    const Node& node = nodes[n];
+    const Points2& pts = node_points[n];
+    if (pts.size() < opt.min_points) return;
+    // Candidate submaps by distance, nearest first.
+    std::vector<std::pair<double, std::size_t>> candidates;
+    for (std::size_t s = 0; s < submaps.size(); ++s) {
+      const Submap& sm = submaps[s];
+      if (!sm.finished) continue;
+      // Submaps still in the local map are tied to this node by the sequential chain already.
+      if (sm.nodes.back() + static_cast<std::size_t>(opt.local_map_nodes) >= n) continue;
+      const Eigen::Vector2d center_world = nodes[sm.anchor].T_world_robot * sm.center_anchor;
+      const double d = (center_world - node.T_world_robot.translation()).norm();
+      if (d <= opt.loop_search_radius_m) candidates.emplace_back(d, s);
+    }
+    std::sort(candidates.begin(), candidates.end());
+    int searches_left = opt.loop_searches_per_node;
+    for (const auto& [dist, s] : candidates) {
+      Submap& sm = submaps[s];
+      const SE2& T_world_anchor = nodes[sm.anchor].T_world_robot;
+
+      Constraint c;
+      c.kind = Constraint::Kind::kLoop;
+      c.from = sm.anchor;
+      c.to = n;
+      SE2 init;
+      if (sm.last_link_node && n - *sm.last_link_node <= static_cast<std::size_t>(opt.loop_link_memory_nodes)) {
+        const std::size_t m = *sm.last_link_node;
+        init = sm.last_link_T_anchor_node * (nodes[m].T_local_robot.inverse() * node.T_local_robot);
+      } else if (n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 && searches_left > 0) {
+        --searches_left;
+        if (!sm.grid) sm.grid = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(sm.points_anchor, loop_search));
+        const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
+        const auto cr = registration::matchCorrelative(*sm.grid, pts, guess, loop_search);
+        ++stats.loop_searches;
+        c.searched = true;
+        c.score = cr.score;
+        if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) continue;  // no candidate: nothing to record
+        init = cr.T_search;
+      } else {
+        continue;
+      }
+      const registration::Result res = alignIcp(*sm.icp, pts, init, loop_icp);
+      c.T_from_to = res.T_target_source;
+      c.explained = res.T_target_source.isFinite() ? explainedFraction(*sm.icp, pts, res.T_target_source) : 0.0;
+      const bool ok = res.status == registration::Status::kConverged || res.status == registration::Status::kMaxIterations;
+      const SE2 d = init.inverse() * res.T_target_source;
+      if (!ok) {
+        c.accepted = false;
+        c.reason = fmt::format("refinement failed ({})", registration::toString(res.status));
+      } else if (c.explained < opt.loop_min_explained_fraction) {
+        c.accepted = false;
+        c.reason = fmt::format("explains {:.0f}% of the points", 100.0 * c.explained);
+      } else if (!c.searched && (d.translation().norm() > 0.2 || std::abs(d.theta()) > 3.0 * kDeg)) {
+        c.accepted = false;
+        c.reason = "disagrees with the submap's recent link";
+      } else if (c.searched && (d.translation().norm() > 0.3 || std::abs(d.theta()) > 5.0 * kDeg)) {
+        c.accepted = false;
+        c.reason = "refinement left the search's answer";
+      }
+      if (!c.accepted) {
+        if (c.searched) {
+          // Only searched closures are worth listing when rejected; link-following ones are routine.
+          ++stats.loop_rejected;
+          addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+        }
+        continue;
+      }
+      if (c.searched) {
+        // A searched closure is only accepted once a second, independent search from a later node
+        // agrees with it through the front end's chain of relative poses (a wrong match in a
+        // self-similar place rarely repeats consistently); until then it is pending.
+        std::optional<Constraint> confirmed;
+        if (sm.pending) {
+          const Constraint& p = *sm.pending;
+          const SE2 predicted = p.T_from_to * (nodes[p.to].T_local_robot.inverse() * node.T_local_robot);
+          const SE2 diff = predicted.inverse() * c.T_from_to;
+          const bool recent = n - p.to <= static_cast<std::size_t>(opt.loop_confirm_window_nodes);
+          if (recent && diff.translation().norm() <= opt.loop_confirm_tolerance_m &&
+              std::abs(diff.theta()) <= opt.loop_confirm_tolerance_rad) {
+            confirmed = p;
+          } else {
+            Constraint old = p;
+            old.accepted = false;
+            old.reason = recent ? "contradicted by a later search" : "not confirmed by a later search";
+            ++stats.loop_rejected;
+            addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
+          }
+          sm.pending.reset();
+        }
+        if (!confirmed) {
+          sm.pending = c;
+          continue;
+        }
+        acceptLoop(*confirmed, sm);
+        searched_loop_pending = true;
+      }
+      acceptLoop(c, sm);
+    }
+  }
+
+  void acceptLoop(Constraint c, Submap& sm) {
+    ++stats.loop_accepted;
+    if (!sm.last_link_node || c.to > *sm.last_link_node) {
+      sm.last_link_node = c.to;
+      sm.last_link_T_anchor_node = c.T_from_to;
+    }
+    ++loops_since_optimization;
+    addEdge(std::move(c), diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad), opt.loop_huber);
+  }
+
+  /// Pending closures that were never confirmed are listed as rejected at the end.
+  void expirePending() {
+    for (Submap& sm : submaps)
+      if (sm.pending) {
+        Constraint old = *sm.pending;
+        old.accepted = false;
+        old.reason = "not confirmed by a later search";
+        ++stats.loop_rejected;
+        addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
+        sm.pending.reset();
+      }
+  }
+
+  void optimize(int iterations) {
+    if (nodes.size() < 2) return;
+    std::vector<SE2> poses;
+    poses.reserve(nodes.size());
+    for (const Node& n : nodes) poses.push_back(n.T_world_robot);
+    PoseGraphOptions go = opt.graph;
+    go.max_iterations = iterations;
+    const PoseGraphSummary summary = optimizePoseGraph(poses, edges, 0, go);
+    ++stats.optimizations;
+    stats.optimization_seconds += summary.seconds;
+    if (summary.usable)
+      for (std::size_t i = 0; i < nodes.size(); ++i) nodes[i].T_world_robot = poses[i];
+    T_world_local = nodes.back().T_world_robot * nodes.back().T_local_robot.inverse();
+    nodes_since_optimization = 0;
+    loops_since_optimization = 0;
+    searched_loop_pending = false;
+  }
+
+  void add(const Frame& f) {
+    const auto t0 = Clock::now();
+    if (finished) throw invalidArgument("add() after finish()", {"Slam", 0, "add"});
+    Points2 pts = voxelFilter(scanPoints(f), opt.scan_voxel_m);
+    ScanRecord rec;
+    rec.frame_index = f.index;
+    rec.time = f.time;
+    const std::size_t scan_index = scans.size();
+
+    // Prediction: odometry when present and sane, else constant velocity (identity across gaps).
+    SE2 delta;
+    bool odom_trusted = false;
+    bool time_ok = true;
+    if (have_prev) {
+      const double dt = f.time - time_prev;
+      if (dt < 0.0) {
+        event(f, fmt::format("time goes backwards by {:.3f} s", -dt));
+        time_ok = false;
+      } else if (dt > opt.time_gap_s) {
+        event(f, fmt::format("gap of {:.1f} s in the log", dt));
+        time_ok = false;
+      }
+    }
+    if (opt.use_odometry && f.T_odom_robot) {
+      if (odometry_missing) {
+        event(f, fmt::format("odometry back after {} scans without it", odometry_missing_count));
+        odometry_missing = false;
+      }
+      odometry_seen = true;
+      if (have_prev && odom_prev) {
+        const SE2 d = odom_prev->inverse() * *f.T_odom_robot;
+        if (!d.isFinite() || d.translation().norm() > opt.odometry_jump_m || std::abs(d.theta()) > opt.odometry_jump_rad) {
+          event(f, fmt::format("odometry jumps by {:.2f} m / {:.1f} deg: not used for this scan",
+                               d.translation().norm(), std::abs(d.theta()) / kDeg));
+        } else {
+          delta = d;
+          odom_trusted = true;
+        }
+      }
+    } else if (opt.use_odometry && odometry_seen) {
+      if (!odometry_missing) event(f, "scans without odometry from here: constant-velocity prediction");
+      odometry_missing = true;
+      ++odometry_missing_count;
+    }
+    if (have_prev && !odom_trusted) delta = time_ok ? last_delta : SE2();
+
+    if (!have_prev) {
+      // The first scan anchors everything (at its odometry pose, so the map lines up with it).
+      const SE2 T0 = opt.use_odometry && f.T_odom_robot ? *f.T_odom_robot : SE2();
+      T_world_local = SE2();
+      rec.node = 0;
+      rec.is_node = true;
+      rec.matched = true;
+      scans.push_back(rec);
+      addNode(f, scan_index, T0, std::move(pts), false, Eigen::Vector2d::Zero(), false, true);
+      T_local_prev = T0;
+    } else {
+      const SE2 T_pred = T_local_prev * delta;
+      bool degenerate = false, used_fallback = false;
+      Eigen::Vector2d dir = Eigen::Vector2d::Zero();
+      std::vector<SE2> alternatives;
+      const SE2 pred_delta = T_local_prev.inverse() * T_pred;
+      if (pred_delta.translation().norm() > opt.alternative_start_m || std::abs(pred_delta.theta()) > opt.alternative_start_rad) {
+        alternatives.push_back(T_local_prev);
+        if (odom_trusted) alternatives.push_back(T_local_prev * last_delta);
+      }
+      std::optional<SE2> T_match = frontEndMatch(pts, T_pred, alternatives, degenerate, dir, used_fallback);
+      if (used_fallback) ++stats.correlative_fallbacks;
+      SE2 T_est = T_pred;
+      bool restart = false;
+      if (T_match) {
+        T_est = *T_match;
+        rec.matched = true;
+        consecutive_failures = 0;
+        ++stats.matched;
+        if (degenerate) ++stats.degenerate;
+      } else {
+        ++stats.unmatched;
+        ++consecutive_failures;
+        if (consecutive_failures == 1)
+          event(f, pts.size() < opt.min_points ? fmt::format("only {} valid points: pose predicted", pts.size())
+                                               : std::string("scan does not match the local map: pose predicted"));
+        if (consecutive_failures >= 5 && pts.size() >= opt.min_points) {
+          event(f, "lost track for 5 scans: local map restarted here (kidnapping?); loop closure may reconnect");
+          restart = true;
+          consecutive_failures = 0;
+        }
+      }
+      rec.degenerate = degenerate;
+      const Node& last = nodes.back();
+      const SE2 rel = last.T_local_robot.inverse() * T_est;
+      const bool moved = rel.translation().norm() >= opt.node_min_translation_m ||
+                         std::abs(rel.theta()) >= opt.node_min_rotation_rad ||
+                         f.time - last.time >= opt.node_max_interval_s;
+      if (restart || (rec.matched && moved && pts.size() >= opt.min_points)) {
+        rec.node = nodes.size();
+        rec.is_node = true;
+        scans.push_back(rec);
+        addNode(f, scan_index, T_est, std::move(pts), degenerate, dir, restart, odom_trusted);
+      } else {
+        rec.node = nodes.size() - 1;
+        rec.T_node_scan = rel;
+        scans.push_back(rec);
+      }
+      last_delta = T_local_prev.inverse() * T_est;
+      if (!time_ok) last_delta = SE2();
+      T_local_prev = T_est;
+    }
+    have_prev = true;
+    time_prev = f.time;
+    if (f.T_odom_robot) odom_prev = f.T_odom_robot;
+    ++stats.scans;
+    scans.back().seconds = secondsSince(t0);
+    stats.total_seconds += scans.back().seconds;
+  }
+};
+
+Slam::Slam(const SlamOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+Slam::~Slam() = default;
+
+void Slam::add(const Frame& frame) { impl_->add(frame); }
+
+void Slam::finish() {
+  if (impl_->finished) return;
+  const auto t0 = Clock::now();
+  impl_->expirePending();
+  impl_->optimize(impl_->opt.graph.max_iterations);
+  impl_->finished = true;
+  impl_->stats.nodes = impl_->nodes.size();
+  impl_->stats.submaps = impl_->submaps.size();
+  impl_->stats.total_seconds += secondsSince(t0);
+}
+
+std::vector<ScanEstimate> Slam::trajectory() const {
+  std::vector<ScanEstimate> out;
+  out.reserve(impl_->scans.size());
+  for (const ScanRecord& r : impl_->scans) {
+    ScanEstimate e;
+    e.frame_index = r.frame_index;
+    e.time = r.time;
+    e.node = r.node;
+    e.is_node = r.is_node;
+    e.matched = r.matched;
+    e.degenerate = r.degenerate;
+    e.seconds = r.seconds;
+    e.T_world_robot = impl_->nodes[r.node].T_world_robot * r.T_node_scan;
+    out.push_back(e);
+  }
+  return out;
+}
+
+const std::vector<Node>& Slam::nodes() const { return impl_->nodes; }
+const std::vector<Constraint>& Slam::constraints() const { return impl_->constraints; }
+const std::vector<Event>& Slam::events() const { return impl_->events; }
+const SlamStats& Slam::stats() const {
+  impl_->stats.nodes = impl_->nodes.size();
+  impl_->stats.submaps = impl_->submaps.size();
+  return impl_->stats;
+}
+const SlamOptions& Slam::options() const { return impl_->opt; }
+
+}  // namespace lidar2d::slam

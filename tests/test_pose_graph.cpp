@@ -1,0 +1,139 @@
+// SE(2) pose graph: exact recovery from perturbed starts, robustness to a wrong loop closure, and
+// bad input.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/slam/pose_graph.hpp"
+#include "support/test_support.hpp"
+
+namespace lidar2d::slam {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// A square loop of `n` poses per side (true poses), with odometry edges and one loop closure.
+std::vector<SE2> squareLoop(int per_side) {
+  std::vector<SE2> truth;
+  SE2 T;
+  for (int side = 0; side < 4; ++side)
+    for (int k = 0; k < per_side; ++k) {
+      truth.push_back(T);
+      T = T * SE2(1.0, 0.0, k + 1 == per_side ? kPi / 2 : 0.0);
+    }
+  return truth;
+}
+
+PoseGraphEdge edgeBetween(const std::vector<SE2>& truth, std::size_t a, std::size_t b, double sm, double sr,
+                          double huber = 0.0) {
+  PoseGraphEdge e;
+  e.from = a;
+  e.to = b;
+  e.T_from_to = truth[a].inverse() * truth[b];
+  e.sqrt_information = Eigen::Vector3d(1 / sm, 1 / sm, 1 / sr).asDiagonal();
+  e.huber_scale = huber;
+  return e;
+}
+
+TEST(PoseGraph, ResidualIsZeroAtTheMeasurement) {
+  const std::vector<SE2> truth{SE2(1, 2, 0.3), SE2(2.5, 1, -2.9)};
+  const auto e = edgeBetween(truth, 0, 1, 0.1, 0.01);
+  EXPECT_LT(edgeResidual(truth[0], truth[1], e).norm(), 1e-9);
+  // Angles wrap: the same pose with theta + 2 pi gives the same residual.
+  EXPECT_LT(edgeResidual(truth[0], SE2(truth[1].translation(), truth[1].theta() + 2 * kPi), e).norm(), 1e-9);
+  EXPECT_GT(edgeResidual(truth[0], SE2(2.6, 1, -2.9), e).norm(), 0.5);
+}
+
+TEST(PoseGraph, RecoversTheTruthFromAPerturbedStart) {
+  const auto truth = squareLoop(5);
+  std::vector<PoseGraphEdge> edges;
+  for (std::size_t i = 0; i + 1 < truth.size(); ++i) edges.push_back(edgeBetween(truth, i, i + 1, 0.05, 0.01));
+  edges.push_back(edgeBetween(truth, truth.size() - 1, 0, 0.05, 0.01));  // closes the loop
+  edges.push_back(edgeBetween(truth, 2, 12, 0.05, 0.01));
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0.0, 0.3);
+  std::vector<SE2> poses = truth;
+  for (std::size_t i = 1; i < poses.size(); ++i)
+    poses[i] = poses[i] * SE2(n(rng), n(rng), 0.3 * n(rng));
+  const PoseGraphSummary s = optimizePoseGraph(poses, edges, 0);
+  ASSERT_TRUE(s.usable) << s.message;
+  EXPECT_LT(s.final_cost, 1e-12);
+  for (std::size_t i = 0; i < poses.size(); ++i) EXPECT_TRUE(test::IsNearPose(truth[i], poses[i], 1e-5, 1e-3)) << "node " << i;
+}
+
+TEST(PoseGraph, DistributesTheLoopErrorOfDriftingOdometry) {
+  const auto truth = squareLoop(6);
+  std::vector<PoseGraphEdge> edges;
+  // Odometry that over-estimates each rotation by 1 degree: the open chain ends far off.
+  std::vector<SE2> poses{truth[0]};
+  for (std::size_t i = 0; i + 1 < truth.size(); ++i) {
+    PoseGraphEdge e = edgeBetween(truth, i, i + 1, 0.05, 0.02);
+    e.T_from_to = e.T_from_to * SE2(0, 0, kPi / 180);
+    edges.push_back(e);
+    poses.push_back(poses.back() * e.T_from_to);
+  }
+  const double open_end_error = (poses.back().translation() - truth.back().translation()).norm();
+  edges.push_back(edgeBetween(truth, truth.size() - 1, 0, 0.01, 0.002));  // an accurate loop closure
+  const PoseGraphSummary s = optimizePoseGraph(poses, edges, 0);
+  ASSERT_TRUE(s.usable);
+  EXPECT_LT(s.final_cost, s.initial_cost);
+  double worst = 0;
+  for (std::size_t i = 0; i < poses.size(); ++i)
+    worst = std::max(worst, (poses[i].translation() - truth[i].translation()).norm());
+  EXPECT_GT(open_end_error, 0.5);
+  EXPECT_LT(worst, open_end_error / 3);
+}
+
+TEST(PoseGraph, HuberLossLimitsAWrongLoopClosure) {
+  const auto truth = squareLoop(5);
+  std::vector<PoseGraphEdge> edges;
+  for (std::size_t i = 0; i + 1 < truth.size(); ++i) edges.push_back(edgeBetween(truth, i, i + 1, 0.01, 0.002));
+  PoseGraphEdge wrong = edgeBetween(truth, 3, 13, 0.05, 0.01, 1.0);
+  wrong.T_from_to = wrong.T_from_to * SE2(2.0, -1.0, 0.5);  // metres off
+  edges.push_back(wrong);
+  auto robust = truth;
+  optimizePoseGraph(robust, edges, 0);
+  auto plain = truth;
+  edges.back().huber_scale = 0.0;
+  optimizePoseGraph(plain, edges, 0);
+  double worst_robust = 0, worst_plain = 0;
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    worst_robust = std::max(worst_robust, (robust[i].translation() - truth[i].translation()).norm());
+    worst_plain = std::max(worst_plain, (plain[i].translation() - truth[i].translation()).norm());
+  }
+  EXPECT_LT(worst_robust, worst_plain / 2);
+}
+
+TEST(PoseGraph, UntouchedNodesKeepTheirPose) {
+  std::vector<SE2> poses{SE2(), SE2(1, 0, 0), SE2(5, 5, 1)};
+  const std::vector<PoseGraphEdge> edges{edgeBetween({SE2(), SE2(2, 0, 0)}, 0, 1, 0.1, 0.1)};
+  optimizePoseGraph(poses, edges, 0);
+  EXPECT_TRUE(test::IsNearPose(SE2(2, 0, 0), poses[1], 1e-5, 1e-3));
+  EXPECT_TRUE(test::IsNearPose(SE2(5, 5, 1), poses[2], 1e-12, 1e-9));
+}
+
+TEST(PoseGraph, BadInputThrows) {
+  std::vector<SE2> poses{SE2(), SE2(1, 0, 0)};
+  PoseGraphEdge e;
+  e.from = 0;
+  e.to = 5;
+  EXPECT_THROW(optimizePoseGraph(poses, {e}, 0), Error);
+  e.to = 0;
+  EXPECT_THROW(optimizePoseGraph(poses, {e}, 0), Error);  // self edge
+  e.to = 1;
+  e.T_from_to = SE2(std::nan(""), 0, 0);
+  EXPECT_THROW(optimizePoseGraph(poses, {e}, 0), Error);
+  e.T_from_to = SE2();
+  EXPECT_THROW(optimizePoseGraph(poses, {e}, 2), Error);  // fixed out of range
+  PoseGraphOptions o;
+  o.max_iterations = 0;
+  EXPECT_THROW(optimizePoseGraph(poses, {e}, 0, o), Error);
+  std::vector<SE2> empty;
+  EXPECT_TRUE(optimizePoseGraph(empty, {}, 0).usable);
+}
+
+}  // namespace
+}  // namespace lidar2d::slam

@@ -1,0 +1,182 @@
+// SLAM on the simulator's worlds: accuracy against truth with and without odometry, loop closure,
+// corridor drift, and logs with gaps, time going backwards, missing or jumping odometry and a
+// kidnapping.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/sim/simulator.hpp"
+#include "lidar2d/sim/worlds.hpp"
+#include "lidar2d/slam/slam.hpp"
+#include "support/test_support.hpp"
+
+namespace lidar2d::slam {
+namespace {
+
+/// Simulated frames of a built-in world's route (default noise), the route driven `laps` times.
+std::vector<Frame> simulateWorld(const std::string& name, std::uint64_t seed = 1, std::size_t scans = 0) {
+  const sim::Scenario sc = sim::builtinScenario(name);
+  sim::PathOptions po;
+  sim::SimulatorOptions so;
+  so.seed = seed;
+  return sim::simulate(sc.world, sim::samplePath(sc.waypoints, po, scans), so);
+}
+
+struct Errors {
+  double rms = 0.0, max = 0.0;
+};
+
+Errors poseErrors(const std::vector<SE2>& est, const std::vector<Frame>& frames) {
+  Errors e;
+  for (std::size_t i = 0; i < est.size(); ++i) {
+    const double d = (est[i].translation() - frames[i].T_world_robot->translation()).norm();
+    e.rms += d * d;
+    e.max = std::max(e.max, d);
+  }
+  e.rms = std::sqrt(e.rms / static_cast<double>(est.size()));
+  return e;
+}
+
+std::vector<SE2> runSlam(const std::vector<Frame>& frames, const SlamOptions& o, Slam** keep = nullptr) {
+  static std::unique_ptr<Slam> last;
+  last = std::make_unique<Slam>(o);
+  for (const auto& f : frames) last->add(f);
+  last->finish();
+  std::vector<SE2> out;
+  for (const auto& e : last->trajectory()) {
+    EXPECT_TRUE(e.T_world_robot.isFinite());
+    out.push_back(e.T_world_robot);
+  }
+  if (keep) *keep = last.get();
+  return out;
+}
+
+std::vector<SE2> odometryInTruthFrame(const std::vector<Frame>& frames) {
+  // The simulator's odometry starts at the truth, so it is already in the world frame.
+  std::vector<SE2> out;
+  for (const auto& f : frames) out.push_back(*f.T_odom_robot);
+  return out;
+}
+
+TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
+  const auto frames = simulateWorld("office");
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  const Errors e = poseErrors(est, frames);
+  const Errors odo = poseErrors(odometryInTruthFrame(frames), frames);
+  EXPECT_LT(e.rms, 0.05) << "odometry rms " << odo.rms;
+  EXPECT_LT(e.max, 0.15);
+  EXPECT_LT(e.rms, odo.rms / 5);
+  EXPECT_GT(slam->stats().loop_accepted, 0u);
+  EXPECT_EQ(slam->stats().unmatched, 0u);
+  // Every scan is attached to a node and nodes are a subset of the scans.
+  const auto traj = slam->trajectory();
+  std::size_t nodes = 0;
+  for (const auto& t : traj) nodes += t.is_node ? 1 : 0;
+  EXPECT_EQ(nodes, slam->nodes().size());
+  EXPECT_LT(nodes, traj.size());
+}
+
+TEST(Slam, OfficeWithoutOdometry) {
+  const auto frames = simulateWorld("office", 2);
+  SlamOptions o;
+  o.use_odometry = false;
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, o, &slam);
+  // Without odometry the first pose is the origin: compare after moving the estimate onto the
+  // truth's first pose.
+  const SE2 T = *frames[0].T_world_robot * est[0].inverse();
+  std::vector<SE2> moved;
+  for (const auto& p : est) moved.push_back(T * p);
+  const Errors e = poseErrors(moved, frames);
+  EXPECT_LT(e.rms, 0.08);
+  EXPECT_EQ(slam->stats().unmatched, 0u);
+}
+
+TEST(Slam, CorridorDoesNotSlide) {
+  // In the featureless corridor scan matching cannot tell the position along x; the front end must
+  // keep the odometry's estimate there instead of sliding.
+  const auto frames = simulateWorld("corridor", 3);
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  const Errors e = poseErrors(est, frames);
+  const Errors odo = poseErrors(odometryInTruthFrame(frames), frames);
+  EXPECT_GT(slam->stats().degenerate, 50u);
+  EXPECT_LT(e.max, std::max(0.5, 1.5 * odo.max)) << "odometry max error " << odo.max;
+}
+
+TEST(Slam, SurvivesGapsBackwardsTimeMissingOdometryAndAKidnapping) {
+  auto frames = simulateWorld("office", 4);
+  ASSERT_GT(frames.size(), 600u);
+  // A 30 s gap, time going backwards, no odometry for 40 scans, and an odometry jump of 5 m.
+  for (std::size_t i = 200; i < frames.size(); ++i) frames[i].time += 30.0;
+  frames[300].time -= 5.0;
+  for (std::size_t i = 350; i < 390; ++i) frames[i].T_odom_robot.reset();
+  for (std::size_t i = 450; i < frames.size(); ++i)
+    if (frames[i].T_odom_robot) frames[i].T_odom_robot = SE2(5.0, 0.0, 0.0) * *frames[i].T_odom_robot;
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  std::string all;
+  for (const auto& ev : slam->events()) all += ev.what + "\n";
+  EXPECT_NE(all.find("gap"), std::string::npos) << all;
+  EXPECT_NE(all.find("backwards"), std::string::npos) << all;
+  EXPECT_NE(all.find("without odometry"), std::string::npos) << all;
+  EXPECT_NE(all.find("odometry jumps"), std::string::npos) << all;
+  // The run stays accurate through all of it.
+  const Errors e = poseErrors(est, frames);
+  EXPECT_LT(e.rms, 0.1);
+}
+
+TEST(Slam, KidnappedRobotIsReportedAndTheRunContinues) {
+  // Two stretches of the office route glued together: the second starts elsewhere with odometry
+  // that does not know it (a robot carried away).
+  const auto a = simulateWorld("office", 5);
+  std::vector<Frame> frames(a.begin(), a.begin() + 250);
+  for (std::size_t i = 500; i < 700; ++i) {
+    Frame f = a[i];
+    f.index = frames.size();
+    f.T_odom_robot = *frames.back().T_odom_robot * (*a[500].T_odom_robot).inverse() * *a[i].T_odom_robot;
+    frames.push_back(f);
+  }
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  std::string all;
+  for (const auto& ev : slam->events()) all += ev.what + "\n";
+  EXPECT_NE(all.find("lost track"), std::string::npos) << all;
+  for (const auto& p : est) EXPECT_TRUE(p.isFinite());
+}
+
+TEST(Slam, FramesWithFewPointsArePredicted) {
+  auto frames = simulateWorld("office", 6, 100);
+  // Scans 40..44 see nothing valid.
+  for (std::size_t i = 40; i < 45; ++i) {
+    LaserScanFields f = frames[i].scan.fields();
+    for (auto& r : f.ranges) r = std::nan("");
+    frames[i].scan = LaserScan::create(f);
+  }
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  EXPECT_EQ(slam->stats().unmatched, 5u);
+  const Errors e = poseErrors(est, frames);
+  EXPECT_LT(e.max, 0.1);
+}
+
+TEST(Slam, OptionsAreValidated) {
+  SlamOptions o;
+  o.submap_nodes = 1;
+  EXPECT_THROW(Slam{o}, Error);
+  o = {};
+  o.loop_min_score = 1.5;
+  EXPECT_THROW(Slam{o}, Error);
+  o = {};
+  o.max_range_m = std::nan("");
+  EXPECT_THROW(Slam{o}, Error);
+}
+
+}  // namespace
+}  // namespace lidar2d::slam
