@@ -37,6 +37,7 @@ struct SlamArgs {
   std::string dir;
   std::string config;
   bool no_odometry = false;
+  bool laser_frame = false;
   bool quiet = false;
   mapping::MapModel model = mapping::MapModel::kLogOdds;
   double resolution = 0.05;
@@ -62,6 +63,8 @@ std::map<std::string, std::variant<FieldRef, AngleRef>> configFields(slam::SlamO
       {"icp_max_correspondence_m", FieldRef(&o.icp_max_correspondence_m)},
       {"scan_voxel_m", FieldRef(&o.scan_voxel_m)},
       {"map_voxel_m", FieldRef(&o.map_voxel_m)},
+      {"normal_neighbors", FieldRef(&o.normal_neighbors)},
+      {"max_line_flatness", FieldRef(&o.max_line_flatness)},
       {"match_inlier_distance_m", FieldRef(&o.match_inlier_distance_m)},
       {"min_explained_fraction", FieldRef(&o.min_explained_fraction)},
       {"alternative_start_m", FieldRef(&o.alternative_start_m)},
@@ -242,7 +245,10 @@ void run(const SlamArgs& a) {
   const std::string dir = a.dir;
   io::Trajectory traj;
   traj.reserve(trajectory.size());
-  for (const auto& e : trajectory) traj.push_back({e.time, e.T_world_robot});
+  for (std::size_t i = 0; i < trajectory.size(); ++i) {
+    const auto& e = trajectory[i];
+    traj.push_back({e.time, a.laser_frame ? e.T_world_robot * frames[i].T_robot_laser : e.T_world_robot});
+  }
   io::writeTrajectory(dir + "/trajectory.txt", traj);
   std::vector<std::string> written{dir + "/trajectory.txt"};
   for (const auto& w : writeMapFiles(dir + "/map", image)) written.push_back(w);
@@ -275,6 +281,7 @@ void run(const SlamArgs& a) {
   j["ms_per_scan_p95"] = percentile(per_scan, 0.95);
   j["ms_per_scan_max"] = percentile(per_scan, 1.0);
   j["used_odometry"] = options.use_odometry;
+  j["pose_frame"] = a.laser_frame ? "laser" : "robot";
   Json ev = Json::array();
   for (const auto& e : slam.events()) ev.push_back({{"scan", e.frame_index}, {"time", e.time}, {"what", e.what}});
   j["events"] = ev;
@@ -312,6 +319,12 @@ void addSlamCommand(CLI::App& app) {
   sub->add_option("-o,--output", a->dir, "output folder (created if missing)")->required();
   sub->add_option("--config", a->config, "YAML file of SLAM options overriding the defaults (docs/slam.md)");
   sub->add_flag("--no-odometry", a->no_odometry, "ignore the log's odometry (scan matching only)");
+  const std::map<std::string, bool> frames{{"robot", false}, {"laser", true}};
+  sub->add_option("--pose-frame", a->laser_frame,
+                  "frame of the poses in trajectory.txt: robot (base_link) or laser (the robot pose times the laser "
+                  "mounting; what the Radish relation files measure)")
+      ->transform(CLI::CheckedTransformer(frames, CLI::ignore_case))
+      ->default_str("robot");
   const std::map<std::string, mapping::MapModel> models{
       {"logodds", mapping::MapModel::kLogOdds}, {"count", mapping::MapModel::kCount}, {"tsdf", mapping::MapModel::kTsdf}};
   sub->add_option("--map-model", a->model, "model of the output map: logodds, count or tsdf")

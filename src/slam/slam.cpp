@@ -115,6 +115,9 @@ void SlamOptions::validate() const {
   if (local_map_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "local_map_nodes"});
   requirePositive(icp_max_correspondence_m, "icp_max_correspondence_m");
   requirePositive(map_voxel_m, "map_voxel_m");
+  if (!(max_line_flatness > 0.0 && max_line_flatness <= 1.0))
+    throw invalidArgument("must be in (0, 1]", {"SlamOptions", 0, "max_line_flatness"});
+  if (normal_neighbors < 2) throw invalidArgument("must be >= 2", {"SlamOptions", 0, "normal_neighbors"});
   requirePositive(scan_voxel_m, "scan_voxel_m");
   requirePositive(match_inlier_distance_m, "match_inlier_distance_m");
   requireFraction(min_explained_fraction, "min_explained_fraction");
@@ -154,6 +157,8 @@ struct Slam::Impl {
     opt.validate();
     icp.max_correspondence_dist_m = opt.icp_max_correspondence_m;
     icp.max_iterations = 30;
+    icp.normal_neighbors = opt.normal_neighbors;
+    icp.max_line_flatness = opt.max_line_flatness;
     loop_icp = icp;
     loop_icp.max_correspondence_dist_m = std::min(opt.icp_max_correspondence_m, 0.3);
     fallback.linear_window_m = opt.fallback_linear_window_m;
@@ -182,6 +187,8 @@ struct Slam::Impl {
   std::vector<Event> events;
   SlamStats stats;
   std::vector<Submap> submaps;
+  static constexpr std::size_t kMaxGrids = 8;
+  std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
 
   // Front-end state.
   bool have_prev = false;
@@ -258,12 +265,13 @@ struct Slam::Impl {
     // Other starting points (no motion, constant velocity) when the prediction may be wrong: wheel
     // odometry interpolated at badly stamped scans can be tens of degrees off, and ICP from there
     // settles in a wrong minimum that still explains much of the scan. Another start wins when its
-    // result explains clearly more points (2% of the scan) than the prediction's.
+    // result explains clearly more points (5% of the scan) than the prediction's, or about as many
+    // with a clearly lower residual cost.
     for (const SE2& alt : alternatives) {
       registration::Result r;
       double e = 0.0;
       tryFrom(alt, r, e);
-      if (e > explained + 0.02) {
+      if (e > explained + 0.05 || (e > explained - 0.05 && r.final_cost < 0.8 * res.final_cost)) {
         res = r;
         explained = e;
       }
@@ -422,9 +430,8 @@ struct Slam::Impl {
         init = sm.last_link_T_anchor_node * (nodes[m].T_local_robot.inverse() * node.T_local_robot);
       } else if (n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 && searches_left > 0) {
         --searches_left;
-        if (!sm.grid) sm.grid = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(sm.points_anchor, loop_search));
         const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
-        const auto cr = registration::matchCorrelative(*sm.grid, pts, guess, loop_search);
+        const auto cr = registration::matchCorrelative(gridOf(s), pts, guess, loop_search);
         ++stats.loop_searches;
         c.searched = true;
         c.score = cr.score;
@@ -490,6 +497,20 @@ struct Slam::Impl {
       }
       acceptLoop(c, sm);
     }
+  }
+
+  /// The correlative grid of submap `s`, built on demand. Only the most recently used few are kept:
+  /// a grid with its max-grids takes megabytes, and a long run would otherwise hold one per submap.
+  const CorrelativeGrid& gridOf(std::size_t s) {
+    Submap& sm = submaps[s];
+    grid_lru.erase(std::remove(grid_lru.begin(), grid_lru.end(), s), grid_lru.end());
+    grid_lru.push_back(s);
+    if (!sm.grid) sm.grid = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(sm.points_anchor, loop_search));
+    while (grid_lru.size() > kMaxGrids) {
+      submaps[grid_lru.front()].grid.reset();
+      grid_lru.erase(grid_lru.begin());
+    }
+    return *sm.grid;
   }
 
   void acceptLoop(Constraint c, Submap& sm) {

@@ -45,7 +45,14 @@ struct SlamOptions {
   /// A scan keeps one point (the centroid) per cell of this size before matching: dense returns
   /// near the robot add work, not information [m], > 0.
   double scan_voxel_m = 0.05;
-  double map_voxel_m = 0.05;                ///< local maps and submaps keep one point (the centroid) per cell of this size [m], > 0
+  double map_voxel_m = 0.05;
+  /// Map points fitted per line normal (point-to-line ICP). More than a single scan needs: the
+  /// local map stacks several scans, whose small misalignments would make short fits fail the
+  /// flatness test, >= 2.
+  int normal_neighbors = 10;
+  /// A neighbourhood whose spread across its line exceeds this share of its spread along it gets
+  /// no normal (see IcpOptions::max_line_flatness), in (0, 1].
+  double max_line_flatness = 0.5;                ///< local maps and submaps keep one point (the centroid) per cell of this size [m], > 0
   double match_inlier_distance_m = 0.1;     ///< a point within this of the map counts as explained [m], > 0
   double min_explained_fraction = 0.5;      ///< a match explaining less is poor: correlative search next, in (0, 1]
   /// When the predicted motion exceeds either, ICP also starts from "no motion" and from constant
