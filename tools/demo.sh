@@ -1,7 +1,7 @@
 #!/bin/sh
 # make demo: the most complete pipeline that exists, on the built-in simulator's office world:
 # simulate -> summary -> occupancy maps from the true poses -> scan matching -> odometry drift
-# against the truth.
+# against the truth -> full SLAM (map, trajectory, report) and its error against the truth.
 set -eu
 BIN=${1:-build/lidar2d}
 OUT=${2:-out}
@@ -18,10 +18,19 @@ echo "== scan matching (point-to-line ICP, odometry guess) against the truth"
 echo "== odometry against the truth"
 "$BIN" eval "$OUT/office.log" --truth "$OUT/office.log" --estimate-from odometry -o "$OUT/odometry-eval.json" |
   grep -E '"(ate_rmse_m|rpe_trans_rmse_m|matched)"' || true
+echo "== SLAM (front end, submaps, loop closure, pose graph) and its error against the truth"
+"$BIN" slam "$OUT/office.log" -o "$OUT/slam" -q
+"$BIN" eval "$OUT/slam/trajectory.txt" --truth "$OUT/office.log" -o "$OUT/slam-eval.json" |
+  grep -E '"(ate_rmse_m|rpe_trans_rmse_m|matched)"' || true
+echo
+echo "SLAM map:    $OUT/slam/map.png (map_server: $OUT/slam/map.yaml)"
+echo "SLAM report: $OUT/slam/report.html (open it in a browser)"
 echo
 echo "demo wrote:"
 for f in "$OUT"/office.log "$OUT"/office-logodds.pgm "$OUT"/office-logodds.yaml "$OUT"/office-logodds.png \
   "$OUT"/office-tsdf.pgm "$OUT"/office-tsdf.yaml "$OUT"/office-tsdf.png "$OUT"/office-tsdf.surface.txt \
-  "$OUT"/office-pairs.txt "$OUT"/odometry-eval.json; do
+  "$OUT"/office-pairs.txt "$OUT"/odometry-eval.json "$OUT"/slam/trajectory.txt "$OUT"/slam/map.pgm \
+  "$OUT"/slam/map.yaml "$OUT"/slam/map.png "$OUT"/slam/graph.txt "$OUT"/slam/report.html "$OUT"/slam/summary.json \
+  "$OUT"/slam-eval.json; do
   echo "  $f"
 done

@@ -9,7 +9,8 @@ PKGS="build-essential make cmake pkg-config git
   zlib1g-dev libbz2-dev liblz4-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   librosbag-storage-dev libsensor-msgs-dev libnav-msgs-dev libtf2-msgs-dev pluginlib-dev
-  python3 python3-rosbag"
+  python3 python3-rosbag
+  chromium"
 missing=""
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
