@@ -267,7 +267,10 @@ struct Slam::Impl {
     // settles in a wrong minimum that still explains much of the scan. Another start wins when its
     // result explains clearly more points (5% of the scan) than the prediction's, or about as many
     // with a clearly lower residual cost.
-    for (const SE2& alt : alternatives) {
+    // Only when the prediction was not confirmed: the match moved it or explains too little.
+    const SE2 correction = T_pred.inverse() * res.T_target_source;
+    const bool confirmed = explained >= 0.9 && correction.translation().norm() <= 0.05 && std::abs(correction.theta()) <= 2.0 * kDeg;
+    for (const SE2& alt : confirmed ? std::vector<SE2>{} : alternatives) {
       registration::Result r;
       double e = 0.0;
       tryFrom(alt, r, e);
@@ -431,7 +434,7 @@ struct Slam::Impl {
       } else if (n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 && searches_left > 0) {
         --searches_left;
         const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
-        const auto cr = registration::matchCorrelative(gridOf(s), pts, guess, loop_search);
+        const auto cr = registration::matchCorrelative(gridOf(s), voxelFilter(pts, 2.0 * opt.scan_voxel_m), guess, loop_search);
         ++stats.loop_searches;
         c.searched = true;
         c.score = cr.score;

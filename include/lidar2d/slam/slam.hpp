@@ -91,7 +91,7 @@ struct SlamOptions {
 
   // --- pose graph ---
   double sequential_sigma_m = 0.02;          ///< front-end relative pose between nodes [m], > 0
-  double sequential_sigma_rad = 0.5 * kDeg;  ///< [rad], > 0
+  double sequential_sigma_rad = 0.25 * kDeg; ///< [rad], > 0
   double loop_sigma_m = 0.05;                ///< loop-closure constraint [m], > 0
   double loop_sigma_rad = 1.0 * kDeg;        ///< [rad], > 0
   double loop_huber = 1.0;                   ///< Huber scale on the whitened loop residual, > 0
