@@ -118,16 +118,16 @@ std::string slamReportHtml(const ReportInput& in) {
   double tmax = 1e-6;
   for (const auto& e : in.trajectory) tmax = std::max(tmax, e.seconds * 1e3);
   const double PW = 800, PH = 200;
-  plot << fmt::format(R"(<svg id="time-plot" viewBox="0 0 {} {}" width="100%" xmlns="http://www.w3.org/2000/svg">)", PW + 60, PH + 30);
-  plot << fmt::format(R"(<rect x="50" y="0" width="{}" height="{}" fill="#fafafa" stroke="#999"/>)", PW, PH);
+  plot << fmt::format(R"(<svg id="time-plot" viewBox="0 0 {} {}" width="100%" xmlns="http://www.w3.org/2000/svg">)", PW + 90, PH + 30);
+  plot << fmt::format(R"(<rect x="80" y="0" width="{}" height="{}" fill="#fafafa" stroke="#999"/>)", PW, PH);
   plot << fmt::format(R"(<polyline fill="none" stroke="#1f77b4" stroke-width="1" points=")");
   for (std::size_t i = 0; i < in.trajectory.size(); ++i)
-    plot << fmt::format("{:.1f},{:.1f} ", 50 + PW * static_cast<double>(i) / n_scans,
+    plot << fmt::format("{:.1f},{:.1f} ", 80 + PW * static_cast<double>(i) / n_scans,
                         PH - PH * in.trajectory[i].seconds * 1e3 / tmax);
   plot << "\"/>";
-  plot << fmt::format(R"(<text x="45" y="12" text-anchor="end" font-size="11">{:.1f} ms</text>)", tmax);
-  plot << fmt::format(R"(<text x="45" y="{}" text-anchor="end" font-size="11">0</text>)", PH);
-  plot << fmt::format(R"(<text x="{}" y="{}" text-anchor="middle" font-size="11">scan (1 .. {})</text>)", 50 + PW / 2, PH + 20,
+  plot << fmt::format(R"(<text x="75" y="12" text-anchor="end" font-size="11">{:.1f} ms</text>)", tmax);
+  plot << fmt::format(R"(<text x="75" y="{}" text-anchor="end" font-size="11">0</text>)", PH);
+  plot << fmt::format(R"(<text x="{}" y="{}" text-anchor="middle" font-size="11">scan (1 .. {})</text>)", 80 + PW / 2, PH + 20,
                       in.trajectory.size());
   plot << "</svg>";
 
