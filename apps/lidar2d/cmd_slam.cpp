@@ -140,21 +140,28 @@ slam::SlamOptions readConfig(const std::string& path) {
   return o;
 }
 
-/// A progress bar on stderr, redrawn at most ten times a second.
+/// A progress bar on stderr, redrawn at most ten times a second; a running count when the total
+/// is not known in advance (CARMEN text logs).
 class ProgressBar {
  public:
-  ProgressBar(bool enabled, std::size_t total) : enabled_(enabled), total_(std::max<std::size_t>(total, 1)) {}
-  void update(std::size_t done, const slam::SlamStats& s) {
+  ProgressBar(bool enabled, std::optional<std::size_t> total) : enabled_(enabled), total_(total), start_(Clock::now()) {}
+  void update(std::size_t done, const slam::SlamStats& s, bool force = false) {
     if (!enabled_) return;
     const auto now = Clock::now();
-    if (done < total_ && now - last_ < std::chrono::milliseconds(100)) return;
+    if (!force && now - last_ < std::chrono::milliseconds(100)) return;
     last_ = now;
-    const int width = 30;
-    const int filled = static_cast<int>(static_cast<double>(width) * static_cast<double>(done) / static_cast<double>(total_));
-    std::cerr << fmt::format("\rslam [{}{}] {:3.0f}% {}/{} scans, {} nodes, {} loop closures ", std::string(filled, '#'),
-                             std::string(width - filled, '.'), 100.0 * static_cast<double>(done) / static_cast<double>(total_),
-                             done, total_, s.nodes, s.loop_accepted)
-              << std::flush;
+    const std::string tail = fmt::format("{} scans, {} nodes, {} loop closures, {:.1f} s ", done, s.nodes, s.loop_accepted,
+                                         std::chrono::duration<double>(now - start_).count());
+    if (total_ && *total_ > 0) {
+      const double f = std::min(1.0, static_cast<double>(done) / static_cast<double>(*total_));
+      const int width = 30;
+      const int filled = static_cast<int>(width * f);
+      std::cerr << fmt::format("\rslam [{}{}] {:3.0f}% {}", std::string(filled, '#'), std::string(width - filled, '.'),
+                               100.0 * f, tail)
+                << std::flush;
+    } else {
+      std::cerr << "\rslam " << tail << std::flush;
+    }
   }
   void done() {
     if (enabled_) std::cerr << "\n";
@@ -162,7 +169,8 @@ class ProgressBar {
 
  private:
   bool enabled_;
-  std::size_t total_;
+  std::optional<std::size_t> total_;
+  Clock::time_point start_;
   Clock::time_point last_{};
 };
 
@@ -204,27 +212,22 @@ void run(const SlamArgs& a) {
     throw ioError("exists and is not a directory", ErrorLocation(a.dir, 0, "-o"));
   const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
 
-  // Read the whole log first: the map is drawn from every scan at its final pose, and the progress
-  // bar needs the total. Parsing runs on its own thread (prefetch).
+  // Frames are processed as the reader thread (prefetch) parses them, so parsing overlaps with
+  // SLAM on the other core; they are kept for the final map, drawn from every scan at its
+  // optimised pose.
   std::vector<Frame> frames;
-  {
-    auto source = io::prefetch(io::openLog(a.log, a.reader));
-    if (progress) std::cerr << "reading " << a.log << " ..." << std::flush;
-    while (auto f = source->next()) frames.push_back(std::move(*f));
-    if (progress) std::cerr << "\r";
-  }
-  const double read_seconds = secondsSince(t_start);
-  if (frames.empty()) throw badInput("log has no scans", ErrorLocation(a.log));
-
+  auto source = io::prefetch(io::openLog(a.log, a.reader));
   slam::Slam slam(options);
-  ProgressBar bar(progress, frames.size());
+  ProgressBar bar(progress, source->sizeHint());
   const auto t_slam = Clock::now();
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    slam.add(frames[i]);
-    bar.update(i + 1, slam.stats());
+  while (auto f = source->next()) {
+    frames.push_back(std::move(*f));
+    slam.add(frames.back());
+    bar.update(frames.size(), slam.stats());
   }
+  if (frames.empty()) throw badInput("log has no scans", ErrorLocation(a.log));
   slam.finish();
-  bar.update(frames.size(), slam.stats());
+  bar.update(frames.size(), slam.stats(), true);
   bar.done();
   const double slam_seconds = secondsSince(t_slam);
   const auto trajectory = slam.trajectory();
@@ -273,7 +276,6 @@ void run(const SlamArgs& a) {
   j["loop_closures_rejected"] = s.loop_rejected;
   j["optimizations"] = s.optimizations;
   j["optimization_s"] = s.optimization_seconds;
-  j["read_s"] = read_seconds;
   j["slam_s"] = slam_seconds;
   j["map_s"] = map_seconds;
   j["ms_per_scan_mean"] = slam_seconds * 1e3 / static_cast<double>(frames.size());

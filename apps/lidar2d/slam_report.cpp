@@ -158,7 +158,7 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
                                    j.value("loop_closures_accepted", 0), j.value("loop_closures_rejected", 0),
                                    j.value("loop_searches", 0), accepted, rejected));
   row("pose-graph optimisations", fmt::format("{} ({:.2f} s)", j.value("optimizations", 0), j.value("optimization_s", 0.0)));
-  row("time", fmt::format("read {:.2f} s, slam {:.2f} s, map {:.2f} s", j.value("read_s", 0.0), j.value("slam_s", 0.0),
+  row("time", fmt::format("read + slam {:.2f} s, map {:.2f} s", j.value("slam_s", 0.0),
                           j.value("map_s", 0.0)));
   row("time per scan", fmt::format("mean {:.2f} ms, median {:.2f} ms, p95 {:.2f} ms, max {:.1f} ms",
                                    j.value("ms_per_scan_mean", 0.0), j.value("ms_per_scan_median", 0.0),

@@ -13,7 +13,10 @@ namespace {
 class PrefetchingSource final : public FrameSource {
  public:
   PrefetchingSource(std::unique_ptr<FrameSource> source, std::size_t capacity)
-      : source_(std::move(source)), capacity_(capacity == 0 ? 1 : capacity), path_(source_->path()) {
+      : source_(std::move(source)),
+        capacity_(capacity == 0 ? 1 : capacity),
+        path_(source_->path()),
+        size_hint_(source_->sizeHint()) {
     worker_ = std::thread([this] { run(); });
   }
   ~PrefetchingSource() override {
@@ -39,6 +42,8 @@ class PrefetchingSource final : public FrameSource {
     return std::nullopt;
   }
   LogFormat format() const override { return source_->format(); }
+  // Fixed once the wrapped source is constructed, so reading it from this thread is safe.
+  std::optional<std::size_t> sizeHint() const override { return size_hint_; }
   const std::string& path() const override { return path_; }
   SourceNotes notes() const override {
     std::lock_guard lock(mutex_);
@@ -72,6 +77,7 @@ class PrefetchingSource final : public FrameSource {
   std::unique_ptr<FrameSource> source_;
   const std::size_t capacity_;
   const std::string path_;
+  const std::optional<std::size_t> size_hint_;
   mutable std::mutex mutex_;
   std::condition_variable cv_;
   std::deque<Frame> queue_;

@@ -108,6 +108,8 @@ class Ros1Source final : public FrameSource {
     guarded(path_, "reading the index", [&] { setUp(options); });
   }
 
+  std::optional<std::size_t> sizeHint() const override { return size_hint_; }
+
   std::optional<Frame> next() override {
     return guarded(path_, "reading messages", [&]() -> std::optional<Frame> {
       for (;;) {
@@ -191,6 +193,7 @@ class Ros1Source final : public FrameSource {
     const std::optional<RosTopicInfo>& odom = choice.odom;
     checkMd5(find(scan->name), kLaserScanMd5);
     scan_topic_ = scan->name;
+    size_hint_ = static_cast<std::size_t>(scan->count);
 
     if (odom) {
       checkMd5(find(odom->name), kOdometryMd5);
@@ -298,6 +301,7 @@ class Ros1Source final : public FrameSource {
   std::string path_;
   rosbag::Bag bag_;
   std::unique_ptr<rosbag::View> view_;
+  std::optional<std::size_t> size_hint_;
   rosbag::View::iterator it_;
   std::string scan_topic_, odom_topic_;
   RosFrameAssembler assembler_;

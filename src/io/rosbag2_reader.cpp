@@ -117,6 +117,8 @@ class Ros2Source final : public FrameSource {
     setUp(options);
   }
 
+  std::optional<std::size_t> sizeHint() const override { return size_hint_; }
+
   std::optional<Frame> next() override {
     for (;;) {
       if (auto f = assembler_.pop()) return f;
@@ -246,6 +248,7 @@ class Ros2Source final : public FrameSource {
     const Topic& scan_topic = find(scan->name);
     checkCdr(scan_topic);
     scan_topic_ = scan_topic;
+    size_hint_ = static_cast<std::size_t>(scan->count);
     if (odom) {
       checkCdr(find(odom->name));
       odom_topic_ = find(odom->name);
@@ -345,6 +348,7 @@ class Ros2Source final : public FrameSource {
   DbPtr db_;
   StmtPtr stream_;
   Topic scan_topic_;
+  std::optional<std::size_t> size_hint_;
   std::optional<Topic> odom_topic_;
   RosFrameAssembler assembler_;
   SourceNotes notes_;

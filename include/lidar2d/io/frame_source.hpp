@@ -64,6 +64,10 @@ class FrameSource {
   virtual const std::string& path() const = 0;
   /// What was learned so far (complete once `next()` has returned std::nullopt).
   virtual SourceNotes notes() const = 0;
+  /// How many frames the source expects to deliver, when it knows without reading them (ROS bags:
+  /// the scan topic's message count in the index), else std::nullopt (CARMEN text logs). For
+  /// progress display only: the stream may end earlier (a message that fails to decode throws).
+  virtual std::optional<std::size_t> sizeHint() const { return std::nullopt; }
 };
 
 /// Detects the format from the file's first bytes (gzip magic -> CARMEN, "#ROSBAG V" -> ROS1,
