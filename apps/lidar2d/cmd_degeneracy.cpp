@@ -92,15 +92,15 @@ void writeSnapshot(const std::string& path, const Frame& f, const Points2& pts, 
     cv::line(img, px(l.a), px(l.b), parallel && r.degenerate() ? cv::Scalar(0, 0, 200) : cv::Scalar(0, 0, 0), 2,
              cv::LINE_AA);
   }
-  // The robot: a triangle pointing along +x.
-  const double s = 0.3;
-  std::vector<cv::Point> tri{px({s, 0}), px({-s / 2, s / 2}), px({-s / 2, -s / 2})};
-  cv::fillConvexPoly(img, tri, cv::Scalar(60, 60, 60), cv::LINE_AA);
+  // The degenerate direction (both ways), then the robot on top: a triangle pointing along +x.
   if (r.degenerate()) {
     const double L = range_m * 0.6;
-    cv::arrowedLine(img, px({0, 0}), px(L * d), cv::Scalar(0, 0, 255), 3, cv::LINE_AA, 0, 0.05);
-    cv::arrowedLine(img, px({0, 0}), px(-L * d), cv::Scalar(0, 0, 255), 3, cv::LINE_AA, 0, 0.05);
+    cv::arrowedLine(img, px({0, 0}), px(L * d), cv::Scalar(0, 0, 255), 2, cv::LINE_AA, 0, 0.05);
+    cv::arrowedLine(img, px({0, 0}), px(-L * d), cv::Scalar(0, 0, 255), 2, cv::LINE_AA, 0, 0.05);
   }
+  const double s = std::max(0.3, range_m / 40.0);
+  std::vector<cv::Point> tri{px({s, 0}), px({-s / 2, s / 2}), px({-s / 2, -s / 2})};
+  cv::fillConvexPoly(img, tri, cv::Scalar(40, 160, 40), cv::LINE_AA);
   const std::string verdict = degeneracy::toString(r.verdict);
   const std::string line1 =
       fmt::format("scan {}  t={:.3f}  {}  score {:.4f}  dir {:.1f} deg", f.index, f.time, verdict, r.score, dir * kDeg);

@@ -37,6 +37,7 @@ struct DegeneracyBenchOptions {
   double max_range_m = 30.0;    ///< simulated laser: maximum range [m]
   std::uint64_t seed = 1;       ///< simulator seed
   bool verbose = false;         ///< list the simulated scans where the combination disagrees with the label
+  double spacing_m = degeneracy::InputOptions{}.min_spacing_m;  ///< thinning of both detectors [m]
 };
 void runDegeneracyBenchmark(const std::string& data_dir, const DegeneracyBenchOptions& options);
 

@@ -45,8 +45,14 @@ int main(int argc, char** argv) {
   deg->add_option("--seed", deg_options.seed, "simulator seed")->capture_default_str();
   deg->add_option("--geo-threshold", deg_options.options.geometric.threshold, "geometric detector threshold")->capture_default_str();
   deg->add_option("--info-threshold", deg_options.options.information.threshold, "information detector threshold")->capture_default_str();
+  deg->add_option("--eps", deg_options.options.geometric.cluster_eps_m, "DBSCAN radius near the sensor [m]")->capture_default_str();
+  deg->add_option("--spacing", deg_options.spacing_m, "thinning: minimum point spacing [m] (both detectors)")->capture_default_str();
   deg->add_flag("-v,--verbose", deg_options.verbose, "list the simulated scans the combination gets wrong (stderr)");
-  deg->callback([&] { lidar2d::bench::runDegeneracyBenchmark(data, deg_options); });
+  deg->callback([&] {
+    deg_options.options.geometric.input.min_spacing_m = deg_options.options.information.input.min_spacing_m =
+        deg_options.spacing_m;
+    lidar2d::bench::runDegeneracyBenchmark(data, deg_options);
+  });
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -33,6 +33,25 @@ Eig2 eig2(double a, double b, double c) {
   return {m - d, m + d, wrapAxis(hi_angle + 0.5 * kPi)};
 }
 
+// The same without trigonometry (hot loops): eigenvalues lo <= hi and the unit eigenvector of lo.
+struct Eig2Vec {
+  double lo = 0.0, hi = 0.0;
+  Eigen::Vector2d lo_vec = Eigen::Vector2d::UnitX();
+};
+Eig2Vec eig2vec(double a, double b, double c) {
+  const double m = 0.5 * (a + c);
+  const double h = 0.5 * (a - c);
+  const double d = std::sqrt(h * h + b * b);
+  Eig2Vec e{m - d, m + d, Eigen::Vector2d::UnitX()};
+  // (A - lo I) v = 0: v = (b, lo - a) or (lo - c, b); take the longer for accuracy.
+  const Eigen::Vector2d v1(b, e.lo - a), v2(e.lo - c, b);
+  const Eigen::Vector2d& v = v1.squaredNorm() >= v2.squaredNorm() ? v1 : v2;
+  const double n = v.norm();
+  if (n > 0.0) e.lo_vec = v / n;
+  else e.lo_vec = a <= c ? Eigen::Vector2d::UnitX() : Eigen::Vector2d::UnitY();  // isotropic or diagonal
+  return e;
+}
+
 // nanoflann result set appending every point within the radius to CSR arrays (no per-query vector).
 struct AppendResultSet {
   double radius2;
@@ -147,8 +166,8 @@ Line fitLine(const Points2& q, std::size_t b, std::size_t e) {
     sxy += d.x() * d.y();
     syy += d.y() * d.y();
   }
-  const Eig2 e2 = eig2(sxx / n, sxy / n, syy / n);
-  const Eigen::Vector2d normal(std::cos(e2.lo_angle), std::sin(e2.lo_angle));
+  const Eig2Vec e2 = eig2vec(sxx / n, sxy / n, syy / n);
+  const Eigen::Vector2d& normal = e2.lo_vec;
   l.direction = Eigen::Vector2d(-normal.y(), normal.x());
   l.centroid = c;
   l.rms_m = std::sqrt(std::max(0.0, e2.lo));
@@ -224,7 +243,10 @@ GeometricResult geometricFrom(const Prepared& p, std::size_t num_input, const Ge
   // the range (sparser returns far away), so the neighbourhoods of a point are those found from it.
   const Radius eps{o.cluster_eps_m, o.cluster_eps_per_m};
   std::vector<float> eps2(n);
-  for (std::size_t i = 0; i < n; ++i) eps2[i] = static_cast<float>(std::pow(eps.at(p.pts[i]), 2));
+  for (std::size_t i = 0; i < n; ++i) {
+    const double e = eps.at(p.pts[i]);
+    eps2[i] = static_cast<float>(e * e);
+  }
   auto neighbours_within = [&](std::size_t i) {
     std::size_t c = 0;
     for (std::uint32_t j = p.start[i]; j < p.start[i + 1]; ++j) c += p.d2[j] <= eps2[i];
@@ -263,20 +285,19 @@ GeometricResult geometricFrom(const Prepared& p, std::size_t num_input, const Ge
   for (auto& members : clusters) {
     if (members.size() < o.min_cluster_points) continue;
     const int id = static_cast<int>(r.num_clusters++);
-    Eigen::Vector2d mean_dir = Eigen::Vector2d::Zero();
-    for (std::uint32_t m : members) {
-      cluster_of_kept[m] = id;
-      const double nrm = p.pts[m].norm();
-      if (nrm > 0) mean_dir += p.pts[m] / nrm;
-    }
-    const double ref = std::atan2(mean_dir.y(), mean_dir.x());
-    std::vector<std::pair<double, std::uint32_t>> order;
-    order.reserve(members.size());
-    for (std::uint32_t m : members)
-      order.push_back({angleDiff(std::atan2(p.pts[m].y(), p.pts[m].x()), ref), m});
-    std::sort(order.begin(), order.end());
+    for (std::uint32_t m : members) cluster_of_kept[m] = id;
+    // Input order is beam order: sort by index, then start after the largest index gap (counted
+    // around the end), so that a cluster cut by the seam of a 360 degree scan stays one chain.
+    std::sort(members.begin(), members.end());
+    std::size_t start = 0;
+    std::size_t best_gap = members.front() + n - members.back();
+    for (std::size_t k = 1; k < members.size(); ++k)
+      if (members[k] - members[k - 1] > best_gap) {
+        best_gap = members[k] - members[k - 1];
+        start = k;
+      }
     q.clear();
-    for (const auto& [ang, m] : order) q.push_back(p.pts[m]);
+    for (std::size_t k = 0; k < members.size(); ++k) q.push_back(p.pts[members[(start + k) % members.size()]]);
     r.num_clustered_points += q.size();
     Splitter s{o, q, id, r.lines, r.num_unstructured_points};
     for (std::size_t b = 0; b < q.size(); b += o.max_cluster_points)
@@ -335,7 +356,8 @@ InformationResult informationFrom(const Prepared& p, const InformationOptions& o
     // Local line through the neighbours within the radius (Censi 2008's normals).
     double cnt = 0, sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0;
     const Eigen::Vector2d& pi = p.pts[i];
-    const float r2 = static_cast<float>(std::pow(radius.at(pi), 2));
+    const double ri = radius.at(pi);
+    const float r2 = static_cast<float>(ri * ri);
     for (std::uint32_t j = p.start[i]; j < p.start[i + 1]; ++j) {
       if (p.d2[j] > r2) continue;
       const Eigen::Vector2d d = p.pts[p.idx[j]] - pi;  // relative to p_i: well conditioned
@@ -348,9 +370,9 @@ InformationResult informationFrom(const Prepared& p, const InformationOptions& o
     }
     if (cnt < static_cast<double>(o.normal_min_neighbors)) continue;
     const double mx = sx / cnt, my = sy / cnt;
-    const Eig2 e = eig2(sxx / cnt - mx * mx, sxy / cnt - mx * my, syy / cnt - my * my);
+    const Eig2Vec e = eig2vec(sxx / cnt - mx * mx, sxy / cnt - mx * my, syy / cnt - my * my);
     if (!(e.hi > 0.0) || std::max(0.0, e.lo) > max_flat2 * e.hi) continue;
-    const Eigen::Vector2d nrm(std::cos(e.lo_angle), std::sin(e.lo_angle));
+    const Eigen::Vector2d& nrm = e.lo_vec;
     // Residual n . (T p - q) at T = identity: d/d(x, y, theta) = [n_x, n_y, n . perp(p)].
     const Eigen::Vector3d J(nrm.x(), nrm.y(), nrm.x() * -pi.y() + nrm.y() * pi.x());
     H.noalias() += J * J.transpose();

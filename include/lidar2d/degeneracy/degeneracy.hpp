@@ -19,6 +19,9 @@
 ///   of its translational block, divided by the number of points with a normal (so that the threshold
 ///   does not depend on the beam count), falls below a threshold.
 ///
+/// Input: the scan's points in beam order (as `LaserScan::toPoints` gives them): the thinning and the
+/// line splitting walk the points in that order.
+///
 /// Frames and units: points are in the scan's own frame (the robot or laser frame) [m]; directions
 /// are angles of an axis in that frame [rad], reported in (-pi/2, pi/2] (a direction and its
 /// opposite are the same axis). Scores are dimensionless in [0, 0.5]: the translational information
@@ -58,7 +61,7 @@ struct InputOptions {
   /// beam order) is merged into it [m], >= 0 (0 keeps every point). The dense returns of nearby walls
   /// would otherwise outweigh farther structure and cost time; it also makes the scores nearly
   /// independent of the beam count.
-  double min_spacing_m = 0.05;
+  double min_spacing_m = 0.07;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -68,7 +71,7 @@ struct InputOptions {
 /// Options of the geometric (clusters + lines) detector.
 struct GeometricOptions {
   InputOptions input;
-  double cluster_eps_m = 0.3;            ///< DBSCAN neighbourhood radius near the sensor [m], > 0
+  double cluster_eps_m = 0.25;           ///< DBSCAN neighbourhood radius near the sensor [m], > 0
   double cluster_eps_per_m = 0.025;      ///< ... grown with the point's range r to max(cluster_eps_m, r *
                                          ///< this) [m per m], >= 0: beams 1 degree apart are 0.017 m apart
                                          ///< per metre of range (0 = a fixed radius)
@@ -76,8 +79,8 @@ struct GeometricOptions {
                                          ///< included), >= 1
   std::size_t min_cluster_points = 5;    ///< smaller clusters are clutter and ignored, >= 2
   std::size_t max_cluster_points = 2000;  ///< larger clusters are cut into pieces of at most this many
-                                          ///< consecutive points (ordered around the sensor) before the
-                                          ///< line fits, >= min_cluster_points
+                                          ///< consecutive points (in input order, which must be beam
+                                          ///< order) before the line fits, >= min_cluster_points
   double max_line_rms_m = 0.04;  ///< a piece is a line when the RMS orthogonal distance of its points from
                                  ///< the total-least-squares line is at most this [m], > 0; else it is split
                                  ///< at the point farthest from its end-to-end chord
