@@ -112,7 +112,7 @@ void writeSnapshot(const std::string& path, const Frame& f, const Points2& pts, 
   cv::putText(img, line1, {8, 16}, cv::FONT_HERSHEY_SIMPLEX, 0.5, text, 1, cv::LINE_AA);
   cv::putText(img, line2, {8, 34}, cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
   std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", img, png)) throw ioError("PNG encoding failed", ErrorLocation(path));
+  if (!cv::imencode(".png", img, png, {cv::IMWRITE_PNG_COMPRESSION, 9})) throw ioError("PNG encoding failed", ErrorLocation(path));
   io::writeFileAtomically(path, std::string(png.begin(), png.end()));
 }
 
