@@ -54,7 +54,9 @@ const char* toString(Verdict v);
 
 /// Checks shared by both detectors before they look at the structure.
 struct InputOptions {
-  std::size_t min_points = 20;  ///< fewer finite points: cannot decide, >= 3
+  std::size_t min_points = 20;  ///< fewer finite points: cannot decide, >= 3; the geometric detector also
+                                ///< needs this many clustered points, the information detector this many
+                                ///< points with a normal (after thinning)
   double min_spread_m = 0.2;    ///< RMS distance of the points from their centroid below this: all on one
                                 ///< spot, cannot decide [m], >= 0
   /// Thinning before the analysis: a point closer than this to the last kept point (in input order, i.e.
@@ -171,7 +173,8 @@ InformationResult analyzeInformation(const Points2& points_scan, const Informati
 // Combination: the call the matcher and SLAM use
 // ---------------------------------------------------------------------------------------------
 
-/// Options of the combined analysis.
+/// Options of the combined analysis. `analyze` checks the input once with the stricter of the two
+/// detectors' input options (the larger min_points and min_spread_m, the smaller min_spacing_m).
 struct Options {
   GeometricOptions geometric;
   InformationOptions information;
