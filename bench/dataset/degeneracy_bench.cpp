@@ -132,7 +132,8 @@ void real(const std::string& data_dir, const DegeneracyBenchOptions& bo) {
   std::cout << "| log | scans | beams | geometric flagged | information flagged | combined flagged | cannot decide | "
                "median CPU ms/scan | longest flagged stretches (scans: first-last, x y of the first) |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|\n";
-  for (const std::string rel : {"corrected/infinite-corridor.log.gz", "corrected/intel.log.gz"}) {
+  for (const std::string rel :
+       {"corrected/infinite-corridor.log.gz", "corrected/intel.log.gz", "corrected/freiburg-079.log.gz"}) {
     const std::string path = (std::filesystem::path(data_dir) / rel).string();
     if (!std::filesystem::exists(path)) {
       std::cout << "| " << rel << " | missing: skipped | | | | | | | |\n";
