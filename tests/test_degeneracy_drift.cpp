@@ -45,9 +45,15 @@ TEST_P(CorridorDrift, ConstrainedMatchDriftsNoMoreThanOdometry) {
   const sim::Scenario sc = sim::builtinScenario("corridor");
   sim::SimulatorOptions so;
   so.seed = 4;
-  so.laser.beams = 361;
-  const auto path = sim::samplePath(sc.waypoints, sim::PathOptions{});
+  so.laser.beams = 241;
+  // The route's stretch along the corridor's middle (x 5..17 m, driving east); only it is simulated.
+  std::vector<sim::TimedPose> path;
+  for (const auto& p : sim::samplePath(sc.waypoints, sim::PathOptions{}))
+    if (p.T_world_robot.x() >= 5.0 && p.T_world_robot.x() <= 17.0 && std::abs(p.T_world_robot.y()) < 0.5)
+      path.push_back(p);
   const std::vector<Frame> frames = sim::simulate(sc.world, path, so);
+  std::vector<bool> degenerate_label;
+  for (const Frame& f : frames) degenerate_label.push_back(labelFromWorld(sc.world, *f.T_world_robot, so.laser).degenerate);
   registration::MatcherOptions mo;
   mo.method = GetParam();
   Errors odom, match, constrained;
@@ -56,9 +62,7 @@ TEST_P(CorridorDrift, ConstrainedMatchDriftsNoMoreThanOdometry) {
     const Frame& a = frames[k - 1];
     const Frame& b = frames[k];
     // Only the featureless stretch: both scans labelled degenerate from the world geometry.
-    if (!labelFromWorld(sc.world, *a.T_world_robot, so.laser).degenerate ||
-        !labelFromWorld(sc.world, *b.T_world_robot, so.laser).degenerate)
-      continue;
+    if (!degenerate_label[k - 1] || !degenerate_label[k]) continue;
     const SE2 truth = a.T_world_robot->inverse() * *b.T_world_robot;
     const SE2 prior = a.T_odom_robot->inverse() * *b.T_odom_robot;
     const Points2 pa = a.scan.toPoints(a.T_robot_laser), pb = b.scan.toPoints(b.T_robot_laser);
@@ -72,7 +76,7 @@ TEST_P(CorridorDrift, ConstrainedMatchDriftsNoMoreThanOdometry) {
     match.add(r.T_target_source, truth, along);
     constrained.add(constrainMatch(r.T_target_source, prior, deg), truth, along);
   }
-  ASSERT_GT(odom.n, 300u);  // ~30 m of corridor at 0.08 m per scan
+  ASSERT_GT(odom.n, 120u);  // 12 m of corridor at 0.08 m per scan
   EXPECT_GE(flagged, odom.n * 95 / 100);
   std::cout << "pairs " << odom.n << ", flagged " << flagged << "\n"
             << "along-corridor drift [m]: odometry " << odom.along_sum << ", match " << match.along_sum

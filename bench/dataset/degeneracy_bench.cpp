@@ -4,7 +4,7 @@
 //   (degeneracy::labelFromWorld: degenerate when the visible walls are all parallel), precision and
 //   recall of the geometric detector, the information detector and their combination. "Cannot decide"
 //   counts as not flagged.
-// - real logs (corrected infinite-corridor and intel): the fraction of scans flagged by each detector,
+// - real logs (corrected infinite-corridor, intel, freiburg-079): the fraction of scans flagged by each detector,
 //   the longest flagged stretches (scan indices, truth positions) and cannot-decide counts.
 // - time per scan: both detectors together (degeneracy::analyze), median over the scans of the thread's
 //   CPU time (CLOCK_THREAD_CPUTIME_ID: the machine may be shared), one core.
