@@ -140,7 +140,8 @@ TEST(CliDegeneracy, InfiniteCorridorLog) {
   LIDAR2D_REQUIRE_DATA("corrected/infinite-corridor.log.gz");
   TempDir tmp;
   const fs::path out = tmp / "ic.txt";
-  const auto r = runCli({"degeneracy", test::dataFile("corrected/infinite-corridor.log.gz").string(), "-o", out.string()});
+  const auto r =
+      runCli({"degeneracy", test::dataFile("corrected/infinite-corridor.log.gz").string(), "-o", out.string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto lines = readOutput(out);
   ASSERT_EQ(lines.size(), 1941u);

@@ -2,12 +2,9 @@
 // circle), the cannot-decide cases, DBSCAN against a brute-force reference, the remapping API and the
 // ground-truth labels of the simulated worlds.
 
-#include "lidar2d/degeneracy/degeneracy.hpp"
-
 #include <gtest/gtest.h>
 
 #include <algorithm>
-
 #include <cmath>
 #include <functional>
 #include <map>
@@ -15,6 +12,7 @@
 #include <random>
 
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/degeneracy/ground_truth.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
@@ -56,9 +54,9 @@ sim::World walls(std::vector<sim::Segment> segs, std::vector<sim::Arc> arcs = {}
 double axisDiff(double a, double b) { return std::abs(0.5 * wrapAngle(2.0 * (a - b))); }
 
 void expectDegenerateAlong(const Result& r, double axis_rad) {
-  EXPECT_EQ(r.verdict, Verdict::kDegenerate) << "geometric " << toString(r.geometric.verdict) << " "
-                                             << r.geometric.score << " " << r.geometric.reason << "; information "
-                                             << toString(r.information.verdict) << " " << r.information.score;
+  EXPECT_EQ(r.verdict, Verdict::kDegenerate)
+      << "geometric " << toString(r.geometric.verdict) << " " << r.geometric.score << " " << r.geometric.reason
+      << "; information " << toString(r.information.verdict) << " " << r.information.score;
   EXPECT_EQ(r.geometric.verdict, Verdict::kDegenerate) << r.geometric.score << " " << r.geometric.reason;
   EXPECT_EQ(r.information.verdict, Verdict::kDegenerate) << r.information.score;
   EXPECT_LT(axisDiff(r.direction_rad, axis_rad), 3 * kDeg) << r.direction_rad / kDeg;
@@ -108,10 +106,10 @@ TEST(Degeneracy, CorridorWithRecessedDoorsIsDegenerate) {
   std::vector<sim::Segment> s;
   for (double x = -60; x < 60; x += 4) {
     for (double side : {-1.0, 1.0}) {
-      s.push_back({V(x, side), V(x + 3, side)});                           // wall
-      s.push_back({V(x + 3, side), V(x + 3, side * 1.15)});                // jamb
-      s.push_back({V(x + 3, side * 1.15), V(x + 4, side * 1.15)});          // door
-      s.push_back({V(x + 4, side * 1.15), V(x + 4, side)});                // jamb
+      s.push_back({V(x, side), V(x + 3, side)});                    // wall
+      s.push_back({V(x + 3, side), V(x + 3, side * 1.15)});         // jamb
+      s.push_back({V(x + 3, side * 1.15), V(x + 4, side * 1.15)});  // door
+      s.push_back({V(x + 4, side * 1.15), V(x + 4, side)});         // jamb
     }
   }
   const Result r = analyze(scan(walls(s), SE2(0.3, 0.1, 0)));
@@ -122,9 +120,8 @@ TEST(Degeneracy, CorridorWithRecessedDoorsIsDegenerate) {
 
 TEST(Degeneracy, CorridorOpeningIntoARoomIsWellConstrained) {
   // The corridor ends 6 m ahead in a room whose far wall faces the robot.
-  std::vector<sim::Segment> s{{V(-60, -1), V(6, -1)}, {V(-60, 1), V(6, 1)},  {V(6, 1), V(6, 4)},
-                              {V(6, 4), V(12, 4)},    {V(12, 4), V(12, -4)}, {V(12, -4), V(6, -4)},
-                              {V(6, -4), V(6, -1)}};
+  std::vector<sim::Segment> s{{V(-60, -1), V(6, -1)}, {V(-60, 1), V(6, 1)},  {V(6, 1), V(6, 4)},  {V(6, 4), V(12, 4)},
+                              {V(12, 4), V(12, -4)},  {V(12, -4), V(6, -4)}, {V(6, -4), V(6, -1)}};
   expectWellConstrained(analyze(scan(walls(s), SE2())));
 }
 
@@ -205,7 +202,8 @@ TEST(Degeneracy, CannotDecideOnTooLittleData) {
   for (int i = 0; i < 200; ++i) one_spot.push_back(V(1.0 + 1e-3 * (i % 7), 2.0 + 1e-3 * (i % 5)));
   Points2 all_nan(300, V(nan, nan));
   Points2 sparse;  // 100 points 2 m apart: no clusters, no normals
-  for (int i = 0; i < 100; ++i) sparse.push_back(V(std::cos(i * 0.7) * (2 + 0.3 * i), std::sin(i * 0.7) * (2 + 0.3 * i)));
+  for (int i = 0; i < 100; ++i)
+    sparse.push_back(V(std::cos(i * 0.7) * (2 + 0.3 * i), std::sin(i * 0.7) * (2 + 0.3 * i)));
   for (const Points2& input : {few, one_spot, all_nan, sparse, Points2{}}) {
     const Result r = analyze(input);
     EXPECT_EQ(r.verdict, Verdict::kCannotDecide) << input.size();
@@ -265,7 +263,8 @@ TEST(Degeneracy, ClustersMatchABruteForceReference) {
     for (std::size_t i = 0; i < pts.size(); ++i) ++size[find(static_cast<int>(i))];
     for (std::size_t i = 0; i < pts.size(); ++i)
       for (std::size_t j = i + 1; j < pts.size(); ++j) {
-        const bool same_ref = find(static_cast<int>(i)) == find(static_cast<int>(j)) && size[find(static_cast<int>(i))] >= 2;
+        const bool same_ref =
+            find(static_cast<int>(i)) == find(static_cast<int>(j)) && size[find(static_cast<int>(i))] >= 2;
         const bool same = r.cluster_of_point[i] >= 0 && r.cluster_of_point[i] == r.cluster_of_point[j];
         ASSERT_EQ(same, same_ref) << i << " " << j;
       }
@@ -277,7 +276,7 @@ TEST(Degeneracy, ClustersMatchABruteForceReference) {
 TEST(Degeneracy, LinesOfAnLShapedClusterAreSplitAtTheCorner) {
   Points2 pts;
   for (int i = 0; i <= 40; ++i) pts.push_back(V(3.0, -2.0 + 0.05 * i));  // x = 3, y -2..0
-  for (int i = 1; i <= 40; ++i) pts.push_back(V(3.0 - 0.05 * i, 0.0));  // y = 0, x 3..1
+  for (int i = 1; i <= 40; ++i) pts.push_back(V(3.0 - 0.05 * i, 0.0));   // y = 0, x 3..1
   const GeometricResult r = analyzeGeometric(pts);
   EXPECT_EQ(r.num_clusters, 1u);
   ASSERT_GE(r.lines.size(), 2u);
@@ -310,7 +309,7 @@ TEST(DegeneracyRemap, ProjectorKeepsOnlyWellConstrainedDirections) {
 TEST(DegeneracyRemap, ConstrainMatchKeepsThePriorAlongTheCorridor) {
   Result deg;
   deg.verdict = Verdict::kDegenerate;
-  deg.direction_rad = 0.0;  // the source scan's corridor runs along its x axis
+  deg.direction_rad = 0.0;                 // the source scan's corridor runs along its x axis
   const SE2 prior(0.10, 0.00, 90 * kDeg);  // the source is turned by 90 degrees: its x is the target's y
   const SE2 match(0.13, 0.40, 91 * kDeg);  // the matcher slid 0.4 m along the corridor
   const SE2 out = constrainMatch(match, prior, deg);
@@ -332,7 +331,7 @@ TEST(DegeneracyTruth, SimulatedCorridorIsLabelledDegenerateInItsMiddleOnly) {
   EXPECT_TRUE(mid.degenerate);
   EXPECT_TRUE(mid.enough_hits);
   EXPECT_LT(axisDiff(mid.direction_rad, 0.0), 1e-9);
-  EXPECT_FALSE(labelFromWorld(sc.world, SE2(50, 0, 0), laser).degenerate);  // sees the east room's far wall
+  EXPECT_FALSE(labelFromWorld(sc.world, SE2(50, 0, 0), laser).degenerate);    // sees the east room's far wall
   EXPECT_FALSE(labelFromWorld(sc.world, SE2(-4, 2.5, 0), laser).degenerate);  // in the west room
   EXPECT_FALSE(labelFromWorld(sim::builtinScenario("office").world, SE2(10, 7.5, 0), laser).degenerate);
 }

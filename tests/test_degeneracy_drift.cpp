@@ -20,10 +20,10 @@ namespace lidar2d::degeneracy {
 namespace {
 
 struct Errors {
-  double along_sum = 0.0;   // accumulated signed error along the corridor [m] (the drift)
-  double along_sq = 0.0;    // sum of squared per-pair errors along the corridor [m^2]
-  double across_sq = 0.0;   // ... across the corridor [m^2]
-  double rot_sq = 0.0;      // ... of the rotation [rad^2]
+  double along_sum = 0.0;  // accumulated signed error along the corridor [m] (the drift)
+  double along_sq = 0.0;   // sum of squared per-pair errors along the corridor [m^2]
+  double across_sq = 0.0;  // ... across the corridor [m^2]
+  double rot_sq = 0.0;     // ... of the rotation [rad^2]
   std::size_t n = 0;
   void add(const SE2& est, const SE2& truth, const Eigen::Vector2d& along) {
     const Eigen::Vector2d e = est.translation() - truth.translation();
@@ -53,7 +53,8 @@ TEST_P(CorridorDrift, ConstrainedMatchDriftsNoMoreThanOdometry) {
       path.push_back(p);
   const std::vector<Frame> frames = sim::simulate(sc.world, path, so);
   std::vector<bool> degenerate_label;
-  for (const Frame& f : frames) degenerate_label.push_back(labelFromWorld(sc.world, *f.T_world_robot, so.laser).degenerate);
+  for (const Frame& f : frames)
+    degenerate_label.push_back(labelFromWorld(sc.world, *f.T_world_robot, so.laser).degenerate);
   registration::MatcherOptions mo;
   mo.method = GetParam();
   Errors odom, match, constrained;

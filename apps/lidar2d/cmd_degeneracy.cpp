@@ -59,7 +59,7 @@ struct DegeneracyArgs {
 };
 
 cv::Scalar clusterColour(int id) {
-  static const cv::Scalar palette[] = {{180, 119, 31}, {14, 127, 255}, {44, 160, 44},  {189, 103, 148},
+  static const cv::Scalar palette[] = {{180, 119, 31}, {14, 127, 255},  {44, 160, 44},  {189, 103, 148},
                                        {75, 86, 140},  {194, 119, 227}, {34, 189, 188}, {207, 190, 23}};
   return palette[static_cast<std::size_t>(id) % (sizeof(palette) / sizeof(palette[0]))];
 }
@@ -104,15 +104,16 @@ void writeSnapshot(const std::string& path, const Frame& f, const Points2& pts, 
   const std::string verdict = degeneracy::toString(r.verdict);
   const std::string line1 =
       fmt::format("scan {}  t={:.3f}  {}  score {:.4f}  dir {:.1f} deg", f.index, f.time, verdict, r.score, dir * kDeg);
-  const std::string line2 = fmt::format(
-      "geometric: {} {:.4f} ({} clusters, {} lines)   information: {} {:.4f}   1 m grid", toString(r.geometric.verdict),
-      r.geometric.score, r.geometric.num_clusters, r.geometric.lines.size(), toString(r.information.verdict),
-      r.information.score);
+  const std::string line2 =
+      fmt::format("geometric: {} {:.4f} ({} clusters, {} lines)   information: {} {:.4f}   1 m grid",
+                  toString(r.geometric.verdict), r.geometric.score, r.geometric.num_clusters, r.geometric.lines.size(),
+                  toString(r.information.verdict), r.information.score);
   const cv::Scalar text = r.degenerate() ? cv::Scalar(0, 0, 200) : cv::Scalar(0, 0, 0);
   cv::putText(img, line1, {8, 16}, cv::FONT_HERSHEY_SIMPLEX, 0.5, text, 1, cv::LINE_AA);
   cv::putText(img, line2, {8, 34}, cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
   std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", img, png, {cv::IMWRITE_PNG_COMPRESSION, 9})) throw ioError("PNG encoding failed", ErrorLocation(path));
+  if (!cv::imencode(".png", img, png, {cv::IMWRITE_PNG_COMPRESSION, 9}))
+    throw ioError("PNG encoding failed", ErrorLocation(path));
   io::writeFileAtomically(path, std::string(png.begin(), png.end()));
 }
 
@@ -166,12 +167,14 @@ void run(const DegeneracyArgs& a) {
   if (!a.quiet) {
     const double total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
     std::cerr << fmt::format(
-        "{} scans: {} degenerate ({:.1f}%), {} cannot decide, {} well constrained; {:.3f} ms per scan (analysis), {:.2f} "
+        "{} scans: {} degenerate ({:.1f}%), {} cannot decide, {} well constrained; {:.3f} ms per scan (analysis), "
+        "{:.2f} "
         "s in all -> {}\n",
         scans, degenerate, 100.0 * static_cast<double>(degenerate) / static_cast<double>(scans), undecided,
         scans - degenerate - undecided, 1e3 * analyze_s / static_cast<double>(scans), total_s, a.output);
     if (repeats)
-      std::cerr << fmt::format("note: {} scans repeat the previous scan's timestamp; lines are in scan order\n", repeats);
+      std::cerr << fmt::format("note: {} scans repeat the previous scan's timestamp; lines are in scan order\n",
+                               repeats);
     if (!a.snapshots.empty()) std::cerr << fmt::format("{} snapshots -> {}\n", snapshots, a.snapshots);
   }
 }
@@ -200,7 +203,8 @@ void addDegeneracyCommand(CLI::App& app) {
   sub->add_option("--info-threshold", a->options.information.threshold,
                   "information detector: degenerate below this score")
       ->capture_default_str();
-  sub->add_option("--eps", a->options.geometric.cluster_eps_m, "DBSCAN neighbourhood radius [m]")->capture_default_str();
+  sub->add_option("--eps", a->options.geometric.cluster_eps_m, "DBSCAN neighbourhood radius [m]")
+      ->capture_default_str();
   sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
   addReaderOptions(sub, a->reader);
   sub->callback([a] { run(*a); });

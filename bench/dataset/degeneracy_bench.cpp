@@ -13,8 +13,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <ctime>
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 #include <iostream>
 #include <numbers>
@@ -60,9 +60,10 @@ struct Tally {
 
 void simulated(const DegeneracyBenchOptions& bo) {
   std::cout << "### Simulated worlds (labels from the world geometry)\n\n";
-  std::cout << fmt::format("Laser: {} beams over {} deg, range {} m. 'Cannot decide' counts as not flagged.\n\n", bo.beams,
-                           bo.fov_deg, bo.max_range_m);
-  std::cout << "| world | labelled scans | labelled degenerate | detector | TP | FP | FN | precision | recall | cannot decide | "
+  std::cout << fmt::format("Laser: {} beams over {} deg, range {} m. 'Cannot decide' counts as not flagged.\n\n",
+                           bo.beams, bo.fov_deg, bo.max_range_m);
+  std::cout << "| world | labelled scans | labelled degenerate | detector | TP | FP | FN | precision | recall | cannot "
+               "decide | "
                "median CPU ms/scan |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|---|---|\n";
   Tally all[3];
@@ -98,27 +99,29 @@ void simulated(const DegeneracyBenchOptions& bo) {
       t[2].add(label.degenerate, r.verdict);
       if (bo.verbose && (label.degenerate != (r.verdict == degeneracy::Verdict::kDegenerate)))
         std::cerr << fmt::format(
-            "{} scan {} at ({:.2f}, {:.2f}, {:.0f} deg): label {} (hits {}, visible {}) -> {} geo {} {:.4f} info {} {:.4f} "
+            "{} scan {} at ({:.2f}, {:.2f}, {:.0f} deg): label {} (hits {}, visible {}) -> {} geo {} {:.4f} info {} "
+            "{:.4f} "
             "({})\n",
-            world, f->index, f->T_world_robot->x(), f->T_world_robot->y(), f->T_world_robot->theta() * 180 / std::numbers::pi,
-            label.degenerate, label.hits, label.visible, degeneracy::toString(r.verdict),
-            degeneracy::toString(r.geometric.verdict), r.geometric.score, degeneracy::toString(r.information.verdict),
-            r.information.score, r.reason + r.geometric.reason);
+            world, f->index, f->T_world_robot->x(), f->T_world_robot->y(),
+            f->T_world_robot->theta() * 180 / std::numbers::pi, label.degenerate, label.hits, label.visible,
+            degeneracy::toString(r.verdict), degeneracy::toString(r.geometric.verdict), r.geometric.score,
+            degeneracy::toString(r.information.verdict), r.information.score, r.reason + r.geometric.reason);
     }
     const char* names[3] = {"geometric", "information", "combined"};
     for (int k = 0; k < 3; ++k) {
-      std::cout << fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", world, scans - too_few, labelled,
-                               names[k], t[k].tp, t[k].fp, t[k].fn, t[k].precision(), t[k].recall(), t[k].undecided,
-                               k == 2 ? fmt::format("{:.3f}", medianOf(ms)) : "");
+      std::cout << fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", world, scans - too_few,
+                               labelled, names[k], t[k].tp, t[k].fp, t[k].fn, t[k].precision(), t[k].recall(),
+                               t[k].undecided, k == 2 ? fmt::format("{:.3f}", medianOf(ms)) : "");
       all[k].tp += t[k].tp;
       all[k].fp += t[k].fp;
       all[k].fn += t[k].fn;
       all[k].undecided += t[k].undecided;
     }
     if (too_few)
-      notes += fmt::format("- {}: {} scans with fewer than 20 beam hits are not labelled (excluded above); the combination "
-                           "says 'cannot decide' for {} of them and 'degenerate' for {}.\n",
-                           world, too_few, too_few_undecided, too_few_flagged);
+      notes += fmt::format(
+          "- {}: {} scans with fewer than 20 beam hits are not labelled (excluded above); the combination "
+          "says 'cannot decide' for {} of them and 'degenerate' for {}.\n",
+          world, too_few, too_few_undecided, too_few_flagged);
   }
   const char* names[3] = {"geometric", "information", "combined"};
   for (int k = 0; k < 3; ++k)

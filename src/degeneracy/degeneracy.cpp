@@ -47,8 +47,10 @@ Eig2Vec eig2vec(double a, double b, double c) {
   const Eigen::Vector2d v1(b, e.lo - a), v2(e.lo - c, b);
   const Eigen::Vector2d& v = v1.squaredNorm() >= v2.squaredNorm() ? v1 : v2;
   const double n = v.norm();
-  if (n > 0.0) e.lo_vec = v / n;
-  else e.lo_vec = a <= c ? Eigen::Vector2d::UnitX() : Eigen::Vector2d::UnitY();  // isotropic or diagonal
+  if (n > 0.0)
+    e.lo_vec = v / n;
+  else
+    e.lo_vec = a <= c ? Eigen::Vector2d::UnitX() : Eigen::Vector2d::UnitY();  // isotropic or diagonal
   return e;
 }
 
@@ -74,12 +76,12 @@ struct AppendResultSet {
 // The finite points of a scan and their neighbours within a radius (themselves included), found once
 // on one k-d tree and shared by both detectors.
 struct Prepared {
-  Points2 pts;                     // finite points kept by the thinning, input order
+  Points2 pts;                              // finite points kept by the thinning, input order
   std::vector<std::int32_t> kept_of_input;  // per input point: the kept point it was merged into, or -1
-  std::vector<std::uint32_t> start;  // CSR: neighbours of i are idx[start[i] .. start[i+1])
+  std::vector<std::uint32_t> start;         // CSR: neighbours of i are idx[start[i] .. start[i+1])
   std::vector<std::uint32_t> idx;
-  std::vector<float> d2;            // squared distances [m^2]
-  std::string reason;               // non-empty: the input checks failed (cannot decide)
+  std::vector<float> d2;  // squared distances [m^2]
+  std::string reason;     // non-empty: the input checks failed (cannot decide)
 };
 
 // Neighbourhood radius of a point at range r: max(base, r * per_m).
@@ -409,7 +411,8 @@ const char* toString(Verdict v) {
 std::string GeometricOptions::check() const {
   if (auto bad = checkInput(input, "geometric."); !bad.empty()) return bad;
   if (!(cluster_eps_m > 0.0) || !std::isfinite(cluster_eps_m)) return "geometric.cluster_eps_m must be > 0";
-  if (!(cluster_eps_per_m >= 0.0) || !std::isfinite(cluster_eps_per_m)) return "geometric.cluster_eps_per_m must be >= 0";
+  if (!(cluster_eps_per_m >= 0.0) || !std::isfinite(cluster_eps_per_m))
+    return "geometric.cluster_eps_per_m must be >= 0";
   if (core_min_points < 1) return "geometric.core_min_points must be >= 1";
   if (min_cluster_points < 2) return "geometric.min_cluster_points must be >= 2";
   if (max_cluster_points < min_cluster_points) return "geometric.max_cluster_points must be >= min_cluster_points";
@@ -516,7 +519,8 @@ Eigen::Matrix3d projectorRemovingDirection(double direction_rad) {
 }
 
 SE2 remapPose(const SE2& init, const SE2& estimate, const Eigen::Matrix3d& P) {
-  const Eigen::Vector3d delta(estimate.x() - init.x(), estimate.y() - init.y(), angleDiff(estimate.theta(), init.theta()));
+  const Eigen::Vector3d delta(estimate.x() - init.x(), estimate.y() - init.y(),
+                              angleDiff(estimate.theta(), init.theta()));
   return SE2::fromVector(init.vector() + P * delta);
 }
 

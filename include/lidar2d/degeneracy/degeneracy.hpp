@@ -73,28 +73,28 @@ struct InputOptions {
 /// Options of the geometric (clusters + lines) detector.
 struct GeometricOptions {
   InputOptions input;
-  double cluster_eps_m = 0.25;           ///< DBSCAN neighbourhood radius near the sensor [m], > 0
-  double cluster_eps_per_m = 0.025;      ///< ... grown with the point's range r to max(cluster_eps_m, r *
-                                         ///< this) [m per m], >= 0: beams 1 degree apart are 0.017 m apart
-                                         ///< per metre of range (0 = a fixed radius)
-  std::size_t core_min_points = 3;       ///< DBSCAN: a core point has this many points within eps (itself
-                                         ///< included), >= 1
-  std::size_t min_cluster_points = 5;    ///< smaller clusters are clutter and ignored, >= 2
+  double cluster_eps_m = 0.25;            ///< DBSCAN neighbourhood radius near the sensor [m], > 0
+  double cluster_eps_per_m = 0.025;       ///< ... grown with the point's range r to max(cluster_eps_m, r *
+                                          ///< this) [m per m], >= 0: beams 1 degree apart are 0.017 m apart
+                                          ///< per metre of range (0 = a fixed radius)
+  std::size_t core_min_points = 3;        ///< DBSCAN: a core point has this many points within eps (itself
+                                          ///< included), >= 1
+  std::size_t min_cluster_points = 5;     ///< smaller clusters are clutter and ignored, >= 2
   std::size_t max_cluster_points = 2000;  ///< larger clusters are cut into pieces of at most this many
                                           ///< consecutive points (in input order, which must be beam
                                           ///< order) before the line fits, >= min_cluster_points
-  double max_line_rms_m = 0.04;  ///< a piece is a line when the RMS orthogonal distance of its points from
-                                 ///< the total-least-squares line is at most this [m], > 0; else it is split
-                                 ///< at the point farthest from its end-to-end chord
-  std::size_t min_line_points = 4;  ///< pieces with fewer points are not split further: their points are
-                                    ///< "unstructured" (they constrain every direction equally), >= 2
-  int max_split_depth = 8;          ///< recursion limit of the split, >= 0
-  double parallel_tol_deg = 10.0;   ///< lines within this angle of the weakest direction count as parallel
-                                    ///< to it ("corridor walls") [deg], in [0, 90)
-  double min_parallel_length_m = 1.5;  ///< degenerate only when the parallel lines are at least this long in
-                                       ///< total (else there is no corridor to speak of) [m], >= 0
-  double threshold = 0.02;  ///< degenerate when the score (constraint along the weakest direction per
-                            ///< clustered point) is below this, in (0, 0.5]
+  double max_line_rms_m = 0.04;           ///< a piece is a line when the RMS orthogonal distance of its points from
+                                          ///< the total-least-squares line is at most this [m], > 0; else it is split
+                                          ///< at the point farthest from its end-to-end chord
+  std::size_t min_line_points = 4;        ///< pieces with fewer points are not split further: their points are
+                                          ///< "unstructured" (they constrain every direction equally), >= 2
+  int max_split_depth = 8;                ///< recursion limit of the split, >= 0
+  double parallel_tol_deg = 10.0;         ///< lines within this angle of the weakest direction count as parallel
+                                          ///< to it ("corridor walls") [deg], in [0, 90)
+  double min_parallel_length_m = 1.5;     ///< degenerate only when the parallel lines are at least this long in
+                                          ///< total (else there is no corridor to speak of) [m], >= 0
+  double threshold = 0.02;                ///< degenerate when the score (constraint along the weakest direction per
+                                          ///< clustered point) is below this, in (0, 0.5]
 
   /// Empty when every field is in its domain, else a message naming the first bad field.
   std::string check() const;
@@ -102,31 +102,31 @@ struct GeometricOptions {
 
 /// A total-least-squares line fitted to a piece of a cluster.
 struct Line {
-  Eigen::Vector2d centroid = Eigen::Vector2d::Zero();  ///< [m], scan frame
+  Eigen::Vector2d centroid = Eigen::Vector2d::Zero();    ///< [m], scan frame
   Eigen::Vector2d direction = Eigen::Vector2d::UnitX();  ///< unit vector along the line
-  Eigen::Vector2d a = Eigen::Vector2d::Zero();  ///< end points: extreme projections of the points [m]
+  Eigen::Vector2d a = Eigen::Vector2d::Zero();           ///< end points: extreme projections of the points [m]
   Eigen::Vector2d b = Eigen::Vector2d::Zero();
-  double rms_m = 0.0;            ///< RMS orthogonal residual [m]
+  double rms_m = 0.0;  ///< RMS orthogonal residual [m]
   std::size_t num_points = 0;
-  int cluster = -1;              ///< index of the cluster it belongs to
+  int cluster = -1;  ///< index of the cluster it belongs to
   double length() const { return (b - a).norm(); }
 };
 
 /// What the geometric detector found.
 struct GeometricResult {
   Verdict verdict = Verdict::kCannotDecide;
-  double score = std::numeric_limits<double>::quiet_NaN();  ///< constraint along the weakest direction per
-                                                            ///< clustered point, [0, 0.5]; NaN if undecided
+  double score = std::numeric_limits<double>::quiet_NaN();          ///< constraint along the weakest direction per
+                                                                    ///< clustered point, [0, 0.5]; NaN if undecided
   double direction_rad = std::numeric_limits<double>::quiet_NaN();  ///< weakest direction, (-pi/2, pi/2]
   std::vector<int> cluster_of_point;  ///< per input point: its cluster (that of the kept point it was merged
                                       ///< into), or -1 (noise, non-finite, or in a cluster smaller than
                                       ///< min_cluster_points)
   std::size_t num_clusters = 0;
-  std::vector<Line> lines;             ///< well-fitted lines of all clusters
-  std::size_t num_clustered_points = 0;    ///< points (after thinning) in clusters of an accepted size
+  std::vector<Line> lines;                  ///< well-fitted lines of all clusters
+  std::size_t num_clustered_points = 0;     ///< points (after thinning) in clusters of an accepted size
   std::size_t num_unstructured_points = 0;  ///< clustered points in no line
-  double parallel_length_m = 0.0;  ///< total length of the lines parallel to the weakest direction [m]
-  std::string reason;              ///< why it cannot decide (empty otherwise)
+  double parallel_length_m = 0.0;           ///< total length of the lines parallel to the weakest direction [m]
+  std::string reason;                       ///< why it cannot decide (empty otherwise)
 };
 
 /// Runs the geometric detector on a scan's points (scan frame [m]; non-finite points are ignored).
@@ -139,14 +139,14 @@ GeometricResult analyzeGeometric(const Points2& points_scan, const GeometricOpti
 /// Options of the information-matrix detector.
 struct InformationOptions {
   InputOptions input;
-  double normal_radius_m = 0.2;         ///< neighbours within this radius fit each point's line [m], > 0
-  double normal_radius_per_m = 0.03;    ///< ... grown with the point's range r to max(normal_radius_m, r *
-                                        ///< this) [m per m], >= 0 (0 = a fixed radius)
+  double normal_radius_m = 0.2;          ///< neighbours within this radius fit each point's line [m], > 0
+  double normal_radius_per_m = 0.03;     ///< ... grown with the point's range r to max(normal_radius_m, r *
+                                         ///< this) [m per m], >= 0 (0 = a fixed radius)
   std::size_t normal_min_neighbors = 3;  ///< fewer neighbours (itself included): the point gets no normal, >= 2
-  double max_flatness = 0.3;  ///< sqrt(smaller / larger eigenvalue) of the neighbourhood above this: no line
-                              ///< (a corner or clutter), the point gets no normal, in (0, 1]
-  double threshold = 0.01;    ///< degenerate when the score (smallest translational eigenvalue of H per
-                              ///< point with a normal) is below this, in (0, 0.5]
+  double max_flatness = 0.3;             ///< sqrt(smaller / larger eigenvalue) of the neighbourhood above this: no line
+                                         ///< (a corner or clutter), the point gets no normal, in (0, 1]
+  double threshold = 0.01;               ///< degenerate when the score (smallest translational eigenvalue of H per
+                                         ///< point with a normal) is below this, in (0, 0.5]
 
   /// Empty when every field is in its domain, else a message naming the first bad field.
   std::string check() const;
@@ -155,7 +155,7 @@ struct InformationOptions {
 /// What the information-matrix detector found.
 struct InformationResult {
   Verdict verdict = Verdict::kCannotDecide;
-  double score = std::numeric_limits<double>::quiet_NaN();  ///< lambda_min(H_tt) / num_normals, [0, 0.5]
+  double score = std::numeric_limits<double>::quiet_NaN();          ///< lambda_min(H_tt) / num_normals, [0, 0.5]
   double direction_rad = std::numeric_limits<double>::quiet_NaN();  ///< eigenvector of lambda_min, (-pi/2, pi/2]
   /// Rotation information per point relative to its maximum, H_thth / sum |p_i|^2, in [0, 1] (0 for a
   /// robot at the centre of a round room: its rotation is unconstrained); NaN if undecided.
