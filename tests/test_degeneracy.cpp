@@ -14,6 +14,7 @@
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/degeneracy/ground_truth.hpp"
+#include "lidar2d/registration/matcher.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
 
@@ -304,6 +305,27 @@ TEST(DegeneracyRemap, ProjectorKeepsOnlyWellConstrainedDirections) {
   EXPECT_NEAR((P2 * Eigen::Vector3d(-s, c, 0.3) - Eigen::Vector3d(-s, c, 0.3)).norm(), 0.0, 1e-9);
   EXPECT_TRUE(P2.isApprox(projectorRemovingDirection(30 * kDeg), 1e-9));
   EXPECT_TRUE(wellConstrainedProjector(Eigen::Matrix3d::Constant(std::nan("")), 0.0).isZero());
+}
+
+// Solution remapping with the information matrix a matcher returns: in a corridor along x, the
+// projector built from point-to-line ICP's H removes x and keeps y and theta.
+TEST(DegeneracyRemap, ProjectorFromAMatchersInformationInACorridor) {
+  const auto w = walls({{V(-100, -1), V(100, -1)}, {V(-100, 1), V(100, 1)}});
+  const Points2 target = scan(w, SE2(), {}, 1), source = scan(w, SE2(0.1, 0.05, 0.02), {}, 2);
+  registration::MatcherOptions mo;
+  mo.method = registration::Method::kP2L;
+  const registration::Result r = registration::matchScans(target, source, SE2(0.1, 0.05, 0.02), mo);
+  ASSERT_GT(r.num_inliers, 100u);
+  // The matcher's normals (5 nearest neighbours, 1 cm noise) leave about 0.012 per inlier along the
+  // corridor (the detector's own, wider normals about 0.002): a threshold of 0.05 per inlier.
+  const Eigen::Matrix3d P = wellConstrainedProjector(r.information, 0.05 * static_cast<double>(r.num_inliers));
+  EXPECT_LT((P * Eigen::Vector3d::UnitX()).norm(), 0.05) << P;
+  EXPECT_NEAR((P * Eigen::Vector3d::UnitY() - Eigen::Vector3d::UnitY()).norm(), 0.0, 0.05) << P;
+  EXPECT_NEAR((P * Eigen::Vector3d::UnitZ() - Eigen::Vector3d::UnitZ()).norm(), 0.0, 0.05) << P;
+  // A slid estimate is pulled back to the guess along x only.
+  const SE2 remapped = remapPose(SE2(0.1, 0.05, 0.02), SE2(0.6, 0.06, 0.021), P);
+  EXPECT_NEAR(remapped.x(), 0.1, 0.03);
+  EXPECT_NEAR(remapped.y(), 0.06, 0.01);
 }
 
 TEST(DegeneracyRemap, ConstrainMatchKeepsThePriorAlongTheCorridor) {
