@@ -317,7 +317,7 @@ TEST(DegeneracyRemap, ProjectorFromAMatchersInformationInACorridor) {
   const registration::Result r = registration::matchScans(target, source, SE2(0.1, 0.05, 0.02), mo);
   ASSERT_GT(r.num_inliers, 100u);
   // The matcher's normals (5 nearest neighbours, 1 cm noise) leave about 0.012 per inlier along the
-  // corridor (the detector's own, wider normals about 0.002): a threshold of 0.05 per inlier.
+  // corridor (the detector's own, wider normals: below 0.002): a threshold of 0.05 per inlier.
   const Eigen::Matrix3d P = wellConstrainedProjector(r.information, 0.05 * static_cast<double>(r.num_inliers));
   EXPECT_LT((P * Eigen::Vector3d::UnitX()).norm(), 0.05) << P;
   EXPECT_NEAR((P * Eigen::Vector3d::UnitY() - Eigen::Vector3d::UnitY()).norm(), 0.0, 0.05) << P;
