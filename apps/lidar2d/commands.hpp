@@ -16,6 +16,7 @@ void addMapCommand(CLI::App& app);
 void addPosesCommand(CLI::App& app);
 void addMatchCommand(CLI::App& app);
 void addSlamCommand(CLI::App& app);
+void addDegeneracyCommand(CLI::App& app);
 
 /// Adds the reader flags shared by every command that reads a log (--scan-topic, --odom-topic,
 /// --carmen-laser, --carmen-poses) bound to `options`.

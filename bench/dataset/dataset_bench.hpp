@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "lidar2d/core/frame.hpp"
+#include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/registration/icp.hpp"
 
 namespace lidar2d::bench {
@@ -27,5 +28,17 @@ struct MatchBenchOptions {
   std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
 };
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);
+
+/// Options of the `degeneracy` subcommand.
+struct DegeneracyBenchOptions {
+  degeneracy::Options options;  ///< detector options (defaults of the library)
+  int beams = 541;              ///< simulated laser: beams over fov_deg
+  double fov_deg = 270.0;       ///< simulated laser: field of view [deg]
+  double max_range_m = 30.0;    ///< simulated laser: maximum range [m]
+  std::uint64_t seed = 1;       ///< simulator seed
+  bool verbose = false;         ///< list the simulated scans where the combination disagrees with the label
+  double spacing_m = degeneracy::InputOptions{}.min_spacing_m;  ///< thinning of both detectors [m]
+};
+void runDegeneracyBenchmark(const std::string& data_dir, const DegeneracyBenchOptions& options);
 
 }  // namespace lidar2d::bench

@@ -1,5 +1,6 @@
 // lidar2d_dataset_bench: accuracy and speed of lidar2d's algorithms on the real logs, as tables.
 //   lidar2d_dataset_bench map [--data DIR]
+//   lidar2d_dataset_bench degeneracy [--data DIR] [--beams N] [--fov DEG] [-v]
 //   lidar2d_dataset_bench match [--data DIR] [--sigma-xy M] [--sigma-theta DEG] [--seed N] [--methods p2p p2l ...]
 
 #include <CLI/CLI.hpp>
@@ -35,6 +36,23 @@ int main(int argc, char** argv) {
   match->add_option("--max-iterations", match_options.icp.max_iterations, "ICP max iterations")->capture_default_str();
   match->add_option("--gn-inner", match_options.icp.gn_inner_iterations, "Gauss-Newton steps per correspondence search")->capture_default_str();
   match->callback([&] { lidar2d::bench::runMatchBenchmark(data, match_options); });
+  lidar2d::bench::DegeneracyBenchOptions deg_options;
+  auto* deg = app.add_subcommand(
+      "degeneracy", "degeneracy detection: precision/recall on simulated worlds, flagged share of real logs, ms per scan");
+  deg->add_option("--beams", deg_options.beams, "simulated laser: number of beams")->capture_default_str();
+  deg->add_option("--fov", deg_options.fov_deg, "simulated laser: field of view [deg]")->capture_default_str();
+  deg->add_option("--max-range", deg_options.max_range_m, "simulated laser: maximum range [m]")->capture_default_str();
+  deg->add_option("--seed", deg_options.seed, "simulator seed")->capture_default_str();
+  deg->add_option("--geo-threshold", deg_options.options.geometric.threshold, "geometric detector threshold")->capture_default_str();
+  deg->add_option("--info-threshold", deg_options.options.information.threshold, "information detector threshold")->capture_default_str();
+  deg->add_option("--eps", deg_options.options.geometric.cluster_eps_m, "DBSCAN radius near the sensor [m]")->capture_default_str();
+  deg->add_option("--spacing", deg_options.spacing_m, "thinning: minimum point spacing [m] (both detectors)")->capture_default_str();
+  deg->add_flag("-v,--verbose", deg_options.verbose, "list the simulated scans the combination gets wrong (stderr)");
+  deg->callback([&] {
+    deg_options.options.geometric.input.min_spacing_m = deg_options.options.information.input.min_spacing_m =
+        deg_options.spacing_m;
+    lidar2d::bench::runDegeneracyBenchmark(data, deg_options);
+  });
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
