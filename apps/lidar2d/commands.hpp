@@ -15,6 +15,8 @@ void addEvalCommand(CLI::App& app);
 void addMapCommand(CLI::App& app);
 void addPosesCommand(CLI::App& app);
 void addMatchCommand(CLI::App& app);
+/// Adds `localize-index` and `localize`.
+void addLocalizeCommands(CLI::App& app);
 
 /// Adds the reader flags shared by every command that reads a log (--scan-topic, --odom-topic,
 /// --carmen-laser, --carmen-poses) bound to `options`.

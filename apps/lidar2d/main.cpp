@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   lidar2d::cli::addMapCommand(app);
   lidar2d::cli::addPosesCommand(app);
   lidar2d::cli::addMatchCommand(app);
+  lidar2d::cli::addLocalizeCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

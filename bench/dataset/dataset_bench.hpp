@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "lidar2d/core/frame.hpp"
+#include "lidar2d/localization/localizer.hpp"
 #include "lidar2d/registration/icp.hpp"
 
 namespace lidar2d::bench {
@@ -27,5 +28,17 @@ struct MatchBenchOptions {
   std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
 };
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);
+
+/// Options of the `localize` subcommand.
+struct LocalizeBenchOptions {
+  std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
+  std::size_t stride = 1;            ///< localize every stride-th odd scan
+  std::size_t baseline_stride = 20;  ///< branch-and-bound baseline on every n-th odd scan (0: skip)
+  std::string save_maps;             ///< folder to write the even-scan maps to (empty: none)
+  bool verbose = false;              ///< print every failure on stderr
+  localization::DatabaseOptions db;
+  localization::LocalizerOptions loc;
+};
+void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOptions& options);
 
 }  // namespace lidar2d::bench
