@@ -90,6 +90,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
                                             db.positions().size(), db.numPairs());
     localization::Localizer loc(map, std::move(db), bo.loc);
     std::size_t n = 0, ok = 0, answered = 0, declined = 0;
+    double t_desc = 0, t_look = 0, t_ver = 0;
     std::vector<double> ms;
     std::vector<std::size_t> odd;
     for (std::size_t i = 1; i < frames.size(); i += 2) odd.push_back(i);
@@ -98,6 +99,9 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
       const auto r = loc.localize(f.scan, f.T_robot_laser);
       ++n;
       ms.push_back(r.total_ms);
+      t_desc += r.describe_ms;
+      t_look += r.lookup_ms;
+      t_ver += r.verify_ms;
       if (r.declined) {
         ++declined;
       } else {
@@ -105,13 +109,15 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         ok += near(*f.T_world_robot, r.T_world_robot);
       }
       if (bo.verbose && (r.declined || !near(*f.T_world_robot, r.T_world_robot)))
-        std::cerr << fmt::format("{} scan {}: {} {} score {:.3f} lines {} cands {} alt {} ({:.3f} {:.3f} {:.1f}) truth ({:.3f} {:.3f} {:.1f})\n",
-                                 name, odd[k], r.declined ? "declined" : "WRONG", r.reason, r.score, r.num_lines,
-                                 r.num_candidates, r.alternatives.size(), r.T_world_robot.x(), r.T_world_robot.y(),
+        std::cerr << fmt::format("{} scan {}: {} {} truth score {:.3f} score {:.3f} lines {} cands {} alt {} alt0 {:.3f} ({:.3f} {:.3f} {:.1f}) truth ({:.3f} {:.3f} {:.1f})\n",
+                                 name, odd[k], r.declined ? "declined" : "WRONG", r.reason,
+                                 loc.score(f.scan.toPoints(f.T_robot_laser), *f.T_world_robot, f.T_robot_laser.translation()), r.score, r.num_lines,
+                                 r.num_candidates, r.alternatives.size(), r.alternatives.empty() ? 0.0 : r.alternatives[0].score, r.T_world_robot.x(), r.T_world_robot.y(),
                                  r.T_world_robot.theta() / kDeg, f.T_world_robot->x(), f.T_world_robot->y(),
                                  f.T_world_robot->theta() / kDeg);
     }
     row(name, "descriptor", n, ok, answered, declined, ms, db_desc);
+    if (bo.verbose) std::cerr << fmt::format("mean ms: describe {:.2f} lookup {:.2f} verify {:.2f}\n", t_desc / static_cast<double>(n), t_look / static_cast<double>(n), t_ver / static_cast<double>(n));
 
     if (bo.baseline_stride > 0) {
       registration::CorrelativeOptions co;

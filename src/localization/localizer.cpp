@@ -82,7 +82,10 @@ void LocalizerOptions::validate() const {
   if (!(vote_bin_m > 0) || !std::isfinite(vote_bin_m)) throw badOption("vote_bin_m", vote_bin_m);
   if (!(vote_bin_rad > 0) || !std::isfinite(vote_bin_rad)) throw badOption("vote_bin_rad", vote_bin_rad);
   if (max_candidates < 1) throw badOption("max_candidates", static_cast<double>(max_candidates));
+  if (max_refined < 1) throw badOption("max_refined", static_cast<double>(max_refined));
+  if (prescore_points < 10) throw badOption("prescore_points", static_cast<double>(prescore_points));
   if (!(hit_distance_m > 0) || !std::isfinite(hit_distance_m)) throw badOption("hit_distance_m", hit_distance_m);
+  if (!(free_margin_m >= 0) || !std::isfinite(free_margin_m)) throw badOption("free_margin_m", free_margin_m);
   if (!(max_range_m > 0)) throw badOption("max_range_m", max_range_m);
   if (!(min_score >= 0 && min_score <= 1)) throw badOption("min_score", min_score);
   if (!(ambiguity_ratio >= 0 && ambiguity_ratio <= 1)) throw badOption("ambiguity_ratio", ambiguity_ratio);
@@ -365,6 +368,8 @@ struct Localizer::State {
   registration::LikelihoodFieldOptions lf_options;
   registration::LikelihoodField field;
   std::optional<registration::CorrelativeGrid> grid;
+  io::OccupancyImage map;  // for the free-space check
+  SE2 T_map_world;
   registration::CorrelativeOptions corr_options;
 };
 
@@ -375,6 +380,8 @@ std::unique_ptr<Localizer::State> makeState(const io::OccupancyImage& map, Datab
   auto s = std::make_unique<Localizer::State>();
   s->options = options;
   s->db = std::move(db);
+  s->map = map;
+  s->T_map_world = map.origin().inverse();
   s->lf_options.resolution_m = map.resolution();
   s->lf_options.levels = 3;
   s->lf_options.truncation_m = std::max(0.3, 2.0 * map.resolution());
@@ -411,22 +418,41 @@ Localizer::~Localizer() = default;
 const Database& Localizer::database() const { return s_->db; }
 const LocalizerOptions& Localizer::options() const { return s_->options; }
 
-double Localizer::score(const Points2& points_robot, const SE2& T_world_robot) const {
-  std::size_t n = 0, hit = 0;
+double Localizer::score(const Points2& points_robot, const SE2& T_world_robot, const Eigen::Vector2d& sensor_robot) const {
+  const io::OccupancyImage& map = s_->map;
+  const double res = map.resolution();
+  const int occ = s_->db.options().occupied_min;
+  const SE2 T_map_robot = s_->T_map_world * T_world_robot;
+  const Eigen::Vector2d o = (T_map_robot * sensor_robot) / res;  // cell units
+  std::size_t n = 0, hit = 0, through = 0;
   for (const auto& p : points_robot) {
     if (!p.allFinite()) continue;
     ++n;
     const auto smp = s_->field.sample(T_world_robot * p, 0);
     hit += smp.value < s_->options.hit_distance_m;
+    // Free-space check: walk the beam cell by cell up to free_margin before the endpoint.
+    const Eigen::Vector2d e = (T_map_robot * p) / res;
+    const double len = (e - o).norm() - s_->options.free_margin_m / res;
+    if (len <= 0) continue;
+    const Eigen::Vector2d dir = (e - o).normalized();
+    for (double t = 0.5; t < len; t += 1.0) {
+      const Eigen::Vector2d q = o + t * dir;
+      const int cx = static_cast<int>(std::floor(q.x())), cy = static_cast<int>(std::floor(q.y()));
+      if (map.contains(cx, cy) && map.at(cx, cy) >= occ) {
+        ++through;
+        break;
+      }
+    }
   }
-  return n ? static_cast<double>(hit) / static_cast<double>(n) : 0.0;
+  if (n == 0) return 0.0;
+  return std::clamp((static_cast<double>(hit) - static_cast<double>(through)) / static_cast<double>(n), 0.0, 1.0);
 }
 
 LocalizationResult Localizer::localize(const LaserScan& scan, const SE2& T_robot_laser) const {
-  return localize(scan.toPoints(T_robot_laser));
+  return localize(scan.toPoints(T_robot_laser), T_robot_laser.translation());
 }
 
-LocalizationResult Localizer::localize(const Points2& points_robot) const {
+LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen::Vector2d& sensor_robot) const {
   using Clock = std::chrono::steady_clock;
   const auto ms = [](Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double, std::milli>(b - a).count();
@@ -534,20 +560,44 @@ LocalizationResult Localizer::localize(const Points2& points_robot) const {
   const auto t2 = Clock::now();
   res.lookup_ms = ms(t1, t2);
 
-  // 3. Verify: refine each candidate against the map's likelihood field and score it.
-  std::vector<Candidate> cands;
+  // 3. Verify. Pre-score every candidate bin cheaply (hits of a subsample of the points at the bin's
+  // mean pose, lenient distance), then refine the best few against the likelihood field and score
+  // them fully (hits and free space).
+  Points2 sub;
+  const std::size_t stride_pts = std::max<std::size_t>(1, pts.size() / o.prescore_points);
+  for (std::size_t i = 0; i < pts.size(); i += stride_pts) sub.push_back(pts[i]);
+  struct Pre {
+    SE2 guess;
+    double pre = 0;
+    double votes = 0;
+  };
+  std::vector<Pre> pre;
+  pre.reserve(n_cand);
+  const double pre_hit = 2.0 * o.hit_distance_m;
   for (std::size_t c = 0; c < n_cand; ++c) {
     const Bin& b = *ranked[c].second;
     const SE2 guess(b.sx / b.n, b.sy / b.n, std::atan2(b.ss, b.sc));
+    std::size_t hit = 0;
+    for (const auto& p : sub) hit += s_->field.sample(guess * p, 0).value < pre_hit;
+    pre.push_back({guess, static_cast<double>(hit) / static_cast<double>(sub.size()), b.votes});
+  }
+  // Best pre-scores first, skipping near-duplicates of an already chosen candidate (neighbouring bins
+  // of one pose), so that distinct hypotheses (e.g. symmetric rooms) all get refined.
+  std::sort(pre.begin(), pre.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
+  std::vector<Candidate> cands;
+  std::vector<SE2> chosen;
+  for (std::size_t c = 0; c < pre.size() && chosen.size() < o.max_refined; ++c) {
+    const SE2& guess = pre[c].guess;
+    bool dup = false;
+    for (const SE2& q : chosen)
+      dup = dup || ((q.translation() - guess.translation()).norm() < 2.0 * o.vote_bin_m &&
+                    std::abs(angleDiff(q.theta(), guess.theta())) < 2.0 * o.vote_bin_rad);
+    if (dup) continue;
+    chosen.push_back(guess);
     const registration::Result r = registration::matchLikelihoodField(s_->field, pts, guess, s_->lf_options);
     SE2 T = r.T_target_source;
-    double sc = score(pts, T);
-    const double sc_guess = score(pts, guess);
-    if (sc_guess > sc) {
-      T = guess;
-      sc = sc_guess;
-    }
-    cands.push_back({T, sc, b.votes});
+    if (!T.isFinite() || (T.translation() - guess.translation()).norm() > 0.5) T = guess;
+    cands.push_back({T, score(pts, T, sensor_robot), pre[c].votes});
   }
   res.num_candidates = cands.size();
 
@@ -559,7 +609,7 @@ LocalizationResult Localizer::localize(const Points2& points_robot) const {
     const registration::CorrelativeResult r =
         registration::matchCorrelativeGlobal(*s_->grid, pts, s_->corr_options, &s_->field);
     if (r.T_target_source.isFinite()) {
-      cands.push_back({r.T_target_source, score(pts, r.T_target_source), 0.0});
+      cands.push_back({r.T_target_source, score(pts, r.T_target_source, sensor_robot), 0.0});
       res.used_fallback = true;
       bestOf();
     }

@@ -21,10 +21,10 @@ namespace lidar2d::localization {
 /// Options of the line extractor. `validate()` throws `lidar2d::Error` (kInvalidArgument) naming
 /// the first field out of its domain.
 struct LineExtractionOptions {
-  double split_threshold_m = 0.06;  ///< a run is split where a point is farther than this from its chord [m], > 0
-  double max_gap_m = 0.4;           ///< consecutive points farther apart start a new run [m], > 0
-  std::size_t min_points = 5;       ///< fewer points make no line, >= 2
-  double min_length_m = 0.6;        ///< shorter segments are dropped [m], >= 0
+  double split_threshold_m = 0.05;  ///< a run is split where a point is farther than this from its chord [m], > 0
+  double max_gap_m = 0.5;           ///< consecutive points farther apart start a new run [m], > 0
+  std::size_t min_points = 4;       ///< fewer points make no line, >= 2
+  double min_length_m = 0.4;        ///< shorter segments are dropped [m], >= 0
   double max_rms_m = 0.04;          ///< refit residual RMS above this rejects the segment [m], > 0
   double min_distance_m = 0.3;      ///< lines passing closer to the origin have no usable normal [m], >= 0
   double merge_angle_rad = 0.05;    ///< segments of (nearly) the same infinite line are merged: normal angles [rad], >= 0

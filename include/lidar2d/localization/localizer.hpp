@@ -43,18 +43,26 @@ namespace lidar2d::localization {
 /// `lidar2d::Error` (kInvalidArgument) naming the first field out of its domain.
 struct DatabaseOptions {
   double step_m = 0.2;               ///< spacing of the grid of positions [m], > 0
-  int beams = 360;                   ///< beams of each virtual scan, 8..100000
+  int beams = 720;                   ///< beams of each virtual scan, 8..100000
   double fov_rad = 2.0 * std::numbers::pi;  ///< field of view of the virtual scans, centred on +x [rad], in (0, 2 pi]
-  double max_range_m = 20.0;         ///< range of the virtual scans [m], > 0
+  double max_range_m = 30.0;         ///< range of the virtual scans [m], > 0
   double clearance_m = 0.25;         ///< positions keep this distance from occupied and unknown cells [m], >= 0
   int occupied_min = 65;             ///< map cells >= this are obstacles, 1..100
   int free_max = 25;                 ///< map cells 0..free_max are free, 0..99, < occupied_min
-  std::size_t max_lines = 16;        ///< longest lines kept per position, 2..64
+  std::size_t max_lines = 24;        ///< longest lines kept per position, 2..64
   /// Weight of the relative angle in the pair key (d_i, d_j, k * angle) [m/rad], > 0
   double key_angle_scale_m_per_rad = 2.0;
   double min_pair_angle_rad = 20.0 * std::numbers::pi / 180.0;  ///< pairs closer to parallel are not indexed [rad], in [0, pi/2]
-  LineExtractionOptions lines;       ///< line extraction of the virtual scans
+  /// Line extraction of the virtual scans: more permissive than the query's (shorter lines, fewer
+  /// points), so that the database holds a superset of what a real scan extracts.
+  LineExtractionOptions lines = permissiveLines();
   void validate() const;
+  static LineExtractionOptions permissiveLines() {
+    LineExtractionOptions l;
+    l.min_points = 3;
+    l.min_length_m = 0.25;
+    return l;
+  }
 };
 
 /// Progress of a long build: called with (done, total) positions; must be cheap.
@@ -122,8 +130,11 @@ struct LocalizerOptions {
   double key_radius_m = 0.3;         ///< search radius in key space (distances in m, angle scaled by key_angle_scale) [m], > 0
   double vote_bin_m = 0.3;           ///< translation bin of the pose vote [m], > 0
   double vote_bin_rad = 6.0 * std::numbers::pi / 180.0;  ///< rotation bin [rad], > 0
-  std::size_t max_candidates = 24;   ///< best-voted bins verified, >= 1
+  std::size_t max_candidates = 150;  ///< best-voted bins pre-scored (hits of a subsample of points, no refinement), >= 1
+  std::size_t max_refined = 12;      ///< best pre-scored candidates refined and fully scored, >= 1
+  std::size_t prescore_points = 60;  ///< points (evenly subsampled) of the pre-score, >= 10
   double hit_distance_m = 0.1;       ///< a scan point within this of an obstacle counts for the score [m], > 0
+  double free_margin_m = 0.3;        ///< a beam crossing an obstacle cell farther than this before its endpoint counts against the score [m], >= 0
   double max_range_m = 30.0;         ///< scan points beyond this are ignored [m], > 0
   double min_score = 0.5;            ///< a best score below this declines, in [0, 1]
   /// A distinct alternative scoring at least this fraction of the best declines the answer
@@ -140,7 +151,7 @@ struct LocalizerOptions {
 /// One verified pose hypothesis.
 struct Candidate {
   SE2 T_world_robot;      ///< refined pose
-  double score = 0.0;     ///< fraction of scan points within hit_distance of an obstacle, in [0, 1]
+  double score = 0.0;     ///< Localizer::score of the pose, in [0, 1]
   double votes = 0.0;     ///< descriptor votes of its bin (0 for the fallback)
 };
 
@@ -173,14 +184,21 @@ class Localizer {
   Localizer(const Localizer&) = delete;
   Localizer& operator=(const Localizer&) = delete;
 
-  /// Localizes points given in the robot frame, in scan order (LaserScan::toPoints(T_robot_laser)).
-  /// Never throws for bad data: no valid points, no lines or nothing scoring give declined = true.
-  LocalizationResult localize(const Points2& points_robot) const;
+  /// Localizes points given in the robot frame, in scan order (LaserScan::toPoints(T_robot_laser));
+  /// `sensor_robot` is the laser's position in the robot frame (the origin of the beams, used by the
+  /// free-space check of the score). Never throws for bad data: no valid points, no lines or nothing
+  /// scoring give declined = true.
+  LocalizationResult localize(const Points2& points_robot,
+                              const Eigen::Vector2d& sensor_robot = Eigen::Vector2d::Zero()) const;
   /// Same for a scan: its valid beams through `T_robot_laser`.
   LocalizationResult localize(const LaserScan& scan, const SE2& T_robot_laser = {}) const;
 
-  /// Score of a pose without refinement: fraction of the points within hit_distance of an obstacle.
-  double score(const Points2& points_robot, const SE2& T_world_robot) const;
+  /// Score of a pose without refinement: (points within hit_distance of an obstacle - beams that
+  /// cross an obstacle cell more than free_margin before their endpoint) / points, clamped to [0, 1].
+  /// The second term rejects poses that explain the walls but see through other walls (a mirror
+  /// image of the room, a partial view that fits elsewhere).
+  double score(const Points2& points_robot, const SE2& T_world_robot,
+               const Eigen::Vector2d& sensor_robot = Eigen::Vector2d::Zero()) const;
 
   const Database& database() const;
   const LocalizerOptions& options() const;
