@@ -47,6 +47,8 @@ int main(int argc, char** argv) {
   loc->add_option("--ambiguity", loc_options.loc.ambiguity_ratio, "ambiguity ratio")->capture_default_str();
   loc->add_option("--candidates", loc_options.loc.max_candidates, "candidates verified")->capture_default_str();
   loc->add_option("--key-radius", loc_options.loc.key_radius_m, "key search radius")->capture_default_str();
+  loc->add_option("--refined", loc_options.loc.max_refined, "candidates refined")->capture_default_str();
+  loc->add_option("--bin", loc_options.loc.vote_bin_m, "vote bin [m]")->capture_default_str();
   loc->add_flag("--fallback", loc_options.loc.fallback_branch_and_bound, "branch-and-bound fallback");
   loc->add_flag("-v,--verbose", loc_options.verbose, "print each failure");
   loc->callback([&] { lidar2d::bench::runLocalizeBenchmark(data, loc_options); });

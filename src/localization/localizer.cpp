@@ -383,7 +383,7 @@ std::unique_ptr<Localizer::State> makeState(const io::OccupancyImage& map, Datab
   s->map = map;
   s->T_map_world = map.origin().inverse();
   s->lf_options.resolution_m = map.resolution();
-  s->lf_options.levels = 3;
+  s->lf_options.levels = 2;
   s->lf_options.truncation_m = std::max(0.3, 2.0 * map.resolution());
   s->lf_options.occupied_min = s->db.options().occupied_min;
   s->lf_options.max_iterations = 15;

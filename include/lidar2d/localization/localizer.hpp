@@ -130,8 +130,8 @@ struct LocalizerOptions {
   double key_radius_m = 0.3;         ///< search radius in key space (distances in m, angle scaled by key_angle_scale) [m], > 0
   double vote_bin_m = 0.3;           ///< translation bin of the pose vote [m], > 0
   double vote_bin_rad = 6.0 * std::numbers::pi / 180.0;  ///< rotation bin [rad], > 0
-  std::size_t max_candidates = 150;  ///< best-voted bins pre-scored (hits of a subsample of points, no refinement), >= 1
-  std::size_t max_refined = 12;      ///< best pre-scored candidates refined and fully scored, >= 1
+  std::size_t max_candidates = 5000; ///< best-voted bins pre-scored (hits of a subsample of points, no refinement), >= 1
+  std::size_t max_refined = 16;      ///< best pre-scored candidates refined and fully scored, >= 1
   std::size_t prescore_points = 60;  ///< points (evenly subsampled) of the pre-score, >= 10
   double hit_distance_m = 0.1;       ///< a scan point within this of an obstacle counts for the score [m], > 0
   double free_margin_m = 0.3;        ///< a beam crossing an obstacle cell farther than this before its endpoint counts against the score [m], >= 0
@@ -139,7 +139,7 @@ struct LocalizerOptions {
   double min_score = 0.5;            ///< a best score below this declines, in [0, 1]
   /// A distinct alternative scoring at least this fraction of the best declines the answer
   /// (ambiguous, e.g. a symmetric building), in [0, 1].
-  double ambiguity_ratio = 0.9;
+  double ambiguity_ratio = 0.95;
   double distinct_distance_m = 1.0;  ///< alternatives farther than this from the best are distinct [m]
   double distinct_angle_rad = 20.0 * std::numbers::pi / 180.0;  ///< ... or turned by more than this [rad]
   /// When no descriptor candidate scores at least min_score, search the whole map by branch and
