@@ -83,7 +83,9 @@ void LocalizerOptions::validate() const {
   if (!(vote_bin_rad > 0) || !std::isfinite(vote_bin_rad)) throw badOption("vote_bin_rad", vote_bin_rad);
   if (max_candidates < 1) throw badOption("max_candidates", static_cast<double>(max_candidates));
   if (max_refined < 1) throw badOption("max_refined", static_cast<double>(max_refined));
+  if (max_verify_points < 10) throw badOption("max_verify_points", static_cast<double>(max_verify_points));
   if (prescore_points < 10) throw badOption("prescore_points", static_cast<double>(prescore_points));
+  if (max_free_space_checked < 1) throw badOption("max_free_space_checked", static_cast<double>(max_free_space_checked));
   if (!(hit_distance_m > 0) || !std::isfinite(hit_distance_m)) throw badOption("hit_distance_m", hit_distance_m);
   if (!(free_margin_m >= 0) || !std::isfinite(free_margin_m)) throw badOption("free_margin_m", free_margin_m);
   if (!(max_range_m > 0)) throw badOption("max_range_m", max_range_m);
@@ -435,7 +437,9 @@ double Localizer::score(const Points2& points_robot, const SE2& T_world_robot, c
     const double len = (e - o).norm() - s_->options.free_margin_m / res;
     if (len <= 0) continue;
     const Eigen::Vector2d dir = (e - o).normalized();
-    for (double t = 0.5; t < len; t += 1.0) {
+    // Steps of one cell, or 5 cm on finer maps (walls there are several cells thick).
+    const double step = std::max(1.0, 0.05 / res);
+    for (double t = 0.5; t < len; t += step) {
       const Eigen::Vector2d q = o + t * dir;
       const int cx = static_cast<int>(std::floor(q.x())), cy = static_cast<int>(std::floor(q.y()));
       if (map.contains(cx, cy) && map.at(cx, cy) >= occ) {
@@ -475,8 +479,15 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   };
   if (pts.size() < 10) return finish("no points");
 
-  // 1. Describe: lines of the scan (robot frame).
+  // 1. Describe: lines of the scan (robot frame), from every point.
   std::vector<Line> lines = extractLines(pts, o.lines);
+  // Verification needs no more than max_verify_points (evenly subsampled) to score and refine.
+  if (pts.size() > o.max_verify_points) {
+    Points2 thin;
+    const double stride = static_cast<double>(pts.size()) / static_cast<double>(o.max_verify_points);
+    for (std::size_t k = 0; k < o.max_verify_points; ++k) thin.push_back(pts[static_cast<std::size_t>(k * stride)]);
+    pts = std::move(thin);
+  }
   if (lines.size() > o.max_query_lines) lines.resize(o.max_query_lines);
   res.num_lines = lines.size();
   const auto t1 = Clock::now();
@@ -560,9 +571,9 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   const auto t2 = Clock::now();
   res.lookup_ms = ms(t1, t2);
 
-  // 3. Verify. Pre-score every candidate bin cheaply (hits of a subsample of the points at the bin's
-  // mean pose, lenient distance), then refine the best few against the likelihood field and score
-  // them fully (hits and free space).
+  // 3. Verify in three stages of decreasing count and increasing cost: (A) every candidate bin's
+  // mean pose against the likelihood field on a subsample of the points, (B) the best distinct ones
+  // with the free-space term, (C) the best of those refined and scored on all (verification) points.
   Points2 sub;
   const std::size_t stride_pts = std::max<std::size_t>(1, pts.size() / o.prescore_points);
   for (std::size_t i = 0; i < pts.size(); i += stride_pts) sub.push_back(pts[i]);
@@ -573,31 +584,47 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   };
   std::vector<Pre> pre;
   pre.reserve(n_cand);
-  const double pre_hit = 2.0 * o.hit_distance_m;
+  // Stage A: a smooth kernel of the field value (so that near-ties are ordered by how close the
+  // points are, not just whether they are within a tolerance).
+  const double pre_sigma = 2.0 * o.hit_distance_m;
   for (std::size_t c = 0; c < n_cand; ++c) {
     const Bin& b = *ranked[c].second;
     const SE2 guess(b.sx / b.n, b.sy / b.n, std::atan2(b.ss, b.sc));
-    std::size_t hit = 0;
-    for (const auto& p : sub) hit += s_->field.sample(guess * p, 0).value < pre_hit;
-    pre.push_back({guess, static_cast<double>(hit) / static_cast<double>(sub.size()), b.votes});
+    double acc = 0;
+    for (const auto& p : sub) {
+      const double v = s_->field.sample(guess * p, 0).value / pre_sigma;
+      acc += v < 1.0 ? 1.0 - v * v : 0.0;
+    }
+    pre.push_back({guess, acc / static_cast<double>(sub.size()), b.votes});
   }
-  // Best pre-scores first, skipping near-duplicates of an already chosen candidate (neighbouring bins
-  // of one pose), so that distinct hypotheses (e.g. symmetric rooms) all get refined.
   std::sort(pre.begin(), pre.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
-  std::vector<Candidate> cands;
-  std::vector<SE2> chosen;
-  for (std::size_t c = 0; c < pre.size() && chosen.size() < o.max_refined; ++c) {
+  // Stage B: the best distinct ones (neighbouring bins of one pose suppressed, so that distinct
+  // hypotheses such as symmetric rooms all get through) scored with the free-space term.
+  std::vector<Pre> stage_b;
+  for (std::size_t c = 0; c < pre.size() && stage_b.size() < o.max_free_space_checked; ++c) {
     const SE2& guess = pre[c].guess;
     bool dup = false;
-    for (const SE2& q : chosen)
-      dup = dup || ((q.translation() - guess.translation()).norm() < 2.0 * o.vote_bin_m &&
-                    std::abs(angleDiff(q.theta(), guess.theta())) < 2.0 * o.vote_bin_rad);
+    for (const Pre& q : stage_b)
+      dup = dup || ((q.guess.translation() - guess.translation()).norm() < 2.0 * o.vote_bin_m &&
+                    std::abs(angleDiff(q.guess.theta(), guess.theta())) < 2.0 * o.vote_bin_rad);
     if (dup) continue;
-    chosen.push_back(guess);
+    stage_b.push_back({guess, score(sub, guess, sensor_robot) + 1e-3 * pre[c].pre, pre[c].votes});
+  }
+  std::sort(stage_b.begin(), stage_b.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
+  // Stage C: refine the best against the likelihood field and score them on every point.
+  std::vector<Candidate> cands;
+  for (std::size_t c = 0; c < stage_b.size() && c < o.max_refined; ++c) {
+    const SE2& guess = stage_b[c].guess;
     const registration::Result r = registration::matchLikelihoodField(s_->field, pts, guess, s_->lf_options);
     SE2 T = r.T_target_source;
     if (!T.isFinite() || (T.translation() - guess.translation()).norm() > 0.5) T = guess;
-    cands.push_back({T, score(pts, T, sensor_robot), pre[c].votes});
+    double sc = score(pts, T, sensor_robot);
+    const double sc_guess = score(pts, guess, sensor_robot);
+    if (sc_guess > sc) {
+      T = guess;
+      sc = sc_guess;
+    }
+    cands.push_back({T, sc, stage_b[c].votes});
   }
   res.num_candidates = cands.size();
 

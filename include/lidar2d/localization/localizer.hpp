@@ -130,8 +130,10 @@ struct LocalizerOptions {
   double key_radius_m = 0.3;         ///< search radius in key space (distances in m, angle scaled by key_angle_scale) [m], > 0
   double vote_bin_m = 0.3;           ///< translation bin of the pose vote [m], > 0
   double vote_bin_rad = 6.0 * std::numbers::pi / 180.0;  ///< rotation bin [rad], > 0
-  std::size_t max_candidates = 5000; ///< best-voted bins pre-scored (hits of a subsample of points, no refinement), >= 1
-  std::size_t max_refined = 16;      ///< best pre-scored candidates refined and fully scored, >= 1
+  std::size_t max_candidates = 5000; ///< best-voted bins pre-scored (field kernel on a subsample of points, no refinement), >= 1
+  std::size_t max_free_space_checked = 32;  ///< best distinct pre-scored candidates scored with the free-space term (subsample), >= 1
+  std::size_t max_refined = 16;      ///< best of those refined and scored on every point, >= 1
+  std::size_t max_verify_points = 400;  ///< refinement and score use at most this many points (evenly subsampled), >= 10
   std::size_t prescore_points = 60;  ///< points (evenly subsampled) of the pre-score, >= 10
   double hit_distance_m = 0.1;       ///< a scan point within this of an obstacle counts for the score [m], > 0
   double free_margin_m = 0.3;        ///< a beam crossing an obstacle cell farther than this before its endpoint counts against the score [m], >= 0
