@@ -95,8 +95,8 @@ TEST_F(CliLocalize, WithoutDatabaseBuildsItInMemoryAndSelectsScans) {
 }
 
 TEST_F(CliLocalize, SymmetricWorldDeclines) {
-  const auto r = runCli({"localize", path("sym.yaml"), path("sym.log"), "-o", path("sym.txt"), "--scans", "odd",
-                         "--step", "0.3", "-q"});
+  const auto r = runCli(
+      {"localize", path("sym.yaml"), path("sym.log"), "-o", path("sym.txt"), "--scans", "odd", "--step", "0.3", "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto lines = rows(path("sym.txt"));
   ASSERT_EQ(lines.size(), 100u);

@@ -169,7 +169,9 @@ TEST(Localization, SymmetricWorldDeclinesOrListsEverySymmetricPose) {
       found += std::any_of(listed.begin(), listed.end(), [&](const SE2& p) { return near(sym, p); });
     }
     // Never a confident answer naming one room: either "unknown", or every symmetric pose listed.
-    EXPECT_TRUE(r.declined || found == 4) << "scan " << i << " answered with " << found << " of 4 symmetric poses; score " << r.score << " alternative " << (r.alternatives.empty() ? 0.0 : r.alternatives[0].score);
+    EXPECT_TRUE(r.declined || found == 4)
+        << "scan " << i << " answered with " << found << " of 4 symmetric poses; score " << r.score << " alternative "
+        << (r.alternatives.empty() ? 0.0 : r.alternatives[0].score);
     if (r.declined && r.reason == std::string("ambiguous")) {
       EXPECT_GE(found, 2) << "scan " << i;
     }
@@ -242,8 +244,9 @@ TEST(LocalizationDatabase, AnotherMapIsRefused) {
   Database db = Database::build(s.map, fastDb());
   io::OccupancyImage other = s.map;
   other.set(other.width() / 2, other.height() / 2,
-            other.at(other.width() / 2, other.height() / 2) == io::OccupancyImage::kOccupied ? io::OccupancyImage::kFree
-                                                                                               : io::OccupancyImage::kOccupied);
+            other.at(other.width() / 2, other.height() / 2) == io::OccupancyImage::kOccupied
+                ? io::OccupancyImage::kFree
+                : io::OccupancyImage::kOccupied);
   try {
     Localizer loc(other, std::move(db));
     FAIL() << "no error";
@@ -296,7 +299,8 @@ TEST(LocalizationReal, IntelOddScansInEvenMapSubset) {
   std::vector<Frame> frames;
   while (auto f = src->next()) frames.push_back(std::move(*f));
   auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
-  for (std::size_t i = 0; i < frames.size(); i += 2) m->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
+  for (std::size_t i = 0; i < frames.size(); i += 2)
+    m->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
   const io::OccupancyImage map = mapping::toOccupancyImage(*m);
   DatabaseOptions o;
   o.step_m = 0.25;

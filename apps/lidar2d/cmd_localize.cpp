@@ -14,10 +14,10 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <numbers>
-#include <map>
 #include <numeric>
 #include <optional>
 
@@ -203,8 +203,10 @@ void runLocalize(const LocArgs& a) {
     std::cerr << fmt::format("localized {} scans: {} answered, {} declined; median {:.1f} ms, p95 {:.1f} ms per scan",
                              scans, answered, declined, percentile(times_ms, 0.5), percentile(times_ms, 0.95));
     if (a.eval)
-      std::cerr << fmt::format("; success {:.1f}%, precision {:.1f}%", 100.0 * static_cast<double>(correct) / static_cast<double>(with_truth),
-                               answered ? 100.0 * static_cast<double>(correct_answered) / static_cast<double>(answered) : 0.0);
+      std::cerr << fmt::format(
+          "; success {:.1f}%, precision {:.1f}%",
+          100.0 * static_cast<double>(correct) / static_cast<double>(with_truth),
+          answered ? 100.0 * static_cast<double>(correct_answered) / static_cast<double>(answered) : 0.0);
     std::cerr << fmt::format(" -> {}\n", a.output);
   }
 }

@@ -58,11 +58,12 @@ io::OccupancyImage evenMap(const std::vector<Frame>& frames) {
 
 void row(const std::string& name, const std::string& method, std::size_t n, std::size_t ok, std::size_t answered,
          std::size_t declined, const std::vector<double>& ms, const std::string& db) {
-  std::cout << fmt::format("| {} | {} | {} | {:.1f}% | {} | {:.1f}% | {:.1f} | {:.1f} | {} |\n", name, method, n,
-                           100.0 * static_cast<double>(ok) / static_cast<double>(n),
-                           answered ? fmt::format("{:.1f}%", 100.0 * static_cast<double>(ok) / static_cast<double>(answered))
-                                    : std::string("-"),
-                           100.0 * static_cast<double>(declined) / static_cast<double>(n), pct(ms, 0.5), pct(ms, 0.95), db);
+  std::cout << fmt::format(
+      "| {} | {} | {} | {:.1f}% | {} | {:.1f}% | {:.1f} | {:.1f} | {} |\n", name, method, n,
+      100.0 * static_cast<double>(ok) / static_cast<double>(n),
+      answered ? fmt::format("{:.1f}%", 100.0 * static_cast<double>(ok) / static_cast<double>(answered))
+               : std::string("-"),
+      100.0 * static_cast<double>(declined) / static_cast<double>(n), pct(ms, 0.5), pct(ms, 0.95), db);
 }
 
 }  // namespace
@@ -86,8 +87,8 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     const auto tb = Clock::now();
     localization::Database db = localization::Database::build(map, bo.db);
     const double build_s = sec(tb);
-    const std::string db_desc = fmt::format("{:.2f} s, {:.1f} MB, {} positions, {} pairs", build_s, db.memoryBytes() / 1e6,
-                                            db.positions().size(), db.numPairs());
+    const std::string db_desc = fmt::format("{:.2f} s, {:.1f} MB, {} positions, {} pairs", build_s,
+                                            db.memoryBytes() / 1e6, db.positions().size(), db.numPairs());
     localization::Localizer loc(map, std::move(db), bo.loc);
     std::size_t n = 0, ok = 0, answered = 0, declined = 0;
     double t_desc = 0, t_look = 0, t_ver = 0;
@@ -109,15 +110,21 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         ok += near(*f.T_world_robot, r.T_world_robot);
       }
       if (bo.verbose && (r.declined || !near(*f.T_world_robot, r.T_world_robot)))
-        std::cerr << fmt::format("{} scan {}: {} {} truth score {:.3f} score {:.3f} lines {} cands {} alt {} alt0 {:.3f} ({:.3f} {:.3f} {:.1f}) truth ({:.3f} {:.3f} {:.1f})\n",
-                                 name, odd[k], r.declined ? "declined" : "WRONG", r.reason,
-                                 loc.score(f.scan.toPoints(f.T_robot_laser), *f.T_world_robot, f.T_robot_laser.translation()), r.score, r.num_lines,
-                                 r.num_candidates, r.alternatives.size(), r.alternatives.empty() ? 0.0 : r.alternatives[0].score, r.T_world_robot.x(), r.T_world_robot.y(),
-                                 r.T_world_robot.theta() / kDeg, f.T_world_robot->x(), f.T_world_robot->y(),
-                                 f.T_world_robot->theta() / kDeg);
+        std::cerr << fmt::format(
+            "{} scan {}: {} {} truth score {:.3f} score {:.3f} lines {} cands {} alt {} alt0 {:.3f} ({:.3f} {:.3f} "
+            "{:.1f}) truth ({:.3f} {:.3f} {:.1f})\n",
+            name, odd[k], r.declined ? "declined" : "WRONG", r.reason,
+            loc.score(f.scan.toPoints(f.T_robot_laser), *f.T_world_robot, f.T_robot_laser.translation()), r.score,
+            r.num_lines, r.num_candidates, r.alternatives.size(),
+            r.alternatives.empty() ? 0.0 : r.alternatives[0].score, r.T_world_robot.x(), r.T_world_robot.y(),
+            r.T_world_robot.theta() / kDeg, f.T_world_robot->x(), f.T_world_robot->y(),
+            f.T_world_robot->theta() / kDeg);
     }
     row(name, "descriptor", n, ok, answered, declined, ms, db_desc);
-    if (bo.verbose) std::cerr << fmt::format("mean ms: describe {:.2f} lookup {:.2f} verify {:.2f}\n", t_desc / static_cast<double>(n), t_look / static_cast<double>(n), t_ver / static_cast<double>(n));
+    if (bo.verbose)
+      std::cerr << fmt::format("mean ms: describe {:.2f} lookup {:.2f} verify {:.2f}\n",
+                               t_desc / static_cast<double>(n), t_look / static_cast<double>(n),
+                               t_ver / static_cast<double>(n));
 
     if (bo.baseline_stride > 0) {
       registration::CorrelativeOptions co;
@@ -168,11 +175,12 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
       all_listed += found == 4;
       answered_one += !r.declined && found < 4;
     }
-    std::cout << fmt::format("\nsymmetric world: {} queries, declined {:.1f}%, all four symmetric poses listed {:.1f}%, "
-                             "answered with a single room (wrong by symmetry) {:.1f}%, median {:.1f} ms\n",
-                             n, 100.0 * static_cast<double>(declined) / static_cast<double>(n),
-                             100.0 * static_cast<double>(all_listed) / static_cast<double>(n),
-                             100.0 * static_cast<double>(answered_one) / static_cast<double>(n), pct(ms, 0.5));
+    std::cout << fmt::format(
+        "\nsymmetric world: {} queries, declined {:.1f}%, all four symmetric poses listed {:.1f}%, "
+        "answered with a single room (wrong by symmetry) {:.1f}%, median {:.1f} ms\n",
+        n, 100.0 * static_cast<double>(declined) / static_cast<double>(n),
+        100.0 * static_cast<double>(all_listed) / static_cast<double>(n),
+        100.0 * static_cast<double>(answered_one) / static_cast<double>(n), pct(ms, 0.5));
   }
 
   // ROS2 bag in its map: consistency of consecutive answers with odometry.
@@ -208,14 +216,14 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
       have_odom = f->T_odom_robot.has_value();
       if (have_odom) prev_odom = *f->T_odom_robot;
     }
-    std::cout << fmt::format("\nros2 bag macfirst_floor_take_2 in mac_1st_floor_final ({}x{} cells at {} m; database {:.2f} s, "
-                             "{:.1f} MB): {} scans (every {}), answered {:.1f}%, consecutive answered pairs consistent with "
-                             "odometry (0.3 m, 5 deg) {} of {} ({:.1f}%), median {:.1f} ms, p95 {:.1f} ms\n",
-                             mf.map.width(), mf.map.height(), mf.map.resolution(), build_s,
-                             loc.database().memoryBytes() / 1e6, n, bo.stride,
-                             100.0 * static_cast<double>(answered) / static_cast<double>(n), consistent, pairs,
-                             pairs ? 100.0 * static_cast<double>(consistent) / static_cast<double>(pairs) : 0.0,
-                             pct(ms, 0.5), pct(ms, 0.95));
+    std::cout << fmt::format(
+        "\nros2 bag macfirst_floor_take_2 in mac_1st_floor_final ({}x{} cells at {} m; database {:.2f} s, "
+        "{:.1f} MB): {} scans (every {}), answered {:.1f}%, consecutive answered pairs consistent with "
+        "odometry (0.3 m, 5 deg) {} of {} ({:.1f}%), median {:.1f} ms, p95 {:.1f} ms\n",
+        mf.map.width(), mf.map.height(), mf.map.resolution(), build_s, loc.database().memoryBytes() / 1e6, n, bo.stride,
+        100.0 * static_cast<double>(answered) / static_cast<double>(n), consistent, pairs,
+        pairs ? 100.0 * static_cast<double>(consistent) / static_cast<double>(pairs) : 0.0, pct(ms, 0.5),
+        pct(ms, 0.95));
   }
 }
 

@@ -153,8 +153,7 @@ localization::Database readLocalizationDatabase(const std::string& path) {
   const std::string data = readAll(path);
   Reader r(data, path);
   checkHeader(r, data, path);
-  if (data.size() < r.pos() + 8)
-    throw badInput("truncated localization database", ErrorLocation(path, 0, "header"));
+  if (data.size() < r.pos() + 8) throw badInput("truncated localization database", ErrorLocation(path, 0, "header"));
   std::uint64_t stored = 0;
   std::memcpy(&stored, data.data() + data.size() - 8, 8);
   const std::uint64_t map_checksum = r.get<std::uint64_t>("map checksum");

@@ -26,7 +26,9 @@ void LineExtractionOptions::validate() const {
   if (!(merge_distance_m >= 0) || !std::isfinite(merge_distance_m)) throw bad("merge_distance_m", merge_distance_m);
 }
 
-Eigen::Vector2d Line::foot() const { return distance * Eigen::Vector2d(std::cos(normal_angle), std::sin(normal_angle)); }
+Eigen::Vector2d Line::foot() const {
+  return distance * Eigen::Vector2d(std::cos(normal_angle), std::sin(normal_angle));
+}
 
 namespace {
 

@@ -1,13 +1,13 @@
 #include "lidar2d/localization/localizer.hpp"
 
 #include <fmt/format.h>
-#include <nanoflann.hpp>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <nanoflann.hpp>
 #include <optional>
 #include <thread>
 #include <unordered_map>
@@ -69,7 +69,8 @@ void DatabaseOptions::validate() const {
   if (occupied_min < 1 || occupied_min > 100) throw badOption("occupied_min", occupied_min);
   if (free_max < 0 || free_max > 99 || free_max >= occupied_min) throw badOption("free_max", free_max);
   if (max_lines < 2 || max_lines > 64) throw badOption("max_lines", static_cast<double>(max_lines));
-  if (!(min_pair_angle_rad >= 0) || !(min_pair_angle_rad <= kPi / 2)) throw badOption("min_pair_angle_rad", min_pair_angle_rad);
+  if (!(min_pair_angle_rad >= 0) || !(min_pair_angle_rad <= kPi / 2))
+    throw badOption("min_pair_angle_rad", min_pair_angle_rad);
   if (!(key_angle_scale_m_per_rad > 0) || !std::isfinite(key_angle_scale_m_per_rad))
     throw badOption("key_angle_scale_m_per_rad", key_angle_scale_m_per_rad);
   lines.validate();
@@ -85,7 +86,8 @@ void LocalizerOptions::validate() const {
   if (max_refined < 1) throw badOption("max_refined", static_cast<double>(max_refined));
   if (max_verify_points < 10) throw badOption("max_verify_points", static_cast<double>(max_verify_points));
   if (prescore_points < 10) throw badOption("prescore_points", static_cast<double>(prescore_points));
-  if (max_free_space_checked < 1) throw badOption("max_free_space_checked", static_cast<double>(max_free_space_checked));
+  if (max_free_space_checked < 1)
+    throw badOption("max_free_space_checked", static_cast<double>(max_free_space_checked));
   if (!(hit_distance_m > 0) || !std::isfinite(hit_distance_m)) throw badOption("hit_distance_m", hit_distance_m);
   if (!(free_margin_m >= 0) || !std::isfinite(free_margin_m)) throw badOption("free_margin_m", free_margin_m);
   if (!(max_range_m > 0)) throw badOption("max_range_m", max_range_m);
@@ -234,7 +236,8 @@ Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& o
   std::vector<Eigen::Vector2i> offsets;
   for (int dy = -clear; dy <= clear; ++dy)
     for (int dx = -clear; dx <= clear; ++dx)
-      if ((dx * dx + dy * dy) * res * res <= options.clearance_m * options.clearance_m + 1e-12) offsets.emplace_back(dx, dy);
+      if ((dx * dx + dy * dy) * res * res <= options.clearance_m * options.clearance_m + 1e-12)
+        offsets.emplace_back(dx, dy);
   std::vector<Eigen::Vector2d> cand;  // map frame [m]
   for (double y = 0.5 * options.step_m; y < H * res; y += options.step_m)
     for (double x = 0.5 * options.step_m; x < W * res; x += options.step_m) {
@@ -278,8 +281,10 @@ Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& o
           const double a_world = o * kTwoPi / n_orient + a0 + b * inc;  // beam angle in the world frame
           const double a_map = a_world - yaw;
           const double r = castRay(obstacle, W, H, start, Eigen::Vector2d(std::cos(a_map), std::sin(a_map)), max_cells);
-          if (std::isfinite(r)) pts.emplace_back(r * res * std::cos(a_world), r * res * std::sin(a_world));
-          else pts.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0.0);
+          if (std::isfinite(r))
+            pts.emplace_back(r * res * std::cos(a_world), r * res * std::sin(a_world));
+          else
+            pts.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0.0);
         }
         // A NaN between two runs separates them like a gap: split the point list at invalid beams.
         Points2 run;
@@ -291,8 +296,10 @@ Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& o
           run.clear();
         };
         for (const auto& p : pts) {
-          if (p.allFinite()) run.push_back(p);
-          else flush();
+          if (p.allFinite())
+            run.push_back(p);
+          else
+            flush();
         }
         flush();
       }
@@ -333,14 +340,15 @@ Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& o
     p.first_line = static_cast<std::uint32_t>(lines.size());
     p.num_lines = static_cast<std::uint32_t>(per_pos[i].size());
     for (const Line& l : per_pos[i])
-      lines.push_back({static_cast<float>(l.normal_angle), static_cast<float>(l.distance), static_cast<float>(l.length)});
+      lines.push_back(
+          {static_cast<float>(l.normal_angle), static_cast<float>(l.distance), static_cast<float>(l.length)});
     positions.push_back(p);
   }
   return fromParts(options, localization::mapChecksum(map), std::move(positions), std::move(lines));
 }
 
-Database Database::fromParts(const DatabaseOptions& options, std::uint64_t map_checksum, std::vector<Position> positions,
-                             std::vector<LineFeature> lines) {
+Database Database::fromParts(const DatabaseOptions& options, std::uint64_t map_checksum,
+                             std::vector<Position> positions, std::vector<LineFeature> lines) {
   options.validate();
   for (std::size_t i = 0; i < positions.size(); ++i) {
     const Position& p = positions[i];
@@ -377,7 +385,8 @@ struct Localizer::State {
 
 namespace {
 
-std::unique_ptr<Localizer::State> makeState(const io::OccupancyImage& map, Database db, const LocalizerOptions& options) {
+std::unique_ptr<Localizer::State> makeState(const io::OccupancyImage& map, Database db,
+                                            const LocalizerOptions& options) {
   options.validate();
   auto s = std::make_unique<Localizer::State>();
   s->options = options;
@@ -420,7 +429,8 @@ Localizer::~Localizer() = default;
 const Database& Localizer::database() const { return s_->db; }
 const LocalizerOptions& Localizer::options() const { return s_->options; }
 
-double Localizer::score(const Points2& points_robot, const SE2& T_world_robot, const Eigen::Vector2d& sensor_robot) const {
+double Localizer::score(const Points2& points_robot, const SE2& T_world_robot,
+                        const Eigen::Vector2d& sensor_robot) const {
   const io::OccupancyImage& map = s_->map;
   const double res = map.resolution();
   const int occ = s_->db.options().occupied_min;

@@ -27,20 +27,20 @@ struct LineExtractionOptions {
   double min_length_m = 0.4;        ///< shorter segments are dropped [m], >= 0
   double max_rms_m = 0.04;          ///< refit residual RMS above this rejects the segment [m], > 0
   double min_distance_m = 0.3;      ///< lines passing closer to the origin have no usable normal [m], >= 0
-  double merge_angle_rad = 0.05;    ///< segments of (nearly) the same infinite line are merged: normal angles [rad], >= 0
-  double merge_distance_m = 0.08;   ///< ... and distances closer than this [m], >= 0
+  double merge_angle_rad = 0.05;  ///< segments of (nearly) the same infinite line are merged: normal angles [rad], >= 0
+  double merge_distance_m = 0.08;  ///< ... and distances closer than this [m], >= 0
   void validate() const;
 };
 
 /// One extracted line (frame of the input points).
 struct Line {
-  double normal_angle = 0.0;   ///< phi: direction of the normal from the origin to the line [rad], in (-pi, pi]
-  double distance = 0.0;       ///< d: distance of the infinite line from the origin [m], >= 0
-  double length = 0.0;         ///< total length of the segments merged into this line [m]
+  double normal_angle = 0.0;  ///< phi: direction of the normal from the origin to the line [rad], in (-pi, pi]
+  double distance = 0.0;      ///< d: distance of the infinite line from the origin [m], >= 0
+  double length = 0.0;        ///< total length of the segments merged into this line [m]
   Eigen::Vector2d a = Eigen::Vector2d::Zero();  ///< first endpoint of the longest segment (projected on the line) [m]
   Eigen::Vector2d b = Eigen::Vector2d::Zero();  ///< its last endpoint [m]
-  std::size_t num_points = 0;  ///< points supporting the line
-  double rms_m = 0.0;          ///< RMS distance of those points from the line [m]
+  std::size_t num_points = 0;                   ///< points supporting the line
+  double rms_m = 0.0;                           ///< RMS distance of those points from the line [m]
   /// Foot of the perpendicular from the origin, d * n [m].
   Eigen::Vector2d foot() const;
 };

@@ -42,17 +42,18 @@ namespace lidar2d::localization {
 /// Options of the database build (stored in the database file). `validate()` throws
 /// `lidar2d::Error` (kInvalidArgument) naming the first field out of its domain.
 struct DatabaseOptions {
-  double step_m = 0.2;               ///< spacing of the grid of positions [m], > 0
-  int beams = 720;                   ///< beams of each virtual scan, 8..100000
+  double step_m = 0.2;                      ///< spacing of the grid of positions [m], > 0
+  int beams = 720;                          ///< beams of each virtual scan, 8..100000
   double fov_rad = 2.0 * std::numbers::pi;  ///< field of view of the virtual scans, centred on +x [rad], in (0, 2 pi]
-  double max_range_m = 30.0;         ///< range of the virtual scans [m], > 0
-  double clearance_m = 0.25;         ///< positions keep this distance from occupied and unknown cells [m], >= 0
-  int occupied_min = 65;             ///< map cells >= this are obstacles, 1..100
-  int free_max = 25;                 ///< map cells 0..free_max are free, 0..99, < occupied_min
-  std::size_t max_lines = 24;        ///< longest lines kept per position, 2..64
+  double max_range_m = 30.0;                ///< range of the virtual scans [m], > 0
+  double clearance_m = 0.25;                ///< positions keep this distance from occupied and unknown cells [m], >= 0
+  int occupied_min = 65;                    ///< map cells >= this are obstacles, 1..100
+  int free_max = 25;                        ///< map cells 0..free_max are free, 0..99, < occupied_min
+  std::size_t max_lines = 24;               ///< longest lines kept per position, 2..64
   /// Weight of the relative angle in the pair key (d_i, d_j, k * angle) [m/rad], > 0
   double key_angle_scale_m_per_rad = 2.0;
-  double min_pair_angle_rad = 20.0 * std::numbers::pi / 180.0;  ///< pairs closer to parallel are not indexed [rad], in [0, pi/2]
+  double min_pair_angle_rad =
+      20.0 * std::numbers::pi / 180.0;  ///< pairs closer to parallel are not indexed [rad], in [0, pi/2]
   /// Line extraction of the virtual scans: more permissive than the query's (shorter lines, fewer
   /// points), so that the database holds a superset of what a real scan extracts.
   LineExtractionOptions lines = permissiveLines();
@@ -104,11 +105,11 @@ class Database {
                             std::vector<LineFeature> lines);
 
   const DatabaseOptions& options() const;
-  std::uint64_t mapChecksum() const;   ///< mapChecksum() of the map it was built from
+  std::uint64_t mapChecksum() const;  ///< mapChecksum() of the map it was built from
   const std::vector<Position>& positions() const;
   const std::vector<LineFeature>& lines() const;
-  std::size_t numPairs() const;        ///< indexed line pairs
-  std::size_t memoryBytes() const;     ///< approximate heap use, index included
+  std::size_t numPairs() const;     ///< indexed line pairs
+  std::size_t memoryBytes() const;  ///< approximate heap use, index included
   bool empty() const;
 
   /// Internal: the index (defined in the implementation).
@@ -127,16 +128,20 @@ std::uint64_t mapChecksum(const io::OccupancyImage& map);
 struct LocalizerOptions {
   LineExtractionOptions lines;       ///< line extraction of the query scan (defaults match the database's)
   std::size_t max_query_lines = 14;  ///< longest scan lines used, >= 2
-  double key_radius_m = 0.3;         ///< search radius in key space (distances in m, angle scaled by key_angle_scale) [m], > 0
-  double vote_bin_m = 0.3;           ///< translation bin of the pose vote [m], > 0
+  double key_radius_m = 0.3;  ///< search radius in key space (distances in m, angle scaled by key_angle_scale) [m], > 0
+  double vote_bin_m = 0.3;    ///< translation bin of the pose vote [m], > 0
   double vote_bin_rad = 6.0 * std::numbers::pi / 180.0;  ///< rotation bin [rad], > 0
-  std::size_t max_candidates = 5000; ///< best-voted bins pre-scored (field kernel on a subsample of points, no refinement), >= 1
-  std::size_t max_free_space_checked = 32;  ///< best distinct pre-scored candidates scored with the free-space term (subsample), >= 1
-  std::size_t max_refined = 16;      ///< best of those refined and scored on every point, >= 1
-  std::size_t max_verify_points = 400;  ///< refinement and score use at most this many points (evenly subsampled), >= 10
+  std::size_t max_candidates =
+      5000;  ///< best-voted bins pre-scored (field kernel on a subsample of points, no refinement), >= 1
+  std::size_t max_free_space_checked =
+      32;  ///< best distinct pre-scored candidates scored with the free-space term (subsample), >= 1
+  std::size_t max_refined = 16;  ///< best of those refined and scored on every point, >= 1
+  std::size_t max_verify_points =
+      400;                           ///< refinement and score use at most this many points (evenly subsampled), >= 10
   std::size_t prescore_points = 60;  ///< points (evenly subsampled) of the pre-score, >= 10
   double hit_distance_m = 0.1;       ///< a scan point within this of an obstacle counts for the score [m], > 0
-  double free_margin_m = 0.3;        ///< a beam crossing an obstacle cell farther than this before its endpoint counts against the score [m], >= 0
+  double free_margin_m = 0.3;        ///< a beam crossing an obstacle cell farther than this before its endpoint counts
+                                     ///< against the score [m], >= 0
   double max_range_m = 30.0;         ///< scan points beyond this are ignored [m], > 0
   double min_score = 0.5;            ///< a best score below this declines, in [0, 1]
   /// A distinct alternative scoring at least this fraction of the best declines the answer
@@ -152,23 +157,23 @@ struct LocalizerOptions {
 
 /// One verified pose hypothesis.
 struct Candidate {
-  SE2 T_world_robot;      ///< refined pose
-  double score = 0.0;     ///< Localizer::score of the pose, in [0, 1]
-  double votes = 0.0;     ///< descriptor votes of its bin (0 for the fallback)
+  SE2 T_world_robot;   ///< refined pose
+  double score = 0.0;  ///< Localizer::score of the pose, in [0, 1]
+  double votes = 0.0;  ///< descriptor votes of its bin (0 for the fallback)
 };
 
 /// The answer for one scan.
 struct LocalizationResult {
-  bool declined = true;       ///< true: "unknown" (see reason); T_world_robot and score are then the best guess if any
-  std::string reason;         ///< why it declined ("no lines", "no candidate", "low score", "ambiguous", "no points")
-  SE2 T_world_robot;          ///< best pose
-  double score = 0.0;         ///< its score, in [0, 1]
+  bool declined = true;  ///< true: "unknown" (see reason); T_world_robot and score are then the best guess if any
+  std::string reason;    ///< why it declined ("no lines", "no candidate", "low score", "ambiguous", "no points")
+  SE2 T_world_robot;     ///< best pose
+  double score = 0.0;    ///< its score, in [0, 1]
   std::vector<Candidate> alternatives;  ///< distinct poses other than the best, best first (score >= min_score)
-  std::size_t num_points = 0;      ///< valid scan points used
-  std::size_t num_lines = 0;       ///< scan lines used
-  std::size_t num_hits = 0;        ///< database pairs matched
-  std::size_t num_candidates = 0;  ///< candidates verified
-  bool used_fallback = false;      ///< the branch-and-bound fallback ran
+  std::size_t num_points = 0;           ///< valid scan points used
+  std::size_t num_lines = 0;            ///< scan lines used
+  std::size_t num_hits = 0;             ///< database pairs matched
+  std::size_t num_candidates = 0;       ///< candidates verified
+  bool used_fallback = false;           ///< the branch-and-bound fallback ran
   double describe_ms = 0, lookup_ms = 0, verify_ms = 0, total_ms = 0;  ///< timings [ms]
 };
 
