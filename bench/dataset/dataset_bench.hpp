@@ -7,6 +7,7 @@
 
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
+#include "lidar2d/localization/localizer.hpp"
 #include "lidar2d/registration/icp.hpp"
 
 namespace lidar2d::bench {
@@ -40,5 +41,16 @@ struct DegeneracyBenchOptions {
   double spacing_m = degeneracy::InputOptions{}.min_spacing_m;  ///< thinning of both detectors [m]
 };
 void runDegeneracyBenchmark(const std::string& data_dir, const DegeneracyBenchOptions& options);
+/// Options of the `localize` subcommand.
+struct LocalizeBenchOptions {
+  std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
+  std::size_t stride = 1;            ///< localize every stride-th odd scan
+  std::size_t baseline_stride = 20;  ///< branch-and-bound baseline on every n-th odd scan (0: skip)
+  std::string save_maps;             ///< folder to write the even-scan maps to (empty: none)
+  bool verbose = false;              ///< print every failure on stderr
+  localization::DatabaseOptions db;
+  localization::LocalizerOptions loc;
+};
+void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOptions& options);
 
 }  // namespace lidar2d::bench

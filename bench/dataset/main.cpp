@@ -1,6 +1,7 @@
 // lidar2d_dataset_bench: accuracy and speed of lidar2d's algorithms on the real logs, as tables.
 //   lidar2d_dataset_bench map [--data DIR]
 //   lidar2d_dataset_bench degeneracy [--data DIR] [--beams N] [--fov DEG] [-v]
+//   lidar2d_dataset_bench localize [--data DIR] [--stride N] [--baseline-stride N]
 //   lidar2d_dataset_bench match [--data DIR] [--sigma-xy M] [--sigma-theta DEG] [--seed N] [--methods p2p p2l ...]
 
 #include <CLI/CLI.hpp>
@@ -53,6 +54,22 @@ int main(int argc, char** argv) {
         deg_options.spacing_m;
     lidar2d::bench::runDegeneracyBenchmark(data, deg_options);
   });
+  lidar2d::bench::LocalizeBenchOptions loc_options;
+  auto* loc = app.add_subcommand("localize", "global localization: success, precision, decline rate, ms per query; B&B baseline");
+  loc->add_option("--logs", loc_options.logs, "logs under --data")->capture_default_str();
+  loc->add_option("--stride", loc_options.stride, "localize every n-th odd scan")->capture_default_str();
+  loc->add_option("--baseline-stride", loc_options.baseline_stride, "B&B baseline on every n-th odd scan (0: skip)")->capture_default_str();
+  loc->add_option("--save-maps", loc_options.save_maps, "write the even-scan maps (PREFIX-even.yaml/pgm) to this folder");
+  loc->add_option("--step", loc_options.db.step_m, "database grid step [m]")->capture_default_str();
+  loc->add_option("--min-score", loc_options.loc.min_score, "decline below this score")->capture_default_str();
+  loc->add_option("--ambiguity", loc_options.loc.ambiguity_ratio, "ambiguity ratio")->capture_default_str();
+  loc->add_option("--candidates", loc_options.loc.max_candidates, "candidates verified")->capture_default_str();
+  loc->add_option("--key-radius", loc_options.loc.key_radius_m, "key search radius")->capture_default_str();
+  loc->add_option("--refined", loc_options.loc.max_refined, "candidates refined")->capture_default_str();
+  loc->add_option("--bin", loc_options.loc.vote_bin_m, "vote bin [m]")->capture_default_str();
+  loc->add_flag("--fallback", loc_options.loc.fallback_branch_and_bound, "branch-and-bound fallback");
+  loc->add_flag("-v,--verbose", loc_options.verbose, "print each failure");
+  loc->callback([&] { lidar2d::bench::runLocalizeBenchmark(data, loc_options); });
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

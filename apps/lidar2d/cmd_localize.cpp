@@ -1,0 +1,265 @@
+// lidar2d localize MAP.yaml LOG [--db DB] -o FILE [--json FILE] [--eval] [--scans all|even|odd]:
+// the global pose of every scan of LOG in the map, each scan on its own (no odometry, no earlier
+// answer). Output: one line per scan, `t x y theta score` (the robot's pose in the map's world frame
+// [s, m, m, rad] and the fraction of the scan's points on obstacles), `t nan nan nan 0` when the
+// localizer declines. --json writes a summary with timings (and, with --eval, the success rate
+// against the log's truth; with odometry in the log, how consistent consecutive answers are with it).
+//
+// lidar2d localize-index MAP.yaml -o DB [--step 0.2] [--beams N] [--fov DEG] [--max-range R]:
+// builds the descriptor database of the map and writes it (io/localization_db.hpp).
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <numeric>
+#include <optional>
+
+#include "commands.hpp"
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/localization_db.hpp"
+#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/localization/localizer.hpp"
+
+namespace lidar2d::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+double seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(v.begin(), v.end());
+  const double pos = q * static_cast<double>(v.size() - 1);
+  const auto lo = static_cast<std::size_t>(std::floor(pos));
+  const std::size_t hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
+}
+
+struct DbArgs {
+  std::string map;
+  std::string output;
+  localization::DatabaseOptions options;
+  double fov_deg = 360.0;
+  bool quiet = false;
+};
+
+io::MapFile readMapChecked(const std::string& path) { return io::readMap(path); }
+
+void runIndex(DbArgs& a) {
+  const auto t0 = Clock::now();
+  a.options.fov_rad = a.fov_deg * kDeg;
+  const io::MapFile map = readMapChecked(a.map);
+  localization::Database db;
+  try {
+    db = localization::Database::build(map.map, a.options);
+  } catch (const Error& e) {
+    throw Error(e.kind(), e.message(), ErrorLocation(a.map, 0, e.where().field));
+  }
+  io::writeLocalizationDatabase(a.output, db);
+  if (!a.quiet)
+    std::cerr << fmt::format("indexed {} positions, {} lines, {} line pairs ({:.1f} MB in memory) in {:.2f} s -> {}\n",
+                             db.positions().size(), db.lines().size(), db.numPairs(), db.memoryBytes() / 1e6,
+                             seconds(t0), a.output);
+}
+
+enum class Scans { kAll, kEven, kOdd };
+
+struct LocArgs {
+  std::string map;
+  std::string log;
+  std::string db;
+  std::string output;
+  std::string json;
+  bool eval = false;
+  bool quiet = false;
+  Scans scans = Scans::kAll;
+  localization::LocalizerOptions options;
+  localization::DatabaseOptions db_options;
+  double success_m = 0.3;
+  double success_deg = 5.0;
+  io::ReaderOptions reader;
+};
+
+void runLocalize(const LocArgs& a) {
+  const auto t0 = Clock::now();
+  const io::MapFile map = readMapChecked(a.map);
+  std::optional<localization::Database> db;
+  double db_s = 0;
+  const auto tdb = Clock::now();
+  if (!a.db.empty()) {
+    db = io::readLocalizationDatabase(a.db);
+  } else {
+    try {
+      db = localization::Database::build(map.map, a.db_options);
+    } catch (const Error& e) {
+      throw Error(e.kind(), e.message(), ErrorLocation(a.map, 0, e.where().field));
+    }
+  }
+  db_s = seconds(tdb);
+  std::unique_ptr<localization::Localizer> loc;
+  try {
+    loc = std::make_unique<localization::Localizer>(map.map, std::move(*db), a.options);
+  } catch (const Error& e) {
+    throw Error(e.kind(), e.message(), ErrorLocation(a.db.empty() ? a.map : a.db, 0, e.where().field));
+  }
+  auto source = io::openLog(a.log, a.reader);
+  io::AtomicFile out(a.output);
+  out.stream() << "# lidar2d localize: t x y theta score (nan nan nan 0 = declined)\n";
+
+  std::vector<double> times_ms;
+  std::size_t scans = 0, answered = 0, declined = 0, with_truth = 0, correct = 0, correct_answered = 0;
+  std::map<std::string, std::size_t> reasons;
+  // Odometry consistency: consecutive processed scans both answered.
+  SE2 prev_pose, prev_odom;
+  bool have_prev_pose = false, have_prev_odom = false;
+  std::size_t odo_pairs = 0, odo_consistent = 0;
+  while (auto f = source->next()) {
+    if ((a.scans == Scans::kEven && f->index % 2 != 0) || (a.scans == Scans::kOdd && f->index % 2 != 1)) continue;
+    ++scans;
+    const localization::LocalizationResult r = loc->localize(f->scan, f->T_robot_laser);
+    times_ms.push_back(r.total_ms);
+    if (r.declined) {
+      ++declined;
+      ++reasons[r.reason];
+      out.stream() << fmt::format("{:.9f} nan nan nan 0\n", f->time);
+    } else {
+      ++answered;
+      const SE2& T = r.T_world_robot;
+      out.stream() << fmt::format("{:.9f} {:.6f} {:.6f} {:.6f} {:.4f}\n", f->time, T.x(), T.y(), T.theta(), r.score);
+    }
+    if (a.eval) {
+      if (!f->T_world_robot)
+        throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
+                                   f->index, f->time),
+                       ErrorLocation(a.log));
+      ++with_truth;
+      if (!r.declined) {
+        const SE2 e = f->T_world_robot->inverse() * r.T_world_robot;
+        const bool ok = e.translation().norm() <= a.success_m && std::abs(e.theta()) <= a.success_deg * kDeg;
+        correct += ok;
+        correct_answered += ok;
+      }
+    }
+    if (f->T_odom_robot && !r.declined && have_prev_pose && have_prev_odom) {
+      const SE2 d_odo = prev_odom.inverse() * *f->T_odom_robot;
+      const SE2 d_loc = prev_pose.inverse() * r.T_world_robot;
+      const SE2 e = d_odo.inverse() * d_loc;
+      ++odo_pairs;
+      odo_consistent += e.translation().norm() <= a.success_m && std::abs(e.theta()) <= a.success_deg * kDeg;
+    }
+    have_prev_pose = !r.declined;
+    if (have_prev_pose) prev_pose = r.T_world_robot;
+    have_prev_odom = f->T_odom_robot.has_value();
+    if (have_prev_odom) prev_odom = *f->T_odom_robot;
+  }
+  if (scans == 0) throw badInput("the log has no scan to localize", ErrorLocation(a.log));
+  out.commit();
+  const double total_s = seconds(t0);
+  nlohmann::json j;
+  j["map"] = a.map;
+  j["log"] = a.log;
+  j["database"] = a.db.empty() ? nlohmann::json("built in memory") : nlohmann::json(a.db);
+  j["database_s"] = db_s;
+  j["database_positions"] = loc->database().positions().size();
+  j["database_pairs"] = loc->database().numPairs();
+  j["database_mb"] = loc->database().memoryBytes() / 1e6;
+  j["scans"] = scans;
+  j["answered"] = answered;
+  j["declined"] = declined;
+  j["decline_rate"] = static_cast<double>(declined) / static_cast<double>(scans);
+  j["decline_reasons"] = reasons;
+  j["query_ms"] = {{"median", percentile(times_ms, 0.5)},
+                   {"p95", percentile(times_ms, 0.95)},
+                   {"max", percentile(times_ms, 1.0)},
+                   {"mean", std::accumulate(times_ms.begin(), times_ms.end(), 0.0) / static_cast<double>(scans)}};
+  j["total_s"] = total_s;
+  if (a.eval) {
+    j["success_rate"] = static_cast<double>(correct) / static_cast<double>(with_truth);
+    j["precision"] = answered ? nlohmann::json(static_cast<double>(correct_answered) / static_cast<double>(answered))
+                              : nlohmann::json(nullptr);
+    j["success_definition"] = fmt::format("within {} m and {} deg of the truth", a.success_m, a.success_deg);
+  }
+  if (odo_pairs) {
+    j["odometry_consistency"] = {
+        {"pairs", odo_pairs},
+        {"consistent", odo_consistent},
+        {"rate", static_cast<double>(odo_consistent) / static_cast<double>(odo_pairs)},
+        {"definition", fmt::format("consecutive answered scans whose relative pose agrees with odometry within {} m "
+                                   "and {} deg",
+                                   a.success_m, a.success_deg)}};
+  }
+  if (!a.json.empty()) io::writeFileAtomically(a.json, j.dump(2) + "\n");
+  if (!a.quiet) {
+    std::cerr << fmt::format("localized {} scans: {} answered, {} declined; median {:.1f} ms, p95 {:.1f} ms per scan",
+                             scans, answered, declined, percentile(times_ms, 0.5), percentile(times_ms, 0.95));
+    if (a.eval)
+      std::cerr << fmt::format(
+          "; success {:.1f}%, precision {:.1f}%",
+          100.0 * static_cast<double>(correct) / static_cast<double>(with_truth),
+          answered ? 100.0 * static_cast<double>(correct_answered) / static_cast<double>(answered) : 0.0);
+    std::cerr << fmt::format(" -> {}\n", a.output);
+  }
+}
+
+void addDbOptions(CLI::App* sub, localization::DatabaseOptions& o, double* fov_deg) {
+  sub->add_option("--step", o.step_m, "spacing of the database positions [m]")->capture_default_str();
+  sub->add_option("--beams", o.beams, "beams per virtual scan")->capture_default_str();
+  if (fov_deg) sub->add_option("--fov", *fov_deg, "field of view of the virtual scans [deg]")->capture_default_str();
+  sub->add_option("--max-range", o.max_range_m, "range of the virtual scans [m]")->capture_default_str();
+  sub->add_option("--clearance", o.clearance_m, "positions keep this distance from obstacles and unknown space [m]")
+      ->capture_default_str();
+}
+
+}  // namespace
+
+void addLocalizeCommands(CLI::App& app) {
+  auto d = std::make_shared<DbArgs>();
+  auto* idx = app.add_subcommand("localize-index",
+                                 "Build the global localizer's descriptor database of a map_server map (versioned "
+                                 "binary file, tied to that map)");
+  idx->add_option("MAP", d->map, "map YAML (ROS map_server format)")->required();
+  idx->add_option("-o,--output", d->output, "database file to write")->required();
+  addDbOptions(idx, d->options, &d->fov_deg);
+  idx->add_flag("-q,--quiet", d->quiet, "no summary on stderr");
+  idx->callback([d] { runIndex(*d); });
+
+  auto a = std::make_shared<LocArgs>();
+  auto* sub = app.add_subcommand(
+      "localize",
+      "Global pose of every scan of LOG in a known map, each on its own (no odometry); writes 't x y theta score' per "
+      "scan, 't nan nan nan 0' when it declines");
+  sub->add_option("MAP", a->map, "map YAML (ROS map_server format)")->required();
+  sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
+  sub->add_option("-o,--output", a->output, "output file, one line per scan")->required();
+  sub->add_option("--db", a->db, "database from 'lidar2d localize-index' (default: built in memory)");
+  sub->add_option("--json", a->json, "write a JSON summary (timings; success rate with --eval) to this file");
+  sub->add_flag("--eval", a->eval, "compare with the log's truth: success (within 0.3 m and 5 deg), precision");
+  const std::map<std::string, Scans> scans{{"all", Scans::kAll}, {"even", Scans::kEven}, {"odd", Scans::kOdd}};
+  sub->add_option("--scans", a->scans, "which scans to localize: all, even or odd (0-based index in the log)")
+      ->transform(CLI::CheckedTransformer(scans, CLI::ignore_case))
+      ->default_str("all");
+  sub->add_option("--min-score", a->options.min_score, "decline below this score (fraction of points on obstacles)")
+      ->capture_default_str();
+  sub->add_option("--ambiguity", a->options.ambiguity_ratio,
+                  "decline when a distinct alternative scores at least this fraction of the best")
+      ->capture_default_str();
+  sub->add_option("--candidates", a->options.max_candidates, "candidates verified per scan")->capture_default_str();
+  sub->add_flag("--fallback", a->options.fallback_branch_and_bound,
+                "when no candidate scores, search the whole map by branch and bound (slow)");
+  addDbOptions(sub, a->db_options, nullptr);
+  sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
+  addReaderOptions(sub, a->reader);
+  sub->callback([a] { runLocalize(*a); });
+}
+
+}  // namespace lidar2d::cli

@@ -1,0 +1,230 @@
+// Global localization (issue 6) on the protocol of ../shared/DESIGN.md:
+// - corrected intel and freiburg-079: a log-odds map (5 cm) from the even-numbered scans with truth
+//   poses; every odd-numbered scan localized on its own. Success = within 0.3 m and 5 deg of the
+//   truth; precision = successes among answered scans; decline rate; median/p95 ms per query;
+//   database build time and size. Baseline: exhaustive branch-and-bound correlative search over the
+//   whole map and all orientations (registration::matchCorrelativeGlobal) on a subset of the scans.
+// - the simulator's `symmetric` world: the localizer must decline or list every symmetric pose.
+// - the ROS2 bag in ros2/ localized in ros2/maps/mac_1st_floor_final: no truth, so the consistency
+//   of consecutive answers with odometry.
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <numbers>
+
+#include "dataset_bench.hpp"
+#include "lidar2d/io/frame_source.hpp"
+#include "lidar2d/io/localization_db.hpp"
+#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+#include "lidar2d/registration/correlative.hpp"
+#include "lidar2d/sim/path.hpp"
+#include "lidar2d/sim/simulator.hpp"
+#include "lidar2d/sim/worlds.hpp"
+
+namespace lidar2d::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+double sec(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
+
+double pct(std::vector<double> v, double q) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(std::round(q * static_cast<double>(v.size() - 1)))];
+}
+
+bool near(const SE2& a, const SE2& b, double m = 0.3, double deg = 5.0) {
+  const SE2 e = a.inverse() * b;
+  return e.translation().norm() <= m && std::abs(e.theta()) <= deg * kDeg;
+}
+
+io::OccupancyImage evenMap(const std::vector<Frame>& frames) {
+  mapping::MapOptions o;
+  auto m = mapping::makeMap(mapping::MapModel::kLogOdds, o);
+  for (std::size_t i = 0; i < frames.size(); i += 2)
+    if (frames[i].T_world_robot) m->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
+  return mapping::toOccupancyImage(*m);
+}
+
+void row(const std::string& name, const std::string& method, std::size_t n, std::size_t ok, std::size_t answered,
+         std::size_t declined, const std::vector<double>& ms, const std::string& db) {
+  std::cout << fmt::format(
+      "| {} | {} | {} | {:.1f}% | {} | {:.1f}% | {:.1f} | {:.1f} | {} |\n", name, method, n,
+      100.0 * static_cast<double>(ok) / static_cast<double>(n),
+      answered ? fmt::format("{:.1f}%", 100.0 * static_cast<double>(ok) / static_cast<double>(answered))
+               : std::string("-"),
+      100.0 * static_cast<double>(declined) / static_cast<double>(n), pct(ms, 0.5), pct(ms, 0.95), db);
+}
+
+}  // namespace
+
+void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOptions& bo) {
+  std::cout << "| dataset | method | queries | success | precision | declined | median ms | p95 ms | database |\n";
+  std::cout << "|---|---|---|---|---|---|---|---|---|\n";
+  for (const std::string& log : bo.logs) {
+    const std::string path = (std::filesystem::path(data_dir) / log).string();
+    if (!std::filesystem::exists(path)) {
+      std::cout << fmt::format("| {} | (missing: {}) |\n", log, path);
+      continue;
+    }
+    const std::vector<Frame> frames = loadFrames(path);
+    const std::string name = std::filesystem::path(log).stem().stem().string();
+    const io::OccupancyImage map = evenMap(frames);
+    if (!bo.save_maps.empty()) {
+      std::filesystem::create_directories(bo.save_maps);
+      io::writeMap((std::filesystem::path(bo.save_maps) / (name + "-even.yaml")).string(), map);
+    }
+    const auto tb = Clock::now();
+    localization::Database db = localization::Database::build(map, bo.db);
+    const double build_s = sec(tb);
+    const std::string db_desc = fmt::format("{:.2f} s, {:.1f} MB, {} positions, {} pairs", build_s,
+                                            db.memoryBytes() / 1e6, db.positions().size(), db.numPairs());
+    localization::Localizer loc(map, std::move(db), bo.loc);
+    std::size_t n = 0, ok = 0, answered = 0, declined = 0;
+    double t_desc = 0, t_look = 0, t_ver = 0;
+    std::vector<double> ms;
+    std::vector<std::size_t> odd;
+    for (std::size_t i = 1; i < frames.size(); i += 2) odd.push_back(i);
+    for (std::size_t k = 0; k < odd.size(); k += bo.stride) {
+      const Frame& f = frames[odd[k]];
+      const auto r = loc.localize(f.scan, f.T_robot_laser);
+      ++n;
+      ms.push_back(r.total_ms);
+      t_desc += r.describe_ms;
+      t_look += r.lookup_ms;
+      t_ver += r.verify_ms;
+      if (r.declined) {
+        ++declined;
+      } else {
+        ++answered;
+        ok += near(*f.T_world_robot, r.T_world_robot);
+      }
+      if (bo.verbose && (r.declined || !near(*f.T_world_robot, r.T_world_robot)))
+        std::cerr << fmt::format(
+            "{} scan {}: {} {} truth score {:.3f} score {:.3f} lines {} cands {} alt {} alt0 {:.3f} ({:.3f} {:.3f} "
+            "{:.1f}) truth ({:.3f} {:.3f} {:.1f})\n",
+            name, odd[k], r.declined ? "declined" : "WRONG", r.reason,
+            loc.score(f.scan.toPoints(f.T_robot_laser), *f.T_world_robot, f.T_robot_laser.translation()), r.score,
+            r.num_lines, r.num_candidates, r.alternatives.size(),
+            r.alternatives.empty() ? 0.0 : r.alternatives[0].score, r.T_world_robot.x(), r.T_world_robot.y(),
+            r.T_world_robot.theta() / kDeg, f.T_world_robot->x(), f.T_world_robot->y(),
+            f.T_world_robot->theta() / kDeg);
+    }
+    row(name, "descriptor", n, ok, answered, declined, ms, db_desc);
+    if (bo.verbose)
+      std::cerr << fmt::format("mean ms: describe {:.2f} lookup {:.2f} verify {:.2f}\n",
+                               t_desc / static_cast<double>(n), t_look / static_cast<double>(n),
+                               t_ver / static_cast<double>(n));
+
+    if (bo.baseline_stride > 0) {
+      registration::CorrelativeOptions co;
+      co.min_score = 0.0;
+      co.refinement.resolution_m = map.resolution();
+      const auto tg = Clock::now();
+      const registration::CorrelativeGrid grid = registration::CorrelativeGrid::fromMap(map, co);
+      const registration::LikelihoodField field = registration::LikelihoodField::fromMap(map, co.refinement);
+      const double grid_s = sec(tg);
+      std::size_t bn = 0, bok = 0;
+      std::vector<double> bms;
+      for (std::size_t k = 0; k < odd.size(); k += bo.baseline_stride) {
+        const Frame& f = frames[odd[k]];
+        const auto t0 = Clock::now();
+        const auto r = registration::matchCorrelativeGlobal(grid, f.scan.toPoints(f.T_robot_laser), co, &field);
+        bms.push_back(1e3 * sec(t0));
+        ++bn;
+        bok += near(*f.T_world_robot, r.T_target_source);
+      }
+      row(name, "branch-and-bound (whole map)", bn, bok, bn, 0, bms, fmt::format("grids {:.2f} s", grid_s));
+    }
+  }
+
+  // Symmetric world: four identical rooms, invariant under a 90 degree rotation about the origin.
+  {
+    const sim::Scenario sc = sim::builtinScenario("symmetric");
+    const auto truth = sim::samplePath(sc.waypoints, {});
+    sim::SimulatorOptions so;
+    const std::vector<Frame> frames = sim::simulate(sc.world, truth, so.noiseFree());
+    const io::OccupancyImage map = evenMap(frames);
+    localization::Localizer loc(map, bo.loc, bo.db);
+    std::size_t n = 0, declined = 0, all_listed = 0, answered_one = 0;
+    std::vector<double> ms;
+    for (std::size_t i = 1; i < frames.size(); i += 2 * bo.stride) {
+      const Frame& f = frames[i];
+      const auto r = loc.localize(f.scan, f.T_robot_laser);
+      ++n;
+      ms.push_back(r.total_ms);
+      declined += r.declined;
+      std::vector<SE2> listed{r.T_world_robot};
+      for (const auto& a : r.alternatives) listed.push_back(a.T_world_robot);
+      std::size_t found = 0;
+      for (int q = 0; q < 4; ++q) {
+        const SE2 rot(0, 0, q * 90.0 * kDeg);
+        const SE2 sym = rot * *f.T_world_robot;
+        found += std::any_of(listed.begin(), listed.end(), [&](const SE2& p) { return near(sym, p); });
+      }
+      all_listed += found == 4;
+      answered_one += !r.declined && found < 4;
+    }
+    std::cout << fmt::format(
+        "\nsymmetric world: {} queries, declined {:.1f}%, all four symmetric poses listed {:.1f}%, "
+        "answered with a single room (wrong by symmetry) {:.1f}%, median {:.1f} ms\n",
+        n, 100.0 * static_cast<double>(declined) / static_cast<double>(n),
+        100.0 * static_cast<double>(all_listed) / static_cast<double>(n),
+        100.0 * static_cast<double>(answered_one) / static_cast<double>(n), pct(ms, 0.5));
+  }
+
+  // ROS2 bag in its map: consistency of consecutive answers with odometry.
+  const auto bag = std::filesystem::path(data_dir) / "ros2" / "macfirst_floor_take_2";
+  const auto yaml = std::filesystem::path(data_dir) / "ros2" / "maps" / "mac_1st_floor_final.yaml";
+  if (std::filesystem::exists(bag) && std::filesystem::exists(yaml)) {
+    const io::MapFile mf = io::readMap(yaml.string());
+    const auto tb = Clock::now();
+    localization::Database db = localization::Database::build(mf.map, bo.db);
+    const double build_s = sec(tb);
+    localization::Localizer loc(mf.map, std::move(db), bo.loc);
+    auto src = io::openLog(bag.string());
+    std::size_t n = 0, answered = 0, pairs = 0, consistent = 0;
+    std::vector<double> ms;
+    SE2 prev_pose, prev_odom;
+    bool have_pose = false, have_odom = false;
+    std::size_t idx = 0;
+    while (auto f = src->next()) {
+      if (idx++ % bo.stride != 0) continue;
+      const auto r = loc.localize(f->scan, f->T_robot_laser);
+      ++n;
+      ms.push_back(r.total_ms);
+      if (!r.declined) {
+        ++answered;
+        if (have_pose && have_odom && f->T_odom_robot) {
+          const SE2 e = (prev_odom.inverse() * *f->T_odom_robot).inverse() * (prev_pose.inverse() * r.T_world_robot);
+          ++pairs;
+          consistent += e.translation().norm() <= 0.3 && std::abs(e.theta()) <= 5.0 * kDeg;
+        }
+        prev_pose = r.T_world_robot;
+      }
+      have_pose = !r.declined;
+      have_odom = f->T_odom_robot.has_value();
+      if (have_odom) prev_odom = *f->T_odom_robot;
+    }
+    std::cout << fmt::format(
+        "\nros2 bag macfirst_floor_take_2 in mac_1st_floor_final ({}x{} cells at {} m; database {:.2f} s, "
+        "{:.1f} MB): {} scans (every {}), answered {:.1f}%, consecutive answered pairs consistent with "
+        "odometry (0.3 m, 5 deg) {} of {} ({:.1f}%), median {:.1f} ms, p95 {:.1f} ms\n",
+        mf.map.width(), mf.map.height(), mf.map.resolution(), build_s, loc.database().memoryBytes() / 1e6, n, bo.stride,
+        100.0 * static_cast<double>(answered) / static_cast<double>(n), consistent, pairs,
+        pairs ? 100.0 * static_cast<double>(consistent) / static_cast<double>(pairs) : 0.0, pct(ms, 0.5),
+        pct(ms, 0.95));
+  }
+}
+
+}  // namespace lidar2d::bench

@@ -1,0 +1,219 @@
+#pragma once
+/// @file
+/// Global localization from one scan in a known occupancy map.
+///
+/// **Database** (built once per map): virtual 360-degree scans are ray-cast from a grid of free
+/// positions; the lines of each virtual scan are extracted (lines.hpp) and kept in the
+/// world-oriented frame of the position, as (phi_w, d). Every pair of non-parallel lines (i, j) of a
+/// position is indexed by the rotation-invariant key (d_i, d_j, k * wrap(phi_j - phi_i)) in a k-d
+/// tree: the two perpendicular distances from the sensor and the angle of line j relative to the
+/// reference line i. Every line serves as a reference in turn, so no single reference line has to be
+/// found again in the query.
+///
+/// **Query** (one scan, no guess): lines of the scan (robot frame), every ordered pair of them looked
+/// up in the tree within a radius (sub-linear; no loop over the database). A hit pairs two scan lines
+/// with two map lines, which fixes the pose in closed form: theta from the normal directions, the
+/// translation from the two line equations. Hits vote for (x, y, theta) bins (one vote per scan pair
+/// and bin), so missing lines, extra lines (clutter) and a partial field of view only remove or add
+/// a few votes. The best-voted bins are verified: the scan is refined against the map's likelihood
+/// field (registration::matchLikelihoodField) and scored as the fraction of its points that land on
+/// an obstacle. The result is the best pose, its score and the distinct alternatives; the localizer
+/// declines when nothing scores well enough or a distinct alternative scores nearly as well (a
+/// symmetric building). Optionally, when the descriptor path declines for want of candidates, it
+/// falls back to branch-and-bound over the whole map (registration::matchCorrelativeGlobal).
+///
+/// Frames: the map's world frame; results are `T_world_robot` for points given in the robot frame.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "lidar2d/core/laser_scan.hpp"
+#include "lidar2d/core/se2.hpp"
+#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/localization/lines.hpp"
+
+namespace lidar2d::localization {
+
+/// Options of the database build (stored in the database file). `validate()` throws
+/// `lidar2d::Error` (kInvalidArgument) naming the first field out of its domain.
+struct DatabaseOptions {
+  double step_m = 0.2;                      ///< spacing of the grid of positions [m], > 0
+  int beams = 720;                          ///< beams of each virtual scan, 8..100000
+  double fov_rad = 2.0 * std::numbers::pi;  ///< field of view of the virtual scans, centred on +x [rad], in (0, 2 pi]
+  double max_range_m = 30.0;                ///< range of the virtual scans [m], > 0
+  double clearance_m = 0.25;                ///< positions keep this distance from occupied and unknown cells [m], >= 0
+  int occupied_min = 65;                    ///< map cells >= this are obstacles, 1..100
+  int free_max = 25;                        ///< map cells 0..free_max are free, 0..99, < occupied_min
+  std::size_t max_lines = 24;               ///< longest lines kept per position, 2..64
+  /// Weight of the relative angle in the pair key (d_i, d_j, k * angle) [m/rad], > 0
+  double key_angle_scale_m_per_rad = 2.0;
+  double min_pair_angle_rad =
+      20.0 * std::numbers::pi / 180.0;  ///< pairs closer to parallel are not indexed [rad], in [0, pi/2]
+  /// Line extraction of the virtual scans: more permissive than the query's (shorter lines, fewer
+  /// points), so that the database holds a superset of what a real scan extracts.
+  LineExtractionOptions lines = permissiveLines();
+  void validate() const;
+  static LineExtractionOptions permissiveLines() {
+    LineExtractionOptions l;
+    l.min_points = 3;
+    l.min_length_m = 0.25;
+    return l;
+  }
+};
+
+/// Progress of a long build: called with (done, total) positions; must be cheap.
+using ProgressCallback = void (*)(std::size_t done, std::size_t total, void* user);
+
+/// The descriptor database of one map: positions, their lines, and the k-d tree over line pairs.
+/// Movable, not copyable.
+class Database {
+ public:
+  /// One grid position and its lines (a range of `lines()`).
+  struct Position {
+    float x = 0, y = 0;            ///< world frame [m]
+    std::uint32_t first_line = 0;  ///< index of its first line in lines()
+    std::uint32_t num_lines = 0;
+  };
+  /// One line seen from a position, in the world-oriented frame centred on the position.
+  struct LineFeature {
+    float normal_angle = 0;  ///< phi_w [rad]
+    float distance = 0;      ///< d [m]
+    float length = 0;        ///< [m]
+  };
+
+  Database();
+  ~Database();
+  Database(Database&&) noexcept;
+  Database& operator=(Database&&) noexcept;
+  Database(const Database&) = delete;
+  Database& operator=(const Database&) = delete;
+
+  /// Builds the database of `map` (multi-threaded over positions, `threads` = 0: hardware
+  /// concurrency). Throws `lidar2d::Error`: kInvalidArgument for bad options, kBadInput (field
+  /// "free space") when the map has no free cell with the clearance.
+  static Database build(const io::OccupancyImage& map, const DatabaseOptions& options = {}, unsigned threads = 0,
+                        ProgressCallback progress = nullptr, void* progress_user = nullptr);
+  /// Assembles a database from stored parts (what a reader loaded) and builds its index. Throws
+  /// `lidar2d::Error` (kBadInput) when the parts are inconsistent (line ranges out of bounds,
+  /// non-finite values).
+  static Database fromParts(const DatabaseOptions& options, std::uint64_t map_checksum, std::vector<Position> positions,
+                            std::vector<LineFeature> lines);
+
+  const DatabaseOptions& options() const;
+  std::uint64_t mapChecksum() const;  ///< mapChecksum() of the map it was built from
+  const std::vector<Position>& positions() const;
+  const std::vector<LineFeature>& lines() const;
+  std::size_t numPairs() const;     ///< indexed line pairs
+  std::size_t memoryBytes() const;  ///< approximate heap use, index included
+  bool empty() const;
+
+  /// Internal: the index (defined in the implementation).
+  struct Impl;
+  const Impl& impl() const { return *impl_; }
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+/// FNV-1a 64 over the map's size, resolution, origin and cells: identifies the map a database
+/// belongs to.
+std::uint64_t mapChecksum(const io::OccupancyImage& map);
+
+/// Options of the query. `validate()` throws `lidar2d::Error` (kInvalidArgument).
+struct LocalizerOptions {
+  LineExtractionOptions lines;       ///< line extraction of the query scan (defaults match the database's)
+  std::size_t max_query_lines = 14;  ///< longest scan lines used, >= 2
+  double key_radius_m = 0.3;  ///< search radius in key space (distances in m, angle scaled by key_angle_scale) [m], > 0
+  double vote_bin_m = 0.3;    ///< translation bin of the pose vote [m], > 0
+  double vote_bin_rad = 6.0 * std::numbers::pi / 180.0;  ///< rotation bin [rad], > 0
+  std::size_t max_candidates =
+      5000;  ///< best-voted bins pre-scored (field kernel on a subsample of points, no refinement), >= 1
+  std::size_t max_free_space_checked =
+      32;  ///< best distinct pre-scored candidates scored with the free-space term (subsample), >= 1
+  std::size_t max_refined = 16;  ///< best of those refined and scored on every point, >= 1
+  std::size_t max_verify_points =
+      400;                           ///< refinement and score use at most this many points (evenly subsampled), >= 10
+  std::size_t prescore_points = 60;  ///< points (evenly subsampled) of the pre-score, >= 10
+  double hit_distance_m = 0.1;       ///< a scan point within this of an obstacle counts for the score [m], > 0
+  double free_margin_m = 0.3;        ///< a beam crossing an obstacle cell farther than this before its endpoint counts
+                                     ///< against the score [m], >= 0
+  double max_range_m = 30.0;         ///< scan points beyond this are ignored [m], > 0
+  double min_score = 0.5;            ///< a best score below this declines, in [0, 1]
+  /// A distinct alternative scoring at least this fraction of the best declines the answer
+  /// (ambiguous, e.g. a symmetric building), in [0, 1].
+  double ambiguity_ratio = 0.95;
+  double distinct_distance_m = 1.0;  ///< alternatives farther than this from the best are distinct [m]
+  double distinct_angle_rad = 20.0 * std::numbers::pi / 180.0;  ///< ... or turned by more than this [rad]
+  /// When no descriptor candidate scores at least min_score, search the whole map by branch and
+  /// bound (slow: seconds on a building-sized map). Off by default.
+  bool fallback_branch_and_bound = false;
+  void validate() const;
+};
+
+/// One verified pose hypothesis.
+struct Candidate {
+  SE2 T_world_robot;   ///< refined pose
+  double score = 0.0;  ///< Localizer::score of the pose, in [0, 1]
+  double votes = 0.0;  ///< descriptor votes of its bin (0 for the fallback)
+};
+
+/// The answer for one scan.
+struct LocalizationResult {
+  bool declined = true;  ///< true: "unknown" (see reason); T_world_robot and score are then the best guess if any
+  std::string reason;    ///< why it declined ("no lines", "no candidate", "low score", "ambiguous", "no points")
+  SE2 T_world_robot;     ///< best pose
+  double score = 0.0;    ///< its score, in [0, 1]
+  std::vector<Candidate> alternatives;  ///< distinct poses other than the best, best first (score >= min_score)
+  std::size_t num_points = 0;           ///< valid scan points used
+  std::size_t num_lines = 0;            ///< scan lines used
+  std::size_t num_hits = 0;             ///< database pairs matched
+  std::size_t num_candidates = 0;       ///< candidates verified
+  bool used_fallback = false;           ///< the branch-and-bound fallback ran
+  double describe_ms = 0, lookup_ms = 0, verify_ms = 0, total_ms = 0;  ///< timings [ms]
+};
+
+/// Localizes single scans in one map. Holds the map's likelihood field and the database; const
+/// methods are thread-safe. Non-copyable.
+class Localizer {
+ public:
+  /// Builds the database in memory (DatabaseOptions) and the likelihood field of `map`.
+  explicit Localizer(const io::OccupancyImage& map, const LocalizerOptions& options = {},
+                     const DatabaseOptions& db_options = {});
+  /// Uses a prebuilt database. Throws `lidar2d::Error` (kBadInput, field "map checksum") when it was
+  /// built from another map.
+  Localizer(const io::OccupancyImage& map, Database database, const LocalizerOptions& options = {});
+  ~Localizer();
+  Localizer(const Localizer&) = delete;
+  Localizer& operator=(const Localizer&) = delete;
+
+  /// Localizes points given in the robot frame, in scan order (LaserScan::toPoints(T_robot_laser));
+  /// `sensor_robot` is the laser's position in the robot frame (the origin of the beams, used by the
+  /// free-space check of the score). Never throws for bad data: no valid points, no lines or nothing
+  /// scoring give declined = true.
+  LocalizationResult localize(const Points2& points_robot,
+                              const Eigen::Vector2d& sensor_robot = Eigen::Vector2d::Zero()) const;
+  /// Same for a scan: its valid beams through `T_robot_laser`.
+  LocalizationResult localize(const LaserScan& scan, const SE2& T_robot_laser = {}) const;
+
+  /// Score of a pose without refinement: (points within hit_distance of an obstacle - beams that
+  /// cross an obstacle cell more than free_margin before their endpoint) / points, clamped to [0, 1].
+  /// The second term rejects poses that explain the walls but see through other walls (a mirror
+  /// image of the room, a partial view that fits elsewhere).
+  double score(const Points2& points_robot, const SE2& T_world_robot,
+               const Eigen::Vector2d& sensor_robot = Eigen::Vector2d::Zero()) const;
+
+  const Database& database() const;
+  const LocalizerOptions& options() const;
+
+  struct State;  ///< internal (defined in the implementation)
+
+ private:
+  std::unique_ptr<State> s_;
+};
+
+}  // namespace lidar2d::localization

@@ -1,0 +1,322 @@
+// Global localization: line extraction, rotation invariance of the descriptor, the database file
+// (round trip, another map, another version, corruption), simulated worlds (office localizes,
+// symmetric declines or lists every symmetric pose) and bad input.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/io/frame_source.hpp"
+#include "lidar2d/io/localization_db.hpp"
+#include "lidar2d/localization/lines.hpp"
+#include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+#include "lidar2d/sim/path.hpp"
+#include "lidar2d/sim/simulator.hpp"
+#include "lidar2d/sim/worlds.hpp"
+#include "support/test_support.hpp"
+
+namespace lidar2d {
+namespace {
+
+using localization::Database;
+using localization::DatabaseOptions;
+using localization::Localizer;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+bool near(const SE2& a, const SE2& b, double m = 0.3, double deg = 5.0) {
+  const SE2 e = a.inverse() * b;
+  return e.translation().norm() <= m && std::abs(e.theta()) <= deg * kDeg;
+}
+
+// Points along a polyline, one every `step` metres (scan order).
+Points2 polyline(const std::vector<Eigen::Vector2d>& corners, double step) {
+  Points2 pts;
+  for (std::size_t k = 0; k + 1 < corners.size(); ++k) {
+    const Eigen::Vector2d d = corners[k + 1] - corners[k];
+    const int n = static_cast<int>(d.norm() / step);
+    for (int i = 0; i < n; ++i) pts.push_back(corners[k] + d * (static_cast<double>(i) / n));
+  }
+  pts.push_back(corners.back());
+  return pts;
+}
+
+TEST(LocalizationLines, LCornerGivesTwoLinesWithTheirHessianParameters) {
+  // Wall x = 3 (normal 0 rad, d = 3) and wall y = 2 (normal pi/2, d = 2).
+  const Points2 pts = polyline({{3.0, -2.0}, {3.0, 2.0}, {-1.0, 2.0}}, 0.05);
+  const auto lines = localization::extractLines(pts);
+  ASSERT_EQ(lines.size(), 2u);
+  bool seen_x = false, seen_y = false;
+  for (const auto& l : lines) {
+    if (std::abs(angleDiff(l.normal_angle, 0.0)) < 0.01) {
+      seen_x = true;
+      EXPECT_NEAR(l.distance, 3.0, 1e-3);
+      EXPECT_NEAR(l.length, 4.0, 0.1);
+      EXPECT_TRUE(l.foot().isApprox(Eigen::Vector2d(3.0, 0.0), 1e-3));
+    } else if (std::abs(angleDiff(l.normal_angle, std::numbers::pi / 2)) < 0.01) {
+      seen_y = true;
+      EXPECT_NEAR(l.distance, 2.0, 1e-3);
+    }
+  }
+  EXPECT_TRUE(seen_x && seen_y);
+}
+
+TEST(LocalizationLines, DegenerateInputGivesNoLinesAndBadOptionsThrow) {
+  EXPECT_TRUE(localization::extractLines({}).empty());
+  EXPECT_TRUE(localization::extractLines(Points2(50, Eigen::Vector2d(1.0, 1.0))).empty());
+  EXPECT_TRUE(localization::extractLines(Points2(20, Eigen::Vector2d(NAN, 1.0))).empty());
+  localization::LineExtractionOptions bad;
+  bad.split_threshold_m = 0.0;
+  EXPECT_THROW(localization::extractLines({}, bad), Error);
+}
+
+TEST(LocalizationLines, DescriptorIsRotationInvariant) {
+  // A room corner with a pillar-like clutter point cloud: rotating the scan frame by alpha adds
+  // alpha to every normal angle and keeps every distance and every relative angle (the pair keys).
+  const Points2 pts = polyline({{4.0, -3.0}, {4.0, 1.5}, {2.0, 3.0}, {-2.0, 3.0}}, 0.04);
+  const auto ref = localization::extractLines(pts);
+  ASSERT_GE(ref.size(), 3u);
+  for (const double alpha : {0.3, 1.7, -2.5, 3.1}) {
+    Points2 rotated;
+    const SE2 R(0, 0, alpha);
+    for (const auto& p : pts) rotated.push_back(R * p);
+    const auto lines = localization::extractLines(rotated);
+    ASSERT_EQ(lines.size(), ref.size());
+    for (std::size_t i = 0; i < ref.size(); ++i) {
+      EXPECT_NEAR(lines[i].distance, ref[i].distance, 1e-6);
+      EXPECT_NEAR(angleDiff(lines[i].normal_angle, ref[i].normal_angle + alpha), 0.0, 1e-6);
+      for (std::size_t j = 0; j < ref.size(); ++j)
+        EXPECT_NEAR(angleDiff(lines[j].normal_angle - lines[i].normal_angle, ref[j].normal_angle - ref[i].normal_angle),
+                    0.0, 1e-6);
+    }
+  }
+}
+
+// A world's map built from its route with noise-free scans (as `lidar2d map` would), and noisy
+// query scans along the same route.
+struct SimMap {
+  sim::Scenario scenario;
+  std::vector<Frame> frames;
+  io::OccupancyImage map;
+};
+
+SimMap simMap(const std::string& world, std::size_t scans) {
+  SimMap s;
+  s.scenario = sim::builtinScenario(world);
+  const auto truth = sim::samplePath(s.scenario.waypoints, {}, scans);
+  sim::SimulatorOptions so;
+  so.laser.beams = 361;
+  const auto clean = sim::simulate(s.scenario.world, truth, so.noiseFree());
+  auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
+  for (const Frame& f : clean) m->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
+  s.map = mapping::toOccupancyImage(*m);
+  s.frames = sim::simulate(s.scenario.world, truth, so);
+  return s;
+}
+
+DatabaseOptions fastDb() {
+  DatabaseOptions o;
+  o.step_m = 0.3;
+  o.beams = 360;
+  return o;
+}
+
+const SimMap& office() {
+  static const SimMap s = simMap("office", 120);
+  return s;
+}
+
+TEST(Localization, OfficeScansLocalizeCorrectly) {
+  const SimMap& s = office();
+  const Localizer loc(s.map, {}, fastDb());
+  std::size_t answered = 0, correct = 0, n = 0;
+  for (std::size_t i = 3; i < s.frames.size(); i += 10) {
+    const Frame& f = s.frames[i];
+    const auto r = loc.localize(f.scan, f.T_robot_laser);
+    ++n;
+    if (!r.declined) {
+      ++answered;
+      correct += near(*f.T_world_robot, r.T_world_robot);
+      EXPECT_TRUE(near(*f.T_world_robot, r.T_world_robot))
+          << "scan " << i << ": answer " << r.T_world_robot.x() << " " << r.T_world_robot.y() << " "
+          << r.T_world_robot.theta() << " truth " << f.T_world_robot->x() << " " << f.T_world_robot->y() << " "
+          << f.T_world_robot->theta() << " score " << r.score;
+      EXPECT_GE(r.score, loc.options().min_score);
+    }
+  }
+  EXPECT_GE(correct, n * 8 / 10) << "answered " << answered << " of " << n;
+}
+
+TEST(Localization, SymmetricWorldDeclinesOrListsEverySymmetricPose) {
+  const SimMap s = simMap("symmetric", 400);
+  const Localizer loc(s.map, {}, fastDb());
+  std::size_t declined = 0, n = 0;
+  for (std::size_t i = 5; i < s.frames.size(); i += 50) {
+    const Frame& f = s.frames[i];
+    const auto r = loc.localize(f.scan, f.T_robot_laser);
+    ++n;
+    declined += r.declined;
+    std::vector<SE2> listed{r.T_world_robot};
+    for (const auto& a : r.alternatives) listed.push_back(a.T_world_robot);
+    int found = 0;
+    for (int q = 0; q < 4; ++q) {
+      const SE2 sym = SE2(0, 0, q * std::numbers::pi / 2) * *f.T_world_robot;
+      found += std::any_of(listed.begin(), listed.end(), [&](const SE2& p) { return near(sym, p); });
+    }
+    // Never a confident answer naming one room: either "unknown", or every symmetric pose listed.
+    EXPECT_TRUE(r.declined || found == 4)
+        << "scan " << i << " answered with " << found << " of 4 symmetric poses; score " << r.score << " alternative "
+        << (r.alternatives.empty() ? 0.0 : r.alternatives[0].score);
+    if (r.declined && r.reason == std::string("ambiguous")) {
+      EXPECT_GE(found, 2) << "scan " << i;
+    }
+  }
+  EXPECT_GE(declined, n * 3 / 4);
+}
+
+TEST(Localization, ScanWithNoValidBeamsIsUnknown) {
+  const SimMap& s = office();
+  const Localizer loc(s.map, {}, fastDb());
+  LaserScanFields f;
+  f.angle_min = -1.5;
+  f.angle_increment = 0.01;
+  f.range_max = 30.0;
+  f.ranges.assign(300, std::numeric_limits<double>::quiet_NaN());
+  const auto r = loc.localize(LaserScan::create(f));
+  EXPECT_TRUE(r.declined);
+  EXPECT_EQ(r.reason, "no points");
+  EXPECT_TRUE(r.T_world_robot.isFinite());
+  EXPECT_TRUE(loc.localize(Points2{}).declined);
+}
+
+TEST(Localization, MapWithoutFreeSpaceIsRefused) {
+  const auto all_occupied = io::OccupancyImage::filled(40, 40, 0.05, SE2(), io::OccupancyImage::kOccupied);
+  const auto all_unknown = io::OccupancyImage::filled(40, 40, 0.05, SE2(), io::OccupancyImage::kUnknown);
+  for (const auto* m : {&all_occupied, &all_unknown}) {
+    try {
+      (void)Database::build(*m, fastDb());
+      FAIL() << "no error";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kBadInput);
+      EXPECT_EQ(e.where().field, "free space");
+    }
+  }
+}
+
+TEST(LocalizationDatabase, RoundTripKeepsEverythingAndTheAnswers) {
+  const SimMap& s = office();
+  test::TempDir dir;
+  const std::string path = (dir.path() / "office.l2ddb").string();
+  Database db = Database::build(s.map, fastDb());
+  ASSERT_GT(db.numPairs(), 1000u);
+  io::writeLocalizationDatabase(path, db);
+  Database back = io::readLocalizationDatabase(path);
+  EXPECT_EQ(back.mapChecksum(), localization::mapChecksum(s.map));
+  EXPECT_EQ(io::readLocalizationDatabaseMapChecksum(path), back.mapChecksum());
+  EXPECT_EQ(back.options().step_m, db.options().step_m);
+  EXPECT_EQ(back.options().beams, db.options().beams);
+  EXPECT_EQ(back.options().lines.min_points, db.options().lines.min_points);
+  ASSERT_EQ(back.positions().size(), db.positions().size());
+  ASSERT_EQ(back.lines().size(), db.lines().size());
+  EXPECT_EQ(back.numPairs(), db.numPairs());
+  for (std::size_t i = 0; i < db.lines().size(); i += 97) {
+    EXPECT_EQ(back.lines()[i].normal_angle, db.lines()[i].normal_angle);
+    EXPECT_EQ(back.lines()[i].distance, db.lines()[i].distance);
+  }
+  const Localizer a(s.map, std::move(db));
+  const Localizer b(s.map, std::move(back));
+  for (std::size_t i = 7; i < s.frames.size(); i += 30) {
+    const auto ra = a.localize(s.frames[i].scan, s.frames[i].T_robot_laser);
+    const auto rb = b.localize(s.frames[i].scan, s.frames[i].T_robot_laser);
+    EXPECT_EQ(ra.declined, rb.declined);
+    EXPECT_TRUE(ra.T_world_robot.isApprox(rb.T_world_robot, 1e-9, 1e-9));
+    EXPECT_EQ(ra.score, rb.score);
+  }
+}
+
+TEST(LocalizationDatabase, AnotherMapIsRefused) {
+  const SimMap& s = office();
+  Database db = Database::build(s.map, fastDb());
+  io::OccupancyImage other = s.map;
+  other.set(other.width() / 2, other.height() / 2,
+            other.at(other.width() / 2, other.height() / 2) == io::OccupancyImage::kOccupied
+                ? io::OccupancyImage::kFree
+                : io::OccupancyImage::kOccupied);
+  try {
+    Localizer loc(other, std::move(db));
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kBadInput);
+    EXPECT_EQ(e.where().field, "map checksum");
+    EXPECT_NE(std::string(e.what()).find("another map"), std::string::npos) << e.what();
+  }
+}
+
+TEST(LocalizationDatabase, OtherVersionCorruptionAndTruncationAreRefused) {
+  const SimMap& s = office();
+  test::TempDir dir;
+  const std::string path = (dir.path() / "db").string();
+  io::writeLocalizationDatabase(path, Database::build(s.map, fastDb()));
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  auto expectError = [&](const std::string& content, ErrorKind kind, const std::string& field) {
+    const std::string p = (dir.path() / "bad").string();
+    test::writeFile(p, content);
+    try {
+      (void)io::readLocalizationDatabase(p);
+      FAIL() << "no error for field " << field;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), kind) << e.what();
+      EXPECT_EQ(e.where().field, field) << e.what();
+      EXPECT_EQ(e.where().file, p);
+    }
+  };
+  std::string v2 = bytes;
+  v2[8] = 2;  // version (u32 after the 8-byte magic)
+  expectError(v2, ErrorKind::kUnsupported, "version");
+  std::string magic = bytes;
+  magic[0] = 'X';
+  expectError(magic, ErrorKind::kBadInput, "magic");
+  std::string flipped = bytes;
+  flipped[bytes.size() / 2] ^= 0x40;
+  expectError(flipped, ErrorKind::kBadInput, "checksum");
+  expectError(bytes.substr(0, bytes.size() - 100), ErrorKind::kBadInput, "positions");
+  expectError(bytes.substr(0, 20), ErrorKind::kBadInput, "step_m");
+  EXPECT_THROW((void)io::readLocalizationDatabase((dir.path() / "missing").string()), Error);
+}
+
+TEST(LocalizationReal, IntelOddScansInEvenMapSubset) {
+  LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
+  auto src = io::openLog(test::dataFile("corrected/intel.log.gz").string());
+  std::vector<Frame> frames;
+  while (auto f = src->next()) frames.push_back(std::move(*f));
+  auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
+  for (std::size_t i = 0; i < frames.size(); i += 2)
+    m->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
+  const io::OccupancyImage map = mapping::toOccupancyImage(*m);
+  DatabaseOptions o;
+  o.step_m = 0.25;
+  const Localizer loc(map, {}, o);
+  std::size_t n = 0, answered = 0, correct = 0;
+  for (std::size_t i = 1; i < frames.size(); i += 40) {
+    const auto r = loc.localize(frames[i].scan, frames[i].T_robot_laser);
+    ++n;
+    if (!r.declined) {
+      ++answered;
+      correct += near(*frames[i].T_world_robot, r.T_world_robot);
+    }
+  }
+  EXPECT_GE(correct, n * 7 / 10) << correct << " correct of " << n;
+  EXPECT_GE(correct + 1, answered) << "at most one wrong answer: " << correct << " of " << answered;
+}
+
+}  // namespace
+}  // namespace lidar2d
