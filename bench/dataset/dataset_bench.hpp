@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "lidar2d/core/frame.hpp"
+#include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
 
 namespace lidar2d::bench {
@@ -24,6 +25,7 @@ struct MatchBenchOptions {
   std::vector<std::string> solvers;  ///< solver names to run (gn, ceres); empty = all
   std::vector<std::string> inits{"perturbed", "identity"};  ///< initial guesses: perturbed, identity, truth
   registration::IcpOptions icp;      ///< ICP options (metric and solver are set per row)
+  registration::CorrelativeOptions corr;  ///< correlative options (window, grid)
   std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
 };
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);

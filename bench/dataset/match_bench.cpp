@@ -131,6 +131,7 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
             continue;
           registration::MatcherOptions o;
           o.icp = bo.icp;
+          o.corr = bo.corr;
           o.method = method;
           o.solver = solver;
           const Row row = runPairs(points, *inits, truth, o);
