@@ -11,6 +11,7 @@
 #include <limits>
 #include <vector>
 
+#include "internal/bearing_index.hpp"
 #include "internal/ceres_common.hpp"
 #include "internal/kdtree2.hpp"
 
@@ -22,6 +23,16 @@ const char* toString(Solver s) {
       return "gn";
     case Solver::kCeres:
       return "ceres";
+  }
+  return "unknown";
+}
+
+const char* toString(NeighborSearch s) {
+  switch (s) {
+    case NeighborSearch::kBearingWalk:
+      return "bearing";
+    case NeighborSearch::kKdTree:
+      return "kdtree";
   }
   return "unknown";
 }
@@ -112,10 +123,28 @@ struct IcpTarget::Impl {
   Points2 points;
   Points2 normals;
   bool identical = false;
-  internal::KdTree2 tree;
+  std::unique_ptr<internal::KdTree2> tree;         // NeighborSearch::kKdTree
+  std::unique_ptr<internal::BearingIndex> bearing;  // NeighborSearch::kBearingWalk
 
-  Impl(Points2 pts, const IcpOptions& o) : points(std::move(pts)), identical(allSame(points)), tree(points) {
+  Impl(Points2 pts, const IcpOptions& o) : points(std::move(pts)), identical(allSame(points)) {
+    if (o.neighbor_search == NeighborSearch::kKdTree)
+      tree = std::make_unique<internal::KdTree2>(points);
+    else
+      bearing = std::make_unique<internal::BearingIndex>(points);
     computeNormals(o);
+  }
+
+  std::size_t nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const {
+    if (bearing) return bearing->nearest(p, max_dist_sq, dist_sq);
+    const std::size_t j = tree->nearest(p, dist_sq);
+    if (*dist_sq <= max_dist_sq) return j;
+    *dist_sq = std::numeric_limits<double>::infinity();
+    return points.size();
+  }
+
+  std::size_t knn(const Eigen::Vector2d& p, std::size_t k, double max_dist_sq, std::uint32_t* idx, double* d2) const {
+    if (bearing) return bearing->knn(p, k, max_dist_sq, idx, d2);
+    return tree->knn(p, k, idx, d2);  // the caller drops those beyond the radius
   }
 
   // Local line fit per target point (the "local line fit" variant of Censi 2008, section III: the
@@ -129,7 +158,7 @@ struct IcpTarget::Impl {
     const double r2 = o.normal_max_radius_m * o.normal_max_radius_m;
     const double flat2 = o.max_line_flatness * o.max_line_flatness;
     for (std::size_t i = 0; i < points.size(); ++i) {
-      const std::size_t n = tree.knn(points[i], k, idx.data(), d2.data());
+      const std::size_t n = knn(points[i], k, r2, idx.data(), d2.data());
       Eigen::Vector2d mean = Eigen::Vector2d::Zero();
       std::size_t m = 0;
       for (std::size_t j = 0; j < n; ++j)
@@ -169,7 +198,10 @@ const Points2& IcpTarget::points() const { return impl_->points; }
 const Points2& IcpTarget::normals() const { return impl_->normals; }
 bool IcpTarget::allIdentical() const { return impl_->identical; }
 std::size_t IcpTarget::nearest(const Eigen::Vector2d& p, double* dist_sq) const {
-  return impl_->tree.nearest(p, dist_sq);
+  return impl_->nearestWithin(p, std::numeric_limits<double>::infinity(), dist_sq);
+}
+std::size_t IcpTarget::nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const {
+  return impl_->nearestWithin(p, max_dist_sq, dist_sq);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -209,8 +241,8 @@ class Icp {
     for (std::size_t i = 0; i < src_.size(); ++i) {
       const Eigen::Vector2d q = T * src_[i];
       double d2 = 0.0;
-      const std::size_t j = tgt_.nearest(q, &d2);
-      if (!(d2 <= gate2)) continue;
+      const std::size_t j = tgt_.nearestWithin(q, gate2, &d2);
+      if (j == tp.size()) continue;
       double key = d2;
       if (p2l_) {
         const Eigen::Vector2d& n = tn[j];

@@ -65,6 +65,18 @@ enum class IcpMetric {
   kPointToLine,   ///< n . (T p - q), n the normal of the target's local line (Censi 2008)
 };
 
+/// How ICP finds each transformed source point's nearest target point. Both searches are exact
+/// (they return the same nearest distance); they differ in speed only.
+enum class NeighborSearch {
+  /// The target sorted by bearing from its frame's origin; each query walks outwards from its own
+  /// bearing and stops when no farther bearing can hold a closer point (the projective search of
+  /// Censi 2008 made exact). No tree to build; a few points visited per query on scans.
+  kBearingWalk,
+  kKdTree,  ///< a nanoflann k-d tree over the target
+};
+/// "bearing" or "kdtree".
+const char* toString(NeighborSearch s);
+
 /// Options of ICP. Defaults suit indoor 2D scans (0.25 - 1 degree beam spacing, ranges up to tens
 /// of metres) with initial errors up to ~0.3 m and ~10 degrees.
 struct IcpOptions {
@@ -85,6 +97,8 @@ struct IcpOptions {
   double max_line_flatness = 0.2;   ///< a fit whose smaller/larger spread ratio (sqrt of the eigenvalue
                                     ///< ratio) exceeds this is no line: that target point gets no normal
                                     ///< and is not used by point-to-line, in [0, 1]
+  NeighborSearch neighbor_search = NeighborSearch::kBearingWalk;  ///< nearest-neighbour structure of the target
+                                                                  ///< (read by IcpTarget)
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
 
@@ -93,13 +107,15 @@ struct IcpOptions {
 };
 
 /// A target point set prepared once for matching many sources against it: the finite target
-/// points, a k-d tree over them and the unit normal of each point's local line fit. Build it once
+/// points, a nearest-neighbour structure over them (`IcpOptions::neighbor_search`) and the unit
+/// normal of each point's local line fit. Build it once
 /// per target scan and reuse it (the tree and normals are never rebuilt during the iterations).
 /// Movable, not copyable; thread-safe for concurrent `alignIcp` calls once built.
 class IcpTarget {
  public:
   /// Keeps the finite points of `points_target` (in the target frame [m]) and fits their lines
-  /// with `options.normal_neighbors` and `options.normal_max_radius_m` (other fields are unused).
+  /// with `options.normal_neighbors` and `options.normal_max_radius_m`; builds the structure of
+  /// `options.neighbor_search` (other fields are unused).
   /// Never throws for bad points: an empty or all-NaN set gives an empty target that every match
   /// reports as kTooFewPoints.
   explicit IcpTarget(const Points2& points_target, const IcpOptions& options = {});
@@ -119,6 +135,9 @@ class IcpTarget {
   bool allIdentical() const;
   /// Index of the target point nearest to `p` and its squared distance [m^2]; size() when empty.
   std::size_t nearest(const Eigen::Vector2d& p, double* dist_sq) const;
+  /// The nearest target point among those within sqrt(max_dist_sq) of `p` (index and squared
+  /// distance), or size() and +inf when there is none; faster than `nearest` for a small radius.
+  std::size_t nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const;
 
  private:
   struct Impl;
