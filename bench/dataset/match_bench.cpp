@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <numbers>
+#include <optional>
 
 #include "dataset_bench.hpp"
 #include "lidar2d/eval/metrics.hpp"
@@ -52,20 +53,26 @@ struct Row {
   bool implemented = true;
 };
 
+// `then`: when given, a second matcher refines each result of the first (for example correlative
+// search, then point-to-line ICP from its winner); its target preparation is timed too.
 Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, const io::Trajectory& truth,
-             const registration::MatcherOptions& options) {
+             const registration::MatcherOptions& options,
+             const std::optional<registration::MatcherOptions>& then = std::nullopt) {
   Row row;
   std::vector<io::RelativePose> pairs;
   std::vector<double> ms;
   pairs.reserve(points.size());
   ms.reserve(points.size());
-  std::optional<registration::PreparedTarget> prev;
+  std::optional<registration::PreparedTarget> prev, prev_then;
   for (std::size_t k = 0; k < points.size(); ++k) {
     const auto t0 = std::chrono::steady_clock::now();
     const double c0 = threadCpuSeconds();
     registration::PreparedTarget cur(points[k], options);
+    std::optional<registration::PreparedTarget> cur_then;
+    if (then) cur_then.emplace(points[k], *then);
     if (prev) {
-      const registration::Result r = registration::matchScans(*prev, points[k], inits[k], options);
+      registration::Result r = registration::matchScans(*prev, points[k], inits[k], options);
+      if (then) r = registration::matchScans(*prev_then, points[k], r.T_target_source, *then);
       if (r.status == registration::Status::kInvalidInput && r.message == "not implemented yet") {
         row.implemented = false;
         return row;
@@ -74,6 +81,7 @@ Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, 
       pairs.push_back({truth[k - 1].time, truth[k].time, r.T_target_source, r.converged, r.iterations});
     }
     prev.emplace(std::move(cur));
+    if (then) prev_then.emplace(std::move(*cur_then));
     const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     row.total_s += dt;
     if (k > 0) ms.push_back(1e3 * (threadCpuSeconds() - c0));
@@ -133,10 +141,12 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
          {std::pair<std::string, const std::vector<SE2>*>{"perturbed", &perturbed}, {"identity", &identity},
           {"truth", &exact}}) {
       if (std::find(bo.inits.begin(), bo.inits.end(), init_name) == bo.inits.end()) continue;
-      for (auto method : {registration::Method::kP2P, registration::Method::kP2L, registration::Method::kLikelihoodField,
-                          registration::Method::kCorrelative}) {
-        if (!bo.methods.empty() && std::find(bo.methods.begin(), bo.methods.end(), registration::toString(method)) == bo.methods.end())
+      for (const std::string method_name : {"p2p", "p2l", "lf", "corr", "corr+p2l"}) {
+        if (!bo.methods.empty() && std::find(bo.methods.begin(), bo.methods.end(), method_name) == bo.methods.end())
           continue;
+        const bool two_stage = method_name == "corr+p2l";
+        const registration::Method method =
+            two_stage ? registration::Method::kCorrelative : *registration::parseMethod(method_name);
         for (auto solver : {registration::Solver::kGaussNewton, registration::Solver::kCeres}) {
           if (!bo.solvers.empty() && std::find(bo.solvers.begin(), bo.solvers.end(), registration::toString(solver)) == bo.solvers.end())
             continue;
@@ -145,10 +155,16 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
           o.corr = bo.corr;
           o.method = method;
           o.solver = solver;
-          const Row row = runPairs(points, *inits, truth, o);
+          std::optional<registration::MatcherOptions> then;
+          if (two_stage) {
+            o.corr.refine = false;  // the ICP stage refines
+            then = o;
+            then->method = registration::Method::kP2L;
+          }
+          const Row row = runPairs(points, *inits, truth, o, then);
           if (!row.implemented) break;
           std::cout << fmt::format("| {} | {} | {} | {} | {} | {:.1f}% | {:.2f} | {:.3f} | {:.3f} | {:.2f} | {} |\n",
-                                   registration::toString(method), registration::toString(solver), name, init_name,
+                                   method_name, registration::toString(solver), name, init_name,
                                    row.eval.count, 100.0 * row.eval.success_rate, 100.0 * row.eval.trans_m.median,
                                    row.eval.rot_rad.median / kDeg, row.median_ms, row.total_s, row.not_converged);
           std::cout.flush();
