@@ -303,6 +303,8 @@ TEST_P(NeighborSearches, NearestAgreesWithBruteForce) {
     }
   }
   double d2 = 0;
+  EXPECT_EQ(target.nearest({std::nan(""), 1.0}, &d2), pts.size());  // no neighbour, no crash
+  EXPECT_TRUE(std::isinf(d2));
   IcpTarget empty(Points2{}, o);
   EXPECT_EQ(empty.nearest({0, 0}, &d2), 0u);
   EXPECT_TRUE(std::isinf(d2));

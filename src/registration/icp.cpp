@@ -136,6 +136,10 @@ struct IcpTarget::Impl {
   }
 
   std::size_t nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const {
+    if (!p.allFinite()) {
+      *dist_sq = std::numeric_limits<double>::infinity();
+      return points.size();
+    }
     if (bearing) return bearing->nearest(p, max_dist_sq, dist_sq);
     const std::size_t j = tree->nearest(p, dist_sq);
     if (*dist_sq <= max_dist_sq) return j;

@@ -89,7 +89,7 @@ class BearingIndex {
     };
     walk(q, [&](const Node& nd) { consider(nd); }, [&] { return best_d2; });
     for (const std::uint32_t i : at_origin_) {
-      const double d2 = q.squaredNorm();
+      const double d2 = q.squaredNorm();  // NaN for a non-finite query: never taken
       if (d2 < best_d2 || (best == total_ && d2 <= best_d2)) {
         best_d2 = d2;
         best = i;
@@ -139,7 +139,7 @@ class BearingIndex {
   template <class Visit, class Limit>
   void walk(const Eigen::Vector2d& q, Visit&& visit, Limit&& limit) const {
     const std::size_t n = nodes_.size();
-    if (n == 0) return;
+    if (n == 0 || !q.allFinite()) return;  // a non-finite query has no neighbour
     const double qn2 = q.squaredNorm();
     const double kq = pseudoAngle(q.x(), q.y());
     // First point with key >= kq: from its bucket's start, a few steps at most.
