@@ -78,8 +78,9 @@ TEST(CliMatch, IdentityInitAndOdometryInitBothWork) {
 TEST(CliMatch, CorrelativeThenIcpFromIdentity) {
   TempDir tmp;
   const std::string log = (tmp / "sim.log").string();
-  ASSERT_EQ(runCli({"simulate", "--world", "office", "-o", log, "--scans", "20", "--beams", "181", "--seed", "3"}).exit_code,
-            0);
+  const auto sim =
+      runCli({"simulate", "--world", "office", "-o", log, "--scans", "20", "--beams", "181", "--seed", "3"});
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
   const std::string out = (tmp / "m.txt").string();
   const auto r = runCli({"match", log, "--method", "corr", "--then", "p2l", "--init", "identity", "-o", out, "--eval"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -147,7 +148,8 @@ TEST(CliMatch, UsageErrorsExitTwo) {
   EXPECT_EQ(runCli({"match", log, "--method", "icp", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"match", log, "--solver", "lm", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"match", log, "--init", "truth", "-o", out}).exit_code, 2);
-  EXPECT_EQ(runCli({"match", log, "--method", "corr", "--then", "lf", "-o", out}).exit_code, 2);  // ICP only
+  // --then takes an ICP method only.
+  EXPECT_EQ(runCli({"match", log, "--method", "corr", "--then", "lf", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"match", log}).exit_code, 2);  // no -o
   EXPECT_FALSE(fs::exists(out));
 }

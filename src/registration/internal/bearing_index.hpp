@@ -87,7 +87,8 @@ class BearingIndex {
         best = nd.index;
       }
     };
-    walk(q, [&](const Node& nd) { consider(nd); }, [&] { return best_d2; });
+    walk(
+        q, [&](const Node& nd) { consider(nd); }, [&] { return best_d2; });
     for (const std::uint32_t i : at_origin_) {
       const double d2 = q.squaredNorm();  // NaN for a non-finite query: never taken
       if (d2 < best_d2 || (best == total_ && d2 <= best_d2)) {
@@ -129,8 +130,8 @@ class BearingIndex {
 
  private:
   struct Node {
-    double x, y;    // the point
-    double ux, uy;  // its unit direction from the origin
+    double x, y;          // the point
+    double ux, uy;        // its unit direction from the origin
     std::uint32_t index;  // position in the constructor's input
   };
 
