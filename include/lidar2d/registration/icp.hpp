@@ -5,15 +5,18 @@
 /// hand-written Gauss-Newton loop with analytic Jacobians or by Ceres with a robust loss.
 ///
 /// Both estimate `T_target_source` (see result.hpp): `p_target = T_target_source * p_source`.
-/// Every iteration pairs each transformed source point with its nearest target point (a nanoflann
-/// k-d tree built once per target, see `IcpTarget`), rejects pairs farther apart than
+/// Every iteration pairs each transformed source point with its nearest target point (an exact
+/// search structure built once per target, see `IcpTarget` and `NeighborSearch`: a bearing-sorted
+/// index by default, or a nanoflann k-d tree), rejects pairs farther apart than
 /// `max_correspondence_dist_m`, keeps the `trim_keep_fraction` closest of the rest (trimmed ICP,
 /// Chetverikov et al. 2002), and minimises
 ///   point-to-point: sum_i rho(|T p_i - q_i|^2)
 ///   point-to-line:  sum_i rho((n_i . (T p_i - q_i))^2)
 /// with q_i the nearest target point, n_i the unit normal of the line fitted to q_i's neighbours
 /// (precomputed per target point) and rho the robust loss. It stops when the increment of the pose
-/// falls below both `translation_eps_m` and `rotation_eps_rad`.
+/// falls below both `translation_eps_m` and `rotation_eps_rad`, or when a search returns a set of
+/// pairs already solved in one of the last 8 iterations (a fixed point of the correspondences, or a
+/// cycle through a few sets, where searching on cannot settle further); both count as converged.
 ///
 /// Bad input never throws and never yields a NaN pose: empty or too small point sets, all-NaN or
 /// all-identical points, a non-finite initial guess and out-of-domain options give a `Result` with
