@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <string>
 
@@ -73,6 +74,25 @@ TEST(CliMatch, IdentityInitAndOdometryInitBothWork) {
   EXPECT_EQ(io::readRelativePoses(out).size(), 19u);
 }
 
+// Correlative search (default window 1 m, 30 degrees) then point-to-line ICP, from no guess at all.
+TEST(CliMatch, CorrelativeThenIcpFromIdentity) {
+  TempDir tmp;
+  const std::string log = (tmp / "sim.log").string();
+  const auto sim =
+      runCli({"simulate", "--world", "office", "-o", log, "--scans", "20", "--beams", "181", "--seed", "3"});
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  const std::string out = (tmp / "m.txt").string();
+  const auto r = runCli({"match", log, "--method", "corr", "--then", "p2l", "--init", "identity", "-o", out, "--eval"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(valueAfter(r.out, "pairs: "), 19.0) << r.out;
+  EXPECT_GE(valueAfter(r.out, "success rate: "), 95.0) << r.out;
+  EXPECT_LT(valueAfter(r.out, "median translation error: "), 2.0) << r.out;  // [cm]
+  std::ifstream in(out);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_NE(header.find("method=corr then p2l"), std::string::npos) << header;
+}
+
 TEST(CliMatch, IntelLogWithItsRawOdometry) {
   LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
   TempDir tmp;
@@ -128,6 +148,8 @@ TEST(CliMatch, UsageErrorsExitTwo) {
   EXPECT_EQ(runCli({"match", log, "--method", "icp", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"match", log, "--solver", "lm", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"match", log, "--init", "truth", "-o", out}).exit_code, 2);
+  // --then takes an ICP method only.
+  EXPECT_EQ(runCli({"match", log, "--method", "corr", "--then", "lf", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"match", log}).exit_code, 2);  // no -o
   EXPECT_FALSE(fs::exists(out));
 }

@@ -1,6 +1,7 @@
 // ICP (point-to-point and point-to-line, Gauss-Newton and Ceres) through the matcher dispatcher:
 // exact recovery of known transforms on noise-free simulated scans, convergence basins, solver
-// agreement, the corridor's free direction in H, the k-d tree and line fits against brute force,
+// agreement, the corridor's free direction in H, both nearest-neighbour searches (bearing walk and
+// k-d tree) and the line fits against brute force and each other,
 // bad input, and a few real intel pairs.
 
 #include <gtest/gtest.h>
@@ -263,15 +264,26 @@ TEST_P(IcpSolvers, CorridorFreeDirectionIsTheSmallestEigenvalueOfH) {
 INSTANTIATE_TEST_SUITE_P(Solvers, IcpSolvers, ::testing::Values(Solver::kGaussNewton, Solver::kCeres),
                          [](const auto& info) { return std::string(toString(info.param)); });
 
-TEST(IcpTarget, NearestAgreesWithBruteForce) {
+class NeighborSearches : public ::testing::TestWithParam<NeighborSearch> {};
+
+// Both searches are exact: random points (uniform, plus a scan-like ring, points at the origin and
+// duplicates) against queries near and far, with and without a search radius.
+TEST_P(NeighborSearches, NearestAgreesWithBruteForce) {
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> u(-10.0, 10.0);
   Points2 pts(500);
   for (auto& p : pts) p = {u(rng), u(rng)};
-  const IcpTarget target(pts);
+  for (int i = 0; i < 360; ++i) pts.emplace_back(3.0 * std::cos(i * kDeg), 2.0 * std::sin(i * kDeg));
+  pts.emplace_back(0.0, 0.0);
+  pts.emplace_back(0.0, 0.0);
+  pts.emplace_back(pts[3]);
+  IcpOptions o;
+  o.neighbor_search = GetParam();
+  const IcpTarget target(pts, o);
   ASSERT_EQ(target.size(), pts.size());
-  for (int q = 0; q < 1000; ++q) {
-    const Eigen::Vector2d p(u(rng) * 1.2, u(rng) * 1.2);
+  for (int q = 0; q < 3000; ++q) {
+    const double scale = q % 3 == 0 ? 0.05 : 1.2;  // every third query close to the origin
+    const Eigen::Vector2d p(u(rng) * scale, u(rng) * scale);
     double best = std::numeric_limits<double>::infinity();
     for (const auto& t : pts) best = std::min(best, (t - p).squaredNorm());
     double d2 = 0;
@@ -279,11 +291,62 @@ TEST(IcpTarget, NearestAgreesWithBruteForce) {
     ASSERT_LT(i, pts.size());
     EXPECT_DOUBLE_EQ(d2, best);
     EXPECT_DOUBLE_EQ((pts[i] - p).squaredNorm(), best);
+    for (const double radius : {0.05, 0.3, 1.0}) {
+      const std::size_t j = target.nearestWithin(p, radius * radius, &d2);
+      if (best <= radius * radius) {
+        ASSERT_LT(j, pts.size()) << "radius " << radius;
+        EXPECT_DOUBLE_EQ(d2, best);
+      } else {
+        EXPECT_EQ(j, pts.size()) << "radius " << radius;
+        EXPECT_TRUE(std::isinf(d2));
+      }
+    }
   }
   double d2 = 0;
-  EXPECT_EQ(IcpTarget(Points2{}).nearest({0, 0}, &d2), 0u);
+  EXPECT_EQ(target.nearest({std::nan(""), 1.0}, &d2), pts.size());  // no neighbour, no crash
   EXPECT_TRUE(std::isinf(d2));
+  IcpTarget empty(Points2{}, o);
+  EXPECT_EQ(empty.nearest({0, 0}, &d2), 0u);
+  EXPECT_TRUE(std::isinf(d2));
+  EXPECT_EQ(empty.nearestWithin({1, 1}, 4.0, &d2), 0u);
 }
+
+// The line fits take the same k nearest neighbours whichever search finds them.
+TEST_P(NeighborSearches, LineFitsMatchTheKdTree) {
+  const Points2 pts = office().pointsAt(office().routePoses(3).back());
+  IcpOptions o;
+  o.neighbor_search = NeighborSearch::kKdTree;
+  const IcpTarget reference(pts, o);
+  o.neighbor_search = GetParam();
+  const IcpTarget target(pts, o);
+  ASSERT_EQ(target.size(), reference.size());
+  for (std::size_t i = 0; i < target.size(); ++i)
+    EXPECT_LT((target.normals()[i] - reference.normals()[i]).norm(), 1e-9) << i;
+}
+
+// Same nearest neighbours, same normals: the same match to the last bit on noise-free scans.
+TEST_P(NeighborSearches, MatchesAgreeWithTheKdTree) {
+  for (const Method m : {Method::kP2P, Method::kP2L}) {
+    MatcherOptions o;
+    o.method = m;
+    for (const SE2& A : office().routePoses(4)) {
+      const SE2 delta(0.15, -0.1, 4 * kDeg);
+      const Points2 target = office().pointsAt(A);
+      const Points2 source = office().pointsAt(A * delta);
+      o.icp.neighbor_search = NeighborSearch::kKdTree;
+      const Result reference = matchScans(target, source, SE2(), o);
+      o.icp.neighbor_search = GetParam();
+      const Result r = matchScans(target, source, SE2(), o);
+      EXPECT_TRUE(IsNearPose(reference.T_target_source, r.T_target_source, 1e-9, 1e-7)) << toString(m);
+      EXPECT_EQ(reference.iterations, r.iterations) << toString(m);
+      EXPECT_EQ(reference.num_inliers, r.num_inliers) << toString(m);
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Searches, NeighborSearches,
+                         ::testing::Values(NeighborSearch::kBearingWalk, NeighborSearch::kKdTree),
+                         [](const auto& info) { return std::string(toString(info.param)); });
 
 TEST(IcpTarget, LineFitsGiveWallNormalsAndRejectScatter) {
   // A wall y = 2 sampled every 5 cm, and an isolated point far from it.

@@ -1,10 +1,12 @@
-// lidar2d match LOG --method p2p|p2l|lf|corr [--solver gn|ceres] [--init odom|identity] -o FILE [--eval]:
-// aligns every scan to the previous one.
+// lidar2d match LOG --method p2p|p2l|lf|corr [--solver gn|ceres] [--init odom|identity] [--then p2p|p2l]
+//   -o FILE [--eval]: aligns every scan to the previous one.
 //
 // For each consecutive pair (previous = target, current = source), both scans are turned into points
 // in their robot frames (LaserScan::toPoints(T_robot_laser)), the initial guess is the odometry's
 // relative motion T_prev_cur = odom_prev^-1 * odom_cur (or the identity), and the matcher estimates
-// T_prev_cur. Output (io::readRelativePoses reads it): one line per pair,
+// T_prev_cur. With --then, a second stage (ICP) starts from the first stage's estimate: "--method corr
+// --then p2l" is the correlative search for large initial errors followed by point-to-line ICP (the
+// correlative search's own likelihood-field refinement is then skipped). Output (io::readRelativePoses reads it): one line per pair,
 //   t_prev t_cur dx dy dtheta converged iterations    [s, s, m, m, rad, 0/1, count]
 // written atomically. --eval compares the pairs with the log's truth (eval::evaluatePairs: success =
 // error < 10 cm and < 2 deg) and prints the success rate, median errors and time per pair.
@@ -37,6 +39,7 @@ struct MatchArgs {
   std::string log;
   std::string output;
   registration::MatcherOptions options;
+  std::optional<registration::Method> then;  // second stage (ICP) from the first stage's estimate
   Init init = Init::kOdom;
   bool eval = false;
   bool quiet = false;
@@ -48,13 +51,23 @@ void run(const MatchArgs& a) {
   const auto t_start = Clock::now();
   if (const std::string bad = a.options.icp.check(); !bad.empty())
     throw invalidArgument(fmt::format("invalid matcher option: {}", bad));
+  registration::MatcherOptions then_options = a.options;
+  if (a.then) {
+    if (*a.then != registration::Method::kP2P && *a.then != registration::Method::kP2L)
+      throw invalidArgument("--then must be an ICP method (p2p or p2l)");
+    then_options.method = *a.then;
+    if (a.options.method == registration::Method::kCorrelative) then_options.corr.refine = false;
+  }
+  registration::MatcherOptions first_options = a.options;
+  if (a.then && a.options.method == registration::Method::kCorrelative) first_options.corr.refine = false;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   io::AtomicFile out(a.output);
-  out.stream() << fmt::format("# lidar2d match: method={} solver={} init={}\n", registration::toString(a.options.method),
+  out.stream() << fmt::format("# lidar2d match: method={}{} solver={} init={}\n", registration::toString(a.options.method),
+                              a.then ? std::string(" then ") + registration::toString(*a.then) : std::string(),
                               registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity");
   out.stream() << "# t_prev t_cur dx dy dtheta converged iterations\n";
 
-  std::optional<registration::PreparedTarget> prev;
+  std::optional<registration::PreparedTarget> prev, prev_then;
   std::optional<Frame> prev_frame;
   std::vector<io::RelativePose> pairs;
   io::Trajectory truth;
@@ -73,12 +86,19 @@ void run(const MatchArgs& a) {
       truth.push_back({f->time, *f->T_world_robot});
     }
     const auto t0 = Clock::now();
-    registration::PreparedTarget cur(f->scan.toPoints(f->T_robot_laser), a.options);
+    registration::PreparedTarget cur(f->scan.toPoints(f->T_robot_laser), first_options);
+    std::optional<registration::PreparedTarget> cur_then;
+    if (a.then) cur_then.emplace(cur.points(), then_options);
     if (prev) {
       const SE2 init = a.init == Init::kOdom ? prev_frame->T_odom_robot->inverse() * *f->T_odom_robot : SE2();
-      const registration::Result r = registration::matchScans(*prev, cur.points(), init, a.options);
+      registration::Result r = registration::matchScans(*prev, cur.points(), init, first_options);
       if (r.status == registration::Status::kInvalidInput)
         throw invalidArgument(fmt::format("method {}: {}", registration::toString(a.options.method), r.message));
+      if (a.then) {
+        r = registration::matchScans(*prev_then, cur.points(), r.T_target_source, then_options);
+        if (r.status == registration::Status::kInvalidInput)
+          throw invalidArgument(fmt::format("method {}: {}", registration::toString(*a.then), r.message));
+      }
       match_s += std::chrono::duration<double>(Clock::now() - t0).count();
       const SE2& T = r.T_target_source;
       out.stream() << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {} {}\n", prev_frame->time, f->time, T.x(), T.y(),
@@ -89,6 +109,7 @@ void run(const MatchArgs& a) {
       match_s += std::chrono::duration<double>(Clock::now() - t0).count();
     }
     prev.emplace(std::move(cur));
+    if (a.then) prev_then.emplace(std::move(*cur_then));
     f->scan = LaserScan();  // only the times and poses of the previous frame are needed
     prev_frame = std::move(f);
   }
@@ -107,8 +128,9 @@ void run(const MatchArgs& a) {
     std::cout << fmt::format("ms per pair: {:.3f} (preparation and matching, parsing excluded)\n", per_pair_ms);
   }
   if (!a.quiet)
-    std::cerr << fmt::format("matched {} pairs ({} converged) with {}/{} in {:.3f} s ({:.3f} ms per pair) -> {}\n",
+    std::cerr << fmt::format("matched {} pairs ({} converged) with {}{}/{} in {:.3f} s ({:.3f} ms per pair) -> {}\n",
                              pairs.size(), converged, registration::toString(a.options.method),
+                             a.then ? std::string(" then ") + registration::toString(*a.then) : std::string(),
                              registration::toString(a.options.solver), total_s, per_pair_ms, a.output);
 }
 
@@ -129,6 +151,12 @@ void addMatchCommand(CLI::App& app) {
   sub->add_option("--method", a->options.method, "p2p (point-to-point ICP), p2l (point-to-line ICP), lf, corr")
       ->transform(CLI::CheckedTransformer(methods, CLI::ignore_case))
       ->default_str("p2l");
+  const std::map<std::string, registration::Method> icp_methods{{"p2p", registration::Method::kP2P},
+                                                                {"p2l", registration::Method::kP2L}};
+  sub->add_option("--then", a->then,
+                  "second stage from the first one's estimate: p2p or p2l ICP (e.g. --method corr --then p2l for large "
+                  "initial errors; skips the correlative search's own refinement)")
+      ->transform(CLI::CheckedTransformer(icp_methods, CLI::ignore_case));
   const std::map<std::string, registration::Solver> solvers{{"gn", registration::Solver::kGaussNewton},
                                                             {"ceres", registration::Solver::kCeres}};
   sub->add_option("--solver", a->options.solver, "gn (Gauss-Newton) or ceres (robust loss)")

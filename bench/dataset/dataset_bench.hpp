@@ -8,6 +8,7 @@
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
 
 namespace lidar2d::bench {
@@ -26,6 +27,10 @@ struct MatchBenchOptions {
   std::vector<std::string> solvers;  ///< solver names to run (gn, ceres); empty = all
   std::vector<std::string> inits{"perturbed", "identity"};  ///< initial guesses: perturbed, identity, truth
   registration::IcpOptions icp;      ///< ICP options (metric and solver are set per row)
+  registration::CorrelativeOptions corr;  ///< correlative options (window, grid)
+  /// Instead of the table: match every pair from its true relative pose with p2p, p2l and lf
+  /// (Gauss-Newton) and count the pairs where all three fail the bar yet agree with each other.
+  bool truth_check = false;
   std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
 };
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);

@@ -6,11 +6,13 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <vector>
 
+#include "internal/bearing_index.hpp"
 #include "internal/ceres_common.hpp"
 #include "internal/kdtree2.hpp"
 
@@ -22,6 +24,16 @@ const char* toString(Solver s) {
       return "gn";
     case Solver::kCeres:
       return "ceres";
+  }
+  return "unknown";
+}
+
+const char* toString(NeighborSearch s) {
+  switch (s) {
+    case NeighborSearch::kBearingWalk:
+      return "bearing";
+    case NeighborSearch::kKdTree:
+      return "kdtree";
   }
   return "unknown";
 }
@@ -112,10 +124,32 @@ struct IcpTarget::Impl {
   Points2 points;
   Points2 normals;
   bool identical = false;
-  internal::KdTree2 tree;
+  std::unique_ptr<internal::KdTree2> tree;         // NeighborSearch::kKdTree
+  std::unique_ptr<internal::BearingIndex> bearing;  // NeighborSearch::kBearingWalk
 
-  Impl(Points2 pts, const IcpOptions& o) : points(std::move(pts)), identical(allSame(points)), tree(points) {
+  Impl(Points2 pts, const IcpOptions& o) : points(std::move(pts)), identical(allSame(points)) {
+    if (o.neighbor_search == NeighborSearch::kKdTree)
+      tree = std::make_unique<internal::KdTree2>(points);
+    else
+      bearing = std::make_unique<internal::BearingIndex>(points);
     computeNormals(o);
+  }
+
+  std::size_t nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const {
+    if (!p.allFinite()) {
+      *dist_sq = std::numeric_limits<double>::infinity();
+      return points.size();
+    }
+    if (bearing) return bearing->nearest(p, max_dist_sq, dist_sq);
+    const std::size_t j = tree->nearest(p, dist_sq);
+    if (*dist_sq <= max_dist_sq) return j;
+    *dist_sq = std::numeric_limits<double>::infinity();
+    return points.size();
+  }
+
+  std::size_t knn(const Eigen::Vector2d& p, std::size_t k, double max_dist_sq, std::uint32_t* idx, double* d2) const {
+    if (bearing) return bearing->knn(p, k, max_dist_sq, idx, d2);
+    return tree->knn(p, k, idx, d2);  // the caller drops those beyond the radius
   }
 
   // Local line fit per target point (the "local line fit" variant of Censi 2008, section III: the
@@ -129,7 +163,7 @@ struct IcpTarget::Impl {
     const double r2 = o.normal_max_radius_m * o.normal_max_radius_m;
     const double flat2 = o.max_line_flatness * o.max_line_flatness;
     for (std::size_t i = 0; i < points.size(); ++i) {
-      const std::size_t n = tree.knn(points[i], k, idx.data(), d2.data());
+      const std::size_t n = knn(points[i], k, r2, idx.data(), d2.data());
       Eigen::Vector2d mean = Eigen::Vector2d::Zero();
       std::size_t m = 0;
       for (std::size_t j = 0; j < n; ++j)
@@ -153,8 +187,15 @@ struct IcpTarget::Impl {
       const double lmax = half_tr + disc;
       const double lmin = std::max(0.0, half_tr - disc);
       if (!(lmax > 1e-18) || lmin > flat2 * lmax) continue;
-      const double phi = 0.5 * std::atan2(2.0 * b, a - c);
-      normals[i] = Eigen::Vector2d(-std::sin(phi), std::cos(phi));
+      // Normal = eigenvector of lmin: (b, lmin - a) or (lmin - c, b), whichever is better
+      // conditioned; sign as (-sin phi, cos phi) with phi = atan2(2b, a - c) / 2 in (-pi/2, pi/2].
+      Eigen::Vector2d n1(b, lmin - a), n2(lmin - c, b);
+      Eigen::Vector2d nrm = n1.squaredNorm() >= n2.squaredNorm() ? n1 : n2;
+      const double len = nrm.norm();
+      if (!(len > 0.0)) continue;
+      nrm /= len;
+      if (nrm.y() < 0.0 || (nrm.y() == 0.0 && nrm.x() > 0.0)) nrm = -nrm;
+      normals[i] = nrm;
     }
   }
 };
@@ -169,7 +210,10 @@ const Points2& IcpTarget::points() const { return impl_->points; }
 const Points2& IcpTarget::normals() const { return impl_->normals; }
 bool IcpTarget::allIdentical() const { return impl_->identical; }
 std::size_t IcpTarget::nearest(const Eigen::Vector2d& p, double* dist_sq) const {
-  return impl_->tree.nearest(p, dist_sq);
+  return impl_->nearestWithin(p, std::numeric_limits<double>::infinity(), dist_sq);
+}
+std::size_t IcpTarget::nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const {
+  return impl_->nearestWithin(p, max_dist_sq, dist_sq);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -206,11 +250,17 @@ class Icp {
     const double gate2 = o_.max_correspondence_dist_m * o_.max_correspondence_dist_m;
     const Points2& tp = tgt_.points();
     const Points2& tn = tgt_.normals();
+    if (last_match_.size() != src_.size()) last_match_.assign(src_.size(), tp.size());
     for (std::size_t i = 0; i < src_.size(); ++i) {
       const Eigen::Vector2d q = T * src_[i];
+      // The previous iteration's partner bounds the nearest distance (the search stays exact and
+      // visits fewer points once the pose settles).
+      double bound2 = gate2;
+      if (const std::size_t prev = last_match_[i]; prev < tp.size()) bound2 = std::min(gate2, (q - tp[prev]).squaredNorm());
       double d2 = 0.0;
-      const std::size_t j = tgt_.nearest(q, &d2);
-      if (!(d2 <= gate2)) continue;
+      const std::size_t j = tgt_.nearestWithin(q, bound2, &d2);
+      last_match_[i] = j;
+      if (j == tp.size()) continue;
       double key = d2;
       if (p2l_) {
         const Eigen::Vector2d& n = tn[j];
@@ -228,7 +278,13 @@ class Icp {
         pairs_.resize(keep);
       }
     }
+    // Order-independent fingerprint of the kept (source, target) pairs.
+    set_hash_ = 0;
+    for (const Pair& pr : pairs_) set_hash_ += mix((static_cast<std::uint64_t>(pr.src) << 32) | pr.tgt);
   }
+
+  // Fingerprint of the pairs of the last findPairs.
+  std::uint64_t setHash() const { return set_hash_; }
 
   Linearisation linearise(const SE2& T) const {
     Linearisation L;
@@ -295,6 +351,34 @@ class Icp {
   const IcpOptions& o_;
   const bool p2l_;
   std::vector<Pair> pairs_;
+  std::vector<std::size_t> last_match_;  // per source point: its nearest target point last time, or size()
+  std::uint64_t set_hash_ = 0;
+
+  static std::uint64_t mix(std::uint64_t z) {  // splitmix64 finaliser
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+  }
+};
+
+// The fingerprints of the last few sets of pairs: when a search returns a set already solved, the
+// iteration has reached a fixed point of the correspondence search (the same set again) or a cycle
+// through a few sets; searching on cannot settle further, so the loop stops there.
+class PairSetHistory {
+ public:
+  // True when `h` is one of the remembered fingerprints; remembers it either way.
+  bool seenBefore(std::uint64_t h) {
+    const bool seen = std::find(hashes_.begin(), hashes_.begin() + static_cast<std::ptrdiff_t>(count_), h) !=
+                      hashes_.begin() + static_cast<std::ptrdiff_t>(count_);
+    hashes_[next_] = h;
+    next_ = (next_ + 1) % hashes_.size();
+    count_ = std::min(count_ + 1, hashes_.size());
+    return seen;
+  }
+
+ private:
+  std::array<std::uint64_t, 8> hashes_{};
+  std::size_t next_ = 0, count_ = 0;
 };
 
 // Solves H dx = -g. Falls back to the pseudo-inverse (eigenvalues below 1e-12 of the largest
@@ -363,6 +447,7 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
   Eigen::Vector3d x = init.vector();
   int it = 0;
   bool converged = false;
+  PairSetHistory history;
   while (it < o.max_iterations) {
     ++it;
     icp.findPairs(SE2::fromVector(x));
@@ -372,6 +457,7 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
                                  icp.pairs().size(), o.min_inliers));
     // A few Gauss-Newton steps on this set of pairs (the nearest-neighbour search costs far more
     // than a linearisation), then search again; converged when the whole outer step is small.
+    const bool repeated = history.seenBefore(icp.setHash());
     const Eigen::Vector3d x_outer = x;
     for (int inner = 0; inner < o.gn_inner_iterations; ++inner) {
       const Linearisation L = icp.linearise(SE2::fromVector(x));
@@ -384,7 +470,7 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
       if (smallStep(dx, o)) break;
     }
     const Eigen::Vector3d dx(x.x() - x_outer.x(), x.y() - x_outer.y(), angleDiff(x.z(), x_outer.z()));
-    if (smallStep(dx, o)) {
+    if (smallStep(dx, o) || repeated) {
       converged = true;
       break;
     }
@@ -472,6 +558,7 @@ Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
   double x[3] = {init.x(), init.y(), init.theta()};
   int it = 0;
   bool converged = false;
+  PairSetHistory history;
   while (it < o.max_iterations) {
     ++it;
     const SE2 T(x[0], x[1], x[2]);
@@ -480,6 +567,7 @@ Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
       return failure(init, Status::kTooFewInliers,
                      fmt::format("iteration {}: {} correspondences survived the rejection, {} needed", it,
                                  icp.pairs().size(), o.min_inliers));
+    const bool repeated = history.seenBefore(icp.setHash());
     ceres::Problem problem(po);
     for (const Pair& pr : icp.pairs()) {
       const Eigen::Vector2d& p = icp.source()[pr.src];
@@ -493,7 +581,7 @@ Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
       return failure(init, Status::kSolverFailure, fmt::format("Ceres: {}", summary.message));
     x[2] = wrapAngle(x[2]);
     const Eigen::Vector3d dx(x[0] - T.x(), x[1] - T.y(), angleDiff(x[2], T.theta()));
-    if (smallStep(dx, o)) {
+    if (smallStep(dx, o) || repeated) {
       converged = true;
       break;
     }

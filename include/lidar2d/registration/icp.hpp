@@ -5,15 +5,18 @@
 /// hand-written Gauss-Newton loop with analytic Jacobians or by Ceres with a robust loss.
 ///
 /// Both estimate `T_target_source` (see result.hpp): `p_target = T_target_source * p_source`.
-/// Every iteration pairs each transformed source point with its nearest target point (a nanoflann
-/// k-d tree built once per target, see `IcpTarget`), rejects pairs farther apart than
+/// Every iteration pairs each transformed source point with its nearest target point (an exact
+/// search structure built once per target, see `IcpTarget` and `NeighborSearch`: a bearing-sorted
+/// index by default, or a nanoflann k-d tree), rejects pairs farther apart than
 /// `max_correspondence_dist_m`, keeps the `trim_keep_fraction` closest of the rest (trimmed ICP,
 /// Chetverikov et al. 2002), and minimises
 ///   point-to-point: sum_i rho(|T p_i - q_i|^2)
 ///   point-to-line:  sum_i rho((n_i . (T p_i - q_i))^2)
 /// with q_i the nearest target point, n_i the unit normal of the line fitted to q_i's neighbours
 /// (precomputed per target point) and rho the robust loss. It stops when the increment of the pose
-/// falls below both `translation_eps_m` and `rotation_eps_rad`.
+/// falls below both `translation_eps_m` and `rotation_eps_rad`, or when a search returns a set of
+/// pairs already solved in one of the last 8 iterations (a fixed point of the correspondences, or a
+/// cycle through a few sets, where searching on cannot settle further); both count as converged.
 ///
 /// Bad input never throws and never yields a NaN pose: empty or too small point sets, all-NaN or
 /// all-identical points, a non-finite initial guess and out-of-domain options give a `Result` with
@@ -65,6 +68,18 @@ enum class IcpMetric {
   kPointToLine,   ///< n . (T p - q), n the normal of the target's local line (Censi 2008)
 };
 
+/// How ICP finds each transformed source point's nearest target point. Both searches are exact
+/// (they return the same nearest distance); they differ in speed only.
+enum class NeighborSearch {
+  /// The target sorted by bearing from its frame's origin; each query walks outwards from its own
+  /// bearing and stops when no farther bearing can hold a closer point (the projective search of
+  /// Censi 2008 made exact). No tree to build; a few points visited per query on scans.
+  kBearingWalk,
+  kKdTree,  ///< a nanoflann k-d tree over the target
+};
+/// "bearing" or "kdtree".
+const char* toString(NeighborSearch s);
+
 /// Options of ICP. Defaults suit indoor 2D scans (0.25 - 1 degree beam spacing, ranges up to tens
 /// of metres) with initial errors up to ~0.3 m and ~10 degrees.
 struct IcpOptions {
@@ -85,6 +100,8 @@ struct IcpOptions {
   double max_line_flatness = 0.2;   ///< a fit whose smaller/larger spread ratio (sqrt of the eigenvalue
                                     ///< ratio) exceeds this is no line: that target point gets no normal
                                     ///< and is not used by point-to-line, in [0, 1]
+  NeighborSearch neighbor_search = NeighborSearch::kBearingWalk;  ///< nearest-neighbour structure of the target
+                                                                  ///< (read by IcpTarget)
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
 
@@ -93,13 +110,15 @@ struct IcpOptions {
 };
 
 /// A target point set prepared once for matching many sources against it: the finite target
-/// points, a k-d tree over them and the unit normal of each point's local line fit. Build it once
+/// points, a nearest-neighbour structure over them (`IcpOptions::neighbor_search`) and the unit
+/// normal of each point's local line fit. Build it once
 /// per target scan and reuse it (the tree and normals are never rebuilt during the iterations).
 /// Movable, not copyable; thread-safe for concurrent `alignIcp` calls once built.
 class IcpTarget {
  public:
   /// Keeps the finite points of `points_target` (in the target frame [m]) and fits their lines
-  /// with `options.normal_neighbors` and `options.normal_max_radius_m` (other fields are unused).
+  /// with `options.normal_neighbors` and `options.normal_max_radius_m`; builds the structure of
+  /// `options.neighbor_search` (other fields are unused).
   /// Never throws for bad points: an empty or all-NaN set gives an empty target that every match
   /// reports as kTooFewPoints.
   explicit IcpTarget(const Points2& points_target, const IcpOptions& options = {});
@@ -119,6 +138,9 @@ class IcpTarget {
   bool allIdentical() const;
   /// Index of the target point nearest to `p` and its squared distance [m^2]; size() when empty.
   std::size_t nearest(const Eigen::Vector2d& p, double* dist_sq) const;
+  /// The nearest target point among those within sqrt(max_dist_sq) of `p` (index and squared
+  /// distance), or size() and +inf when there is none; faster than `nearest` for a small radius.
+  std::size_t nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const;
 
  private:
   struct Impl;

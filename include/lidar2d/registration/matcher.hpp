@@ -47,7 +47,7 @@ struct MatcherOptions {
   CorrelativeOptions corr;
 };
 
-/// A target prepared once for matching several sources against it (the k-d tree and line normals
+/// A target prepared once for matching several sources against it (the neighbour search and line normals
 /// for ICP; the field or grids of the other methods). Movable, not copyable.
 class PreparedTarget {
  public:

@@ -14,7 +14,7 @@ namespace lidar2d::registration {
 
 /// Why a matcher stopped.
 enum class Status {
-  kConverged,         ///< the increment fell below the thresholds
+  kConverged,         ///< the increment fell below the thresholds (ICP: or the correspondences repeated)
   kMaxIterations,     ///< ran out of iterations (the pose is the last estimate)
   kTooFewPoints,      ///< source or target has fewer valid points than the method needs
   kTooFewInliers,     ///< too few correspondences survived the rejection
