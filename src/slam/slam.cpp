@@ -157,6 +157,9 @@ struct Slam::Impl {
     opt.validate();
     icp.max_correspondence_dist_m = opt.icp_max_correspondence_m;
     icp.max_iterations = 30;
+    // Local maps and submaps stack several scans in a frame far from their sensors: the bearing
+    // walk (made for one scan seen from its own origin) would visit many points per query there.
+    icp.neighbor_search = registration::NeighborSearch::kKdTree;
     icp.normal_neighbors = opt.normal_neighbors;
     icp.max_line_flatness = opt.max_line_flatness;
     loop_icp = icp;
