@@ -52,6 +52,10 @@ class CliLocalize : public ::testing::Test {
 test::TempDir* CliLocalize::dir_ = nullptr;
 
 TEST_F(CliLocalize, IndexThenLocalizeWritesOneLinePerScanAndJson) {
+#ifdef LIDAR2D_SANITIZED
+  GTEST_SKIP() << "building a database through the CLI takes minutes under the sanitizers; make test runs it "
+                  "(test_localization covers the library under them)";
+#endif
   auto r = runCli({"localize-index", path("office.yaml"), "-o", path("office.db"), "--step", "0.3"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   ASSERT_TRUE(fs::exists(path("office.db")));
@@ -87,6 +91,10 @@ TEST_F(CliLocalize, IndexThenLocalizeWritesOneLinePerScanAndJson) {
 }
 
 TEST_F(CliLocalize, WithoutDatabaseBuildsItInMemoryAndSelectsScans) {
+#ifdef LIDAR2D_SANITIZED
+  GTEST_SKIP() << "building a database through the CLI takes minutes under the sanitizers; make test runs it "
+                  "(test_localization covers the library under them)";
+#endif
   const auto r = runCli({"localize", path("office.yaml"), path("query.log"), "-o", path("odd.txt"), "--scans", "odd",
                          "--step", "0.3", "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -95,6 +103,10 @@ TEST_F(CliLocalize, WithoutDatabaseBuildsItInMemoryAndSelectsScans) {
 }
 
 TEST_F(CliLocalize, SymmetricWorldDeclines) {
+#ifdef LIDAR2D_SANITIZED
+  GTEST_SKIP() << "localizing 100 scans through the CLI takes minutes under the sanitizers; make test runs it "
+                  "(test_localization checks the symmetric world under them)";
+#endif
   const auto r = runCli(
       {"localize", path("sym.yaml"), path("sym.log"), "-o", path("sym.txt"), "--scans", "odd", "--step", "0.3", "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;

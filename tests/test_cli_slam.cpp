@@ -30,7 +30,7 @@ class CliSlam : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new TempDir();
-    const auto r = runCli({"simulate", "--world", "office", "--beams", "181", "--scans", "700", "--seed", "3", "-o",
+    const auto r = runCli({"simulate", "--world", "office", "--beams", "181", "--scans", "400", "--seed", "3", "-o",
                            (dir_->path() / "office.log").string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const auto s = runCli({"slam", (dir_->path() / "office.log").string(), "-o", (dir_->path() / "run").string()});
@@ -55,11 +55,11 @@ TEST_F(CliSlam, WritesEveryOutput) {
     EXPECT_NE(slam_out_->find(f), std::string::npos) << "stdout lists " << f;
   }
   // The trajectory has every scan, the map loads as a map_server map.
-  EXPECT_EQ(io::readTrajectory((run() / "trajectory.txt").string()).size(), 700u);
+  EXPECT_EQ(io::readTrajectory((run() / "trajectory.txt").string()).size(), 400u);
   const auto map = io::readMap((run() / "map.yaml").string());
   EXPECT_GT(map.map.width(), 100);
   const auto summary = nlohmann::json::parse(readAll(run() / "summary.json"));
-  EXPECT_EQ(summary["scans"], 700);
+  EXPECT_EQ(summary["scans"], 400);
   EXPECT_GT(summary["nodes"].get<int>(), 10);
   // The graph file lists nodes and constraints.
   const std::string graph = readAll(run() / "graph.txt");
