@@ -61,6 +61,19 @@ TEST(Summarize, KnownValuesAndSampleStd) {
   EXPECT_TRUE(std::isnan(e.rmse));
 }
 
+TEST(Percentile, InterpolatesBetweenOrderStatistics) {
+  const std::vector<double> v{4.0, 1.0, 3.0, 2.0, 5.0};
+  EXPECT_DOUBLE_EQ(percentile(v, 0.0), 1.0);
+  EXPECT_DOUBLE_EQ(percentile(v, 0.5), 3.0);
+  EXPECT_DOUBLE_EQ(percentile(v, 1.0), 5.0);
+  EXPECT_DOUBLE_EQ(percentile(v, 0.95), 4.8);  // position 3.8 between 4 and 5
+  EXPECT_DOUBLE_EQ(percentile({3.0, 1.0, 2.0, 4.0}, 0.5), summarize({3.0, 1.0, 2.0, 4.0}).median);
+  EXPECT_DOUBLE_EQ(percentile({7.0}, 0.95), 7.0);
+  EXPECT_TRUE(std::isnan(percentile({}, 0.5)));
+  EXPECT_TRUE(std::isnan(percentile(v, 1.5)));
+  EXPECT_TRUE(std::isnan(percentile(v, std::numeric_limits<double>::quiet_NaN())));
+}
+
 TEST(TimeIndex, NearestWithinToleranceTiesAndRepeats) {
   // Unsorted with a repeat: original indices 0..5.
   const TimeIndex idx(std::vector<double>{3.0, 1.0, 2.0, 2.0, 5.0, 4.0});

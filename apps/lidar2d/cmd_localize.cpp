@@ -23,6 +23,7 @@
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/io/map_file.hpp"
@@ -35,15 +36,6 @@ using Clock = std::chrono::steady_clock;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 double seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
-  std::sort(v.begin(), v.end());
-  const double pos = q * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<std::size_t>(std::floor(pos));
-  const std::size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
-}
 
 struct DbArgs {
   std::string map;
@@ -178,9 +170,9 @@ void runLocalize(const LocArgs& a) {
   j["declined"] = declined;
   j["decline_rate"] = static_cast<double>(declined) / static_cast<double>(scans);
   j["decline_reasons"] = reasons;
-  j["query_ms"] = {{"median", percentile(times_ms, 0.5)},
-                   {"p95", percentile(times_ms, 0.95)},
-                   {"max", percentile(times_ms, 1.0)},
+  j["query_ms"] = {{"median", eval::percentile(times_ms, 0.5)},
+                   {"p95", eval::percentile(times_ms, 0.95)},
+                   {"max", eval::percentile(times_ms, 1.0)},
                    {"mean", std::accumulate(times_ms.begin(), times_ms.end(), 0.0) / static_cast<double>(scans)}};
   j["total_s"] = total_s;
   if (a.eval) {
@@ -201,7 +193,7 @@ void runLocalize(const LocArgs& a) {
   if (!a.json.empty()) io::writeFileAtomically(a.json, j.dump(2) + "\n");
   if (!a.quiet) {
     std::cerr << fmt::format("localized {} scans: {} answered, {} declined; median {:.1f} ms, p95 {:.1f} ms per scan",
-                             scans, answered, declined, percentile(times_ms, 0.5), percentile(times_ms, 0.95));
+                             scans, answered, declined, eval::percentile(times_ms, 0.5), eval::percentile(times_ms, 0.95));
     if (a.eval)
       std::cerr << fmt::format(
           "; success {:.1f}%, precision {:.1f}%",

@@ -17,6 +17,7 @@
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/prefetch.hpp"
 #include "lidar2d/io/trajectory.hpp"
@@ -193,13 +194,6 @@ void writeGraph(const std::string& path, const slam::Slam& slam) {
   f.commit();
 }
 
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const auto i = static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5);
-  return v[std::min(i, v.size() - 1)];
-}
-
 void run(const SlamArgs& a) {
   const auto t_start = Clock::now();
   slam::SlamOptions options = readConfig(a.config);
@@ -279,9 +273,9 @@ void run(const SlamArgs& a) {
   j["slam_s"] = slam_seconds;
   j["map_s"] = map_seconds;
   j["ms_per_scan_mean"] = slam_seconds * 1e3 / static_cast<double>(frames.size());
-  j["ms_per_scan_median"] = percentile(per_scan, 0.5);
-  j["ms_per_scan_p95"] = percentile(per_scan, 0.95);
-  j["ms_per_scan_max"] = percentile(per_scan, 1.0);
+  j["ms_per_scan_median"] = eval::percentile(per_scan, 0.5);
+  j["ms_per_scan_p95"] = eval::percentile(per_scan, 0.95);
+  j["ms_per_scan_max"] = eval::percentile(per_scan, 1.0);
   j["used_odometry"] = options.use_odometry;
   j["pose_frame"] = a.laser_frame ? "laser" : "robot";
   Json ev = Json::array();

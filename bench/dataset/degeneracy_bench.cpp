@@ -22,6 +22,7 @@
 #include "dataset_bench.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/degeneracy/ground_truth.hpp"
+#include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/sim/path.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
@@ -36,12 +37,6 @@ double threadCpuMs() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
-}
-
-double medianOf(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
 }
 
 struct Tally {
@@ -111,7 +106,7 @@ void simulated(const DegeneracyBenchOptions& bo) {
     for (int k = 0; k < 3; ++k) {
       std::cout << fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", world, scans - too_few,
                                labelled, names[k], t[k].tp, t[k].fp, t[k].fn, t[k].precision(), t[k].recall(),
-                               t[k].undecided, k == 2 ? fmt::format("{:.3f}", medianOf(ms)) : "");
+                               t[k].undecided, k == 2 ? fmt::format("{:.3f}", eval::percentile(ms, 0.5)) : "");
       all[k].tp += t[k].tp;
       all[k].fp += t[k].fp;
       all[k].fn += t[k].fn;
@@ -181,7 +176,7 @@ void real(const std::string& data_dir, const DegeneracyBenchOptions& bo) {
     std::cout << fmt::format("| {} | {} | {} | {:.1f}% | {:.1f}% | {:.1f}% | {} | {:.3f} | {} |\n",
                              std::filesystem::path(rel).stem().stem().string(), frames.size(),
                              frames.empty() ? 0 : frames[0].scan.size(), 100.0 * flagged[0] / n, 100.0 * flagged[1] / n,
-                             100.0 * flagged[2] / n, undecided, medianOf(ms), where);
+                             100.0 * flagged[2] / n, undecided, eval::percentile(ms, 0.5), where);
   }
   std::cout << "\n";
 }

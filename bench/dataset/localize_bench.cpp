@@ -18,6 +18,7 @@
 #include <numbers>
 
 #include "dataset_bench.hpp"
+#include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/frame_source.hpp"
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/io/map_file.hpp"
@@ -36,12 +37,6 @@ using Clock = std::chrono::steady_clock;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 double sec(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
-
-double pct(std::vector<double> v, double q) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(std::round(q * static_cast<double>(v.size() - 1)))];
-}
 
 bool near(const SE2& a, const SE2& b, double m = 0.3, double deg = 5.0) {
   const SE2 e = a.inverse() * b;
@@ -63,7 +58,7 @@ void row(const std::string& name, const std::string& method, std::size_t n, std:
       100.0 * static_cast<double>(ok) / static_cast<double>(n),
       answered ? fmt::format("{:.1f}%", 100.0 * static_cast<double>(ok) / static_cast<double>(answered))
                : std::string("-"),
-      100.0 * static_cast<double>(declined) / static_cast<double>(n), pct(ms, 0.5), pct(ms, 0.95), db);
+      100.0 * static_cast<double>(declined) / static_cast<double>(n), eval::percentile(ms, 0.5), eval::percentile(ms, 0.95), db);
 }
 
 }  // namespace
@@ -180,7 +175,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         "answered with a single room (wrong by symmetry) {:.1f}%, median {:.1f} ms\n",
         n, 100.0 * static_cast<double>(declined) / static_cast<double>(n),
         100.0 * static_cast<double>(all_listed) / static_cast<double>(n),
-        100.0 * static_cast<double>(answered_one) / static_cast<double>(n), pct(ms, 0.5));
+        100.0 * static_cast<double>(answered_one) / static_cast<double>(n), eval::percentile(ms, 0.5));
   }
 
   // ROS2 bag in its map: consistency of consecutive answers with odometry.
@@ -222,8 +217,8 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         "odometry (0.3 m, 5 deg) {} of {} ({:.1f}%), median {:.1f} ms, p95 {:.1f} ms\n",
         mf.map.width(), mf.map.height(), mf.map.resolution(), build_s, loc.database().memoryBytes() / 1e6, n, bo.stride,
         100.0 * static_cast<double>(answered) / static_cast<double>(n), consistent, pairs,
-        pairs ? 100.0 * static_cast<double>(consistent) / static_cast<double>(pairs) : 0.0, pct(ms, 0.5),
-        pct(ms, 0.95));
+        pairs ? 100.0 * static_cast<double>(consistent) / static_cast<double>(pairs) : 0.0, eval::percentile(ms, 0.5),
+        eval::percentile(ms, 0.95));
   }
 }
 

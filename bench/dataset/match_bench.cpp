@@ -29,14 +29,6 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-double median(std::vector<double> v) {
-  if (v.empty()) return std::nan("");
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  if (v.size() % 2 == 1) return *mid;
-  return 0.5 * (*mid + *std::max_element(v.begin(), mid));
-}
-
 // CPU time of the calling thread [s]: per-pair times on a machine shared with other jobs (wall
 // time there includes waiting for the core).
 double threadCpuSeconds() {
@@ -86,7 +78,7 @@ Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, 
     row.total_s += dt;
     if (k > 0) ms.push_back(1e3 * (threadCpuSeconds() - c0));
   }
-  row.median_ms = median(ms);
+  row.median_ms = eval::percentile(ms, 0.5);
   row.eval = eval::evaluatePairs(pairs, truth);
   if (std::getenv("LIDAR2D_BENCH_DUMP"))
     for (const auto& e : row.eval.errors)
@@ -182,7 +174,7 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
       init_r.push_back(std::abs(angleDiff(perturbed[k].theta(), rel_true.theta())) / kDeg);
     }
     std::cerr << fmt::format("{}: {} scans, perturbed guess median error {:.3f} m, {:.2f} deg\n", name, frames.size(),
-                             median(init_t), median(init_r));
+                             eval::percentile(init_t, 0.5), eval::percentile(init_r, 0.5));
     if (bo.truth_check) {
       runTruthCheck(name, points, truth);
       continue;

@@ -66,6 +66,15 @@ ErrorStats summarize(std::vector<double> values) {
   return s;
 }
 
+double percentile(std::vector<double> values, double q) {
+  if (values.empty() || !(q >= 0.0 && q <= 1.0)) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(values.begin(), values.end());
+  const double pos = q * static_cast<double>(values.size() - 1);
+  const auto lo = static_cast<std::size_t>(std::floor(pos));
+  const std::size_t hi = std::min(lo + 1, values.size() - 1);
+  return values[lo] + (pos - static_cast<double>(lo)) * (values[hi] - values[lo]);
+}
+
 TimeIndex::TimeIndex(const io::Trajectory& trajectory) {
   std::vector<double> times;
   times.reserve(trajectory.size());

@@ -64,6 +64,11 @@ struct ErrorStats {
 /// produce them).
 ErrorStats summarize(std::vector<double> values);
 
+/// The q-quantile (q in [0, 1]) of `values` with linear interpolation between order statistics:
+/// q = 0.5 is the median (the mean of the two middle values for an even count), q = 1 the maximum.
+/// NaN when `values` is empty. Used for the timing summaries of the CLI and the benchmarks.
+double percentile(std::vector<double> values, double q);
+
 /// Nearest-timestamp lookup by binary search over sorted times; indices refer to the original order.
 class TimeIndex {
  public:
