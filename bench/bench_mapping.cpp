@@ -41,6 +41,7 @@ void BM_InsertScan(benchmark::State& state) {
   lidar2d::mapping::MapOptions o;
   o.resolution_m = 0.05;
   o.insert.threads = static_cast<unsigned>(state.range(1));
+  if (state.range(2) == 0) o.insert.surface_guard_max_m = 0.0;
   auto map = lidar2d::mapping::makeMap(model, o);
   std::mt19937 rng(1);
   std::uniform_real_distribution<double> ux(-3, 12), uy(-2, 6), ua(-3, 3);
@@ -60,8 +61,10 @@ void BM_InsertScan(benchmark::State& state) {
   state.counters["split_share"] = static_cast<double>(map->parallelScans()) / static_cast<double>(state.iterations());
   state.SetLabel(lidar2d::mapping::toString(model));
 }
-// Args: model (0 log-odds, 1 count, 2 TSDF), threads. Real time: with two threads CPU time of the
+// Args: model (0 log-odds, 1 count, 2 TSDF), threads, surface guard (1 on = default, 0 off; the
+// TSDF has none). Real time: with two threads CPU time of the
 // calling thread alone says little.
-BENCHMARK(BM_InsertScan)->ArgsProduct({{0, 1, 2}, {1, 2}})->UseRealTime();
+BENCHMARK(BM_InsertScan)->ArgsProduct({{0, 1, 2}, {1, 2}, {1}})->UseRealTime();
+BENCHMARK(BM_InsertScan)->ArgsProduct({{0, 1}, {1}, {0}})->UseRealTime();
 
 }  // namespace

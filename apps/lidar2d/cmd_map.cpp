@@ -157,6 +157,10 @@ void addMapCommand(CLI::App& app) {
   sub->add_option("--no-return-clear", a->options.insert.no_return_clear_m,
                   "beams without a return clear free space up to this distance [m] (0: ignore them)")
       ->default_val(5.0);
+  sub->add_option("--surface-guard", a->options.insert.surface_guard_max_m,
+                  "logodds/count: beams do not clear the cells next to the surfaces the scan saw (grazing beams, "
+                  "edges of obstacles); longest stretch spared [m] (0: off)")
+      ->default_val(1.0);
   sub->add_option("--cell-budget", a->options.insert.cell_budget, "largest map extent allowed [cells]")->default_val(1000000000);
   sub->add_flag("--classic", a->options.logodds.classic_integer,
                 "logodds: the classic integer scheme (+2 per hit, -1 per pass, 1..100 around 50)");

@@ -82,8 +82,12 @@ void runMapBenchmark(const std::string& data_dir) {
       continue;
     }
     const std::vector<Frame> frames = loadFrames(path);
-    for (auto model : {mapping::MapModel::kLogOdds, mapping::MapModel::kCount, mapping::MapModel::kTsdf}) {
+    // The occupancy models once more without the surface guard (InsertOptions), for comparison.
+    for (const auto& [model, guard] : {std::pair{mapping::MapModel::kLogOdds, true}, std::pair{mapping::MapModel::kCount, true},
+                                       std::pair{mapping::MapModel::kTsdf, true}, std::pair{mapping::MapModel::kLogOdds, false},
+                                       std::pair{mapping::MapModel::kCount, false}}) {
       mapping::MapOptions o;
+      if (!guard) o.insert.surface_guard_max_m = 0.0;
       // Consistency: even scans build, odd scans test (the same map for any thread count).
       auto even = mapping::makeMap(model, o);
       for (std::size_t i = 0; i < frames.size(); i += 2)
@@ -92,6 +96,7 @@ void runMapBenchmark(const std::string& data_dir) {
       const Consistency c = consistency(image, frames, 1, 20.0);
       // Threads 2 twice: with the adaptive back-off (default) and splitting every scan worth it.
       for (const auto& [threads, adaptive] : {std::pair{1u, true}, std::pair{2u, true}, std::pair{2u, false}}) {
+        if (!guard && threads > 1) continue;
         o.insert.threads = threads;
         o.insert.adaptive_threads = adaptive;
         // Speed: every scan; best of 3 runs to damp the noise of a shared machine.
@@ -107,7 +112,8 @@ void runMapBenchmark(const std::string& data_dir) {
           split = map->parallelScans();
         }
         std::cout << fmt::format("| {} | {} | {} | {} | {:.0f}% | {:.3f} | {:.0f} | {:.0f} | {} x {} | {:.1f}% | {:.2f}% |\n",
-                                 std::filesystem::path(rel).stem().stem().string(), mapping::toString(model),
+                                 std::filesystem::path(rel).stem().stem().string(),
+                                 std::string(mapping::toString(model)) + (guard ? "" : " (no guard)"),
                                  threads == 1 ? std::string("1") : (adaptive ? "2" : "2 (no back-off)"),
                                  frames.size(), 100.0 * static_cast<double>(split) / static_cast<double>(frames.size()),
                                  1e3 * best / static_cast<double>(frames.size()), static_cast<double>(visits) / best / 1e6,

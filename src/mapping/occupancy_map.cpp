@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <numbers>
 #include <system_error>
 #include <thread>
 
@@ -20,6 +21,9 @@ double logit(double p) { return std::log(p / (1.0 - p)); }
 Error badOption(const std::string& field, const std::string& msg) {
   return invalidArgument(msg, ErrorLocation("", 0, field));
 }
+
+// Most beams on each side of an occluding edge that the surface guard spares (InsertOptions).
+constexpr std::size_t kGuardNeighbors = 8;
 
 CellIndex cellOfCoords(const Eigen::Vector2d& p) {
   return {static_cast<std::int32_t>(std::floor(p.x())), static_cast<std::int32_t>(std::floor(p.y()))};
@@ -56,6 +60,45 @@ void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int a
     traceInSlabAlong<0>(start, end, lo, hi, on_pass);
   else
     traceInSlabAlong<1>(start, end, lo, hi, on_pass);
+}
+
+// The cells a beam clears (log-odds, count), restricted to `slab`: each clearing stretch's cells
+// from its start to its end cell inclusive (the stretch ends lie sqrt(2) cells from any guarded
+// surface, so their cells hold none). A beam clearing up to its return (guard off) passes the cells
+// before the return's cell, as `traceRay` does; the return's cell is a hit.
+// (Templated on the map's protected Beam and Slab types, which it cannot name.)
+template <typename BeamT, typename StretchT, typename SlabT, typename F>
+void forEachCleared(const Eigen::Vector2d& origin, const BeamT& b, const std::vector<StretchT>& stretches,
+                    const SlabT& slab, F&& on_clear) {
+  if (b.clear_to_end) {
+    traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, on_clear);
+    if (slab.contains(cellOfCoords(b.end))) on_clear(cellOfCoords(b.end));  // a hit's cell keeps its hit (stamp)
+    return;
+  }
+  // A guarded stretch spares the cells whose open square the beam's surface line passes through:
+  // its corners lie on both sides of the line (n . (corner - p) takes both signs). The margin keeps
+  // a line along a cell border (a wall at a multiple of the cell size) from catching the cells on
+  // both sides through rounding [cells].
+  constexpr double kMargin = 1e-6;
+  const Eigen::Vector2d& n = b.guard_normal;
+  const double lo_off = std::min(n.x(), 0.0) + std::min(n.y(), 0.0) + kMargin;
+  const double hi_off = std::max(n.x(), 0.0) + std::max(n.y(), 0.0) - kMargin;
+  auto guarded = [&](CellIndex c) {
+    const double v = n.x() * (c.x - b.guard_point.x()) + n.y() * (c.y - b.guard_point.y());
+    if (!(v + lo_off < 0 && v + hi_off > 0)) on_clear(c);
+  };
+  for (std::size_t k = b.first_clear; k < b.first_clear + b.num_clear; ++k) {
+    const auto& s = stretches[k];
+    const Eigen::Vector2d from = origin + b.dir * s.from;
+    const Eigen::Vector2d to = origin + b.dir * s.to;
+    if (s.guarded) {
+      traceInSlab(from, to, slab.axis, slab.lo, slab.hi, guarded);
+      if (slab.contains(cellOfCoords(to))) guarded(cellOfCoords(to));
+    } else {
+      traceInSlab(from, to, slab.axis, slab.lo, slab.hi, on_clear);
+      if (slab.contains(cellOfCoords(to))) on_clear(cellOfCoords(to));
+    }
+  }
 }
 
 CellBox unite(CellBox a, const CellBox& b) {
@@ -131,10 +174,8 @@ class LogOddsMap final : public OccupancyMap {
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), hit_);
-    for (const Beam& b : beams) {
-      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, [&](CellIndex c) { update(grid_.cellUnchecked(c), miss_); });
-      if (!b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), miss_);
-    }
+    for (const Beam& b : beams)
+      forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellUnchecked(c), miss_); });
     return updates;
   }
 
@@ -187,10 +228,7 @@ class CountMap final : public OccupancyMap {
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), true);
-    for (const Beam& b : beams) {
-      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, [&](CellIndex c) { update(grid_.cellUnchecked(c), false); });
-      if (!b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), false);
-    }
+    for (const Beam& b : beams) forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellUnchecked(c), false); });
     for (HitMiss* h : touched) h->misses &= ~kMarker;
     return touched.size();
   }
@@ -205,6 +243,56 @@ class CountMap final : public OccupancyMap {
   };
   std::array<Touched, 2> touched_;
 };
+
+// Whether the segment p-q meets the box [0, h]^2 (Liang-Barsky clipping).
+bool segmentMeetsBox(Eigen::Vector2d p, Eigen::Vector2d q, double h) {
+  double t0 = 0.0, t1 = 1.0;
+  const Eigen::Vector2d d = q - p;
+  for (int k = 0; k < 2; ++k)
+    for (const double sign : {-1.0, 1.0}) {
+      // Inside: sign * (p + t d)_k <= bound, bound = 0 for the lower side, h for the upper one.
+      const double bound = sign < 0 ? 0.0 : h;
+      const double num = bound - sign * p[k], den = sign * d[k];
+      if (den == 0) {
+        if (num < 0) return false;
+      } else if (den > 0) {
+        t1 = std::min(t1, num / den);
+      } else {
+        t0 = std::max(t0, num / den);
+      }
+    }
+  return t0 <= t1;
+}
+
+// Marching squares on a square of four cell centres, in its own coordinates: a at (0, 0) (the cell
+// in question), b at (1, 0), e at (0, 1), f at (1, 1). True when the zero contour passes through
+// [0, 0.5]^2, the quarter of the square that belongs to a's cell.
+bool contourEntersQuarter(float a, float b, float e, float f) {
+  auto neg = [](float x) { return x < 0; };
+  std::array<Eigen::Vector2d, 4> cross;  // crossings in order: bottom (a-b), right (b-f), top (e-f), left (a-e)
+  std::array<bool, 4> has{};
+  auto at = [](float x, float y) { return static_cast<double>(x / (x - y)); };
+  if ((has[0] = neg(a) != neg(b))) cross[0] = {at(a, b), 0.0};
+  if ((has[1] = neg(b) != neg(f))) cross[1] = {1.0, at(b, f)};
+  if ((has[2] = neg(e) != neg(f))) cross[2] = {at(e, f), 1.0};
+  if ((has[3] = neg(a) != neg(e))) cross[3] = {0.0, at(a, e)};
+  const int count = has[0] + has[1] + has[2] + has[3];
+  if (count == 2) {
+    std::array<Eigen::Vector2d, 2> ends;
+    int k = 0;
+    for (int i = 0; i < 4; ++i)
+      if (has[static_cast<std::size_t>(i)]) ends[static_cast<std::size_t>(k++)] = cross[static_cast<std::size_t>(i)];
+    return segmentMeetsBox(ends[0], ends[1], 0.5);
+  }
+  if (count == 4) {
+    // Saddle, resolved by the centre value: when it has a's sign, a and f are joined and the
+    // contour cuts off b (bottom-right) and e (left-top); otherwise it cuts off a and f.
+    const bool joined = neg(0.25f * (a + b + e + f)) == neg(a);
+    if (joined) return segmentMeetsBox(cross[0], cross[1], 0.5) || segmentMeetsBox(cross[3], cross[2], 0.5);
+    return segmentMeetsBox(cross[0], cross[3], 0.5) || segmentMeetsBox(cross[1], cross[2], 0.5);
+  }
+  return false;
+}
 
 // ---------------------------------------------------------------------------------------------
 // TSDF: running weighted average of the truncated signed distance along each beam.
@@ -239,18 +327,38 @@ class TsdfMap final : public OccupancyMap {
     return grid_.get(c).weight > 0 ? std::optional<double>(0.5) : std::nullopt;
   }
 
-  /// Occupied: the cell holds a zero crossing, i.e. a 4-neighbour has the opposite sign and the
-  /// cell is the one nearer the surface (|sdf| not larger than the neighbour's). Free: observed,
-  /// positive, no crossing. Cells behind the surface stay unknown.
+  /// Occupied: the zero contour of the field passes through the cell's square. The contour is the
+  /// marching-squares one: linear between the crossings on the edges joining cell centres, per
+  /// square of four centres (the cell's square is covered by four such squares, a quarter each).
+  /// A crossing on an edge with an unobserved end's square missing still counts: the cell is the one
+  /// nearer the crossing. Free: observed, positive, no contour. Cells behind the surface stay unknown.
   CellState state(CellIndex c) const override {
     const TsdfCell& v = grid_.get(c);
     if (v.weight <= 0) return CellState::kUnknown;
+    // The 3 x 3 block around the cell: nb[dy + 1][dx + 1].
+    std::array<std::array<const TsdfCell*, 3>, 3> nb{};
+    bool any_crossing = false;
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const TsdfCell& n = dx == 0 && dy == 0 ? v : grid_.get(CellIndex{c.x + dx, c.y + dy});
+        nb[static_cast<std::size_t>(dy + 1)][static_cast<std::size_t>(dx + 1)] = &n;
+        any_crossing |= n.weight > 0 && (n.sdf >= 0) != (v.sdf >= 0);
+      }
+    if (!any_crossing) return v.sdf > 0 ? CellState::kFree : CellState::kUnknown;
+    auto at = [&nb](int dx, int dy) { return nb[static_cast<std::size_t>(dy + 1)][static_cast<std::size_t>(dx + 1)]; };
+    // A crossing on an edge to a 4-neighbour, in this cell's half of the edge.
     static constexpr std::array<std::array<int, 2>, 4> kN{{{1, 0}, {-1, 0}, {0, 1}, {0, -1}}};
     for (const auto& d : kN) {
-      const TsdfCell& n = grid_.get(CellIndex{c.x + d[0], c.y + d[1]});
-      if (n.weight <= 0) continue;
-      if ((v.sdf >= 0) != (n.sdf >= 0) && std::abs(v.sdf) <= std::abs(n.sdf)) return CellState::kOccupied;
+      const TsdfCell& n = *at(d[0], d[1]);
+      if (n.weight > 0 && (v.sdf >= 0) != (n.sdf >= 0) && std::abs(v.sdf) <= std::abs(n.sdf)) return CellState::kOccupied;
     }
+    // The contour crossing a corner of the cell's square without crossing its edges' halves.
+    for (const int dy : {-1, 1})
+      for (const int dx : {-1, 1}) {
+        const TsdfCell &b = *at(dx, 0), &e = *at(0, dy), &f = *at(dx, dy);
+        if (b.weight <= 0 || e.weight <= 0 || f.weight <= 0) continue;
+        if (contourEntersQuarter(v.sdf, b.sdf, e.sdf, f.sdf)) return CellState::kOccupied;
+      }
     return v.sdf > 0 ? CellState::kFree : CellState::kUnknown;
   }
   std::size_t memoryBytes() const override { return grid_.numAllocatedCells() * sizeof(TsdfCell); }
@@ -529,6 +637,7 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   const double beyond =
       model() == MapModel::kTsdf ? std::min(options_.tsdf.truncation_m, options_.tsdf.behind_surface_m) : 0.0;
   beams_.clear();
+  clear_stretches_.clear();
   CellBox box{geometry_.cellOf(T_world_laser.translation()), geometry_.cellOf(T_world_laser.translation())};
   auto grow = [&box](const Eigen::Vector2d& p) {
     const auto x = static_cast<std::int32_t>(std::floor(p.x())), y = static_cast<std::int32_t>(std::floor(p.y()));
@@ -538,18 +647,156 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
     box.max.y = std::max(box.max.y, y);
   };
   const double c0 = std::cos(T_world_laser.theta()), s0 = std::sin(T_world_laser.theta());
-  for (std::size_t i = 0; i < scan.size(); ++i) {
+  const double guard_max = model() == MapModel::kTsdf ? 0.0 : options_.insert.surface_guard_max_m;
+  const std::size_t n = scan.size();
+  // Beam directions in the laser frame, and for the surface guard (see InsertOptions::
+  // surface_guard_max_m) each return's point and the unit direction of its surface: towards the
+  // nearer neighbouring return within surface_neighbor_max_m (the farther one is more likely across
+  // a depth jump), or else facing the beam (has_tangent_ 0).
+  units_.resize(n);
+  hits_.assign(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double a = scan.angle(i);
+    units_[i] = Eigen::Vector2d(std::cos(a), std::sin(a));
+    hits_[i] = scan.isValid(i) && scan.ranges()[i] <= max_range;
+  }
+  if (guard_max > 0) {
+    points_.resize(n);
+    tangents_.resize(n);
+    has_tangent_.assign(n, 0);
+    for (std::size_t i = 0; i < n; ++i)
+      if (hits_[i]) points_[i] = scan.ranges()[i] * units_[i];
+    const double neighbor_max_sq = options_.insert.surface_neighbor_max_m * options_.insert.surface_neighbor_max_m;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!hits_[i]) continue;
+      double best = neighbor_max_sq;
+      tangents_[i] = Eigen::Vector2d(-units_[i].y(), units_[i].x());  // facing the beam
+      for (const std::size_t j : {i - 1, i + 1}) {
+        if (j >= n || !hits_[j]) continue;  // (i - 1 wraps to a huge index for i = 0)
+        const Eigen::Vector2d t = points_[j] - points_[i];
+        const double sq = t.squaredNorm();
+        if (sq > 0 && sq <= best) {
+          best = sq;
+          tangents_[i] = t / std::sqrt(sq);
+          has_tangent_[i] = 1;
+        }
+      }
+    }
+  }
+  auto cross = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); };
+  // A cell holding two lines lies within sqrt(2) cells of each; two lines meeting at angle a are
+  // within d of each other for d / sin(a) either side of their crossing.
+  const double d = std::numbers::sqrt2 * geometry_.resolution();
+  // Edges of occluding surfaces: a return nearer than its neighbour on one side (by more than
+  // 2 d, or that neighbour has no return) is the edge of a surface that the beams on that side
+  // pass. Those beams, as far as they pass within 2 d of the edge, get a stretch that must not
+  // clear: where they come within d of the edge's surface line (its own beam's surface). A beam
+  // keeps one such stretch per side (the hull, if several edges reach it). Along a continuous
+  // surface no stretch is needed: a beam's own stretch covers its neighbours' surface.
+  if (guard_max > 0) {
+    side_holes_.assign(2 * n, {0.0, -1.0});  // [2 i + (side > 0)]; empty when to < from
+    for (std::size_t j = 0; j < n; ++j) {
+      if (!hits_[j]) continue;
+      const double rj = scan.ranges()[j];
+      const Eigen::Vector2d& p = points_[j];
+      const Eigen::Vector2d& t = tangents_[j];
+      for (const int side : {-1, 1}) {
+        const std::size_t m = side < 0 ? j - 1 : j + 1;
+        if (m >= n) continue;  // (wraps below 0)
+        const double rm = scan.ranges()[m];
+        if (hits_[m] && !(rm > rj + 2 * d)) continue;  // not an edge towards this side
+        for (std::size_t k = 1; k <= kGuardNeighbors; ++k) {
+          const std::size_t i = side < 0 ? j - k : j + k;
+          if (i >= n) break;
+          const double ri = scan.ranges()[i];
+          if (std::isnan(ri) || ri <= scan.rangeMin()) continue;
+          const Eigen::Vector2d& u = units_[i];
+          const double along = p.dot(u), lateral = std::abs(cross(u, p));
+          if (lateral >= 2 * d) break;  // farther beams pass farther from the edge
+          if (hits_[i] && ri <= along) continue;  // ends before it passes the edge
+          const double sin_angle = std::abs(cross(u, t));
+          double centre = along;
+          if (sin_angle * guard_max > d) {
+            centre = cross(p, t) / cross(u, t);  // where the beam crosses the edge's surface line
+            if (std::abs(centre - along) > guard_max) continue;
+          } else if (lateral >= d) {
+            continue;  // (nearly) parallel to it and never within d
+          }
+          const double h = sin_angle * guard_max > d ? d / sin_angle : guard_max;
+          auto& hole = side_holes_[2 * i + (side > 0 ? 0 : 1)];  // seen from beam i, the edge lies on the other side
+          if (hole[1] < hole[0]) {
+            hole = {centre - h, centre + h};
+          } else {
+            hole = {std::min(hole[0], centre - h), std::max(hole[1], centre + h)};
+          }
+        }
+      }
+    }
+  }
+  for (std::size_t i = 0; i < n; ++i) {
     const double r = scan.ranges()[i];
     if (std::isnan(r) || r <= scan.rangeMin()) continue;
-    const bool hit = scan.isValid(i) && r <= max_range;
+    const bool hit = hits_[i];
     const double len = hit ? r + beyond : std::min(clear, std::isfinite(r) ? r : clear);
     if (len <= 0) continue;
-    const double a = scan.angle(i);
-    const double ca = std::cos(a), sa = std::sin(a);
+    const double ca = units_[i].x(), sa = units_[i].y();
     const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
     const Eigen::Vector2d end = origin + dir * (len * inv_res);
     grow(end);
-    beams_.push_back(Beam{end, r * inv_res, hit});
+    Beam beam{end, dir, 0, 0, true, Eigen::Vector2d::Zero(), Eigen::Vector2d::UnitX(), r * inv_res, hit};
+    if (guard_max > 0) {
+      // Stretches [from, to] of this beam (metres from the laser) that must not clear: edges of
+      // surfaces it passes.
+      const Eigen::Vector2d u(ca, sa);
+      const double clear_len = hit ? r : len;
+      // Kept sorted and disjoint: overlapping stretches are merged as they come (usually one or two).
+      std::array<std::array<double, 2>, 3> holes{};
+      std::size_t num_holes = 0;
+      auto addHole = [&](double from, double to) {
+        std::size_t kept = 0;
+        for (std::size_t k = 0; k < num_holes; ++k) {
+          if (holes[k][1] < from || holes[k][0] > to) {
+            holes[kept++] = holes[k];
+          } else {
+            from = std::min(from, holes[k][0]);
+            to = std::max(to, holes[k][1]);
+          }
+        }
+        std::size_t at = kept;
+        for (; at > 0 && holes[at - 1][0] > from; --at) holes[at] = holes[at - 1];
+        holes[at] = {from, to};
+        num_holes = kept + 1;
+      };
+      auto halfWidth = [&](double sin_angle) { return sin_angle * guard_max > d ? d / sin_angle : guard_max; };
+      // Its own surface: from where the beam comes within d of the surface line to the return, the
+      // cells are cleared unless that line passes through them (guarded stretch).
+      double own_start = clear_len;
+      if (hit) {
+        const Eigen::Vector2d& t = tangents_[i];  // laser frame
+        own_start = std::max(0.0, r - halfWidth(std::abs(cross(t, u))));
+        beam.guard_point = origin + dir * (r * inv_res);
+        beam.guard_normal = Eigen::Vector2d(-(s0 * t.x() + c0 * t.y()), c0 * t.x() - s0 * t.y());  // world, unit
+      }
+      for (std::size_t k = 2 * i; k < 2 * i + 2; ++k)  // edges of surfaces it passes (see above)
+        if (side_holes_[k][0] <= side_holes_[k][1] && side_holes_[k][0] < clear_len && side_holes_[k][1] > 0)
+          addHole(side_holes_[k][0], side_holes_[k][1]);
+      beam.clear_to_end = false;
+      auto addStretch = [&](double from, double to, bool guarded) {
+        if (!(to > from)) return;
+        if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(clear_stretches_.size());
+        clear_stretches_.push_back({from * inv_res, to * inv_res, guarded});
+      };
+      double from = 0.0;
+      for (std::size_t k = 0; k <= num_holes && from < clear_len; ++k) {
+        const double to = k < num_holes ? std::min(holes[k][0], clear_len) : clear_len;
+        if (to > from) {  // [from, to] split at own_start into a plain and a guarded part
+          addStretch(from, std::min(to, own_start), false);
+          addStretch(std::max(from, own_start), to, true);
+        }
+        if (k < num_holes) from = std::max(from, holes[k][1]);
+      }
+    }
+    beams_.push_back(beam);
   }
   if (beams_.empty()) return;
   beginScan(box);
@@ -583,6 +830,10 @@ std::unique_ptr<OccupancyMap> makeMap(MapModel model, const MapOptions& o) {
     throw badOption("max_range_m", "must be in (0, 10000] m");
   if (!(o.insert.no_return_clear_m >= 0 && o.insert.no_return_clear_m <= 1e4))
     throw badOption("no_return_clear_m", "must be in [0, 10000] m");
+  if (!(o.insert.surface_guard_max_m >= 0 && o.insert.surface_guard_max_m <= 100))
+    throw badOption("surface_guard_max_m", "must be in [0, 100] m");
+  if (!(o.insert.surface_neighbor_max_m > 0 && o.insert.surface_neighbor_max_m <= 100))
+    throw badOption("surface_neighbor_max_m", "must be in (0, 100] m");
   switch (model) {
     case MapModel::kLogOdds:
       return std::make_unique<LogOddsMap>(o);

@@ -4,6 +4,7 @@
 /// log-odds, hit/miss counting, and a 2D truncated signed distance field (TSDF). All store their
 /// cells in a sparse `TiledGrid` and trace beams exactly (`traceRay`).
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -31,6 +32,19 @@ struct InsertOptions {
   /// Beams without a return (>= range_max, +inf, or beyond max_range_m) clear free space up to
   /// this distance and mark nothing occupied; 0 ignores them [m].
   double no_return_clear_m = 5.0;
+  /// Surface guard (log-odds and count): free-space clearing spares the cells that may hold a
+  /// surface the scan saw, those within sqrt(2) cells of it. For each return the surface is the
+  /// line through it along the neighbouring return; a beam stops clearing where it comes within
+  /// sqrt(2) cells of its own surface (sqrt(2) * resolution / sin(a) before the return, a = the
+  /// incidence angle, 90 deg = head-on) and skips the stretch where it passes that close to a
+  /// neighbouring beam's surface in front of it (the edge of an occluding object). Each such stretch
+  /// is at most twice this long [m]. Without the guard, beams that graze a wall and end further
+  /// along it, or pass the edge of an obstacle, clear the cells the surface passes through
+  /// (BENCHMARK.md, simulated office). 0 disables the guard.
+  double surface_guard_max_m = 1.0;
+  /// Neighbouring returns farther apart than this are not taken as one surface by the surface guard;
+  /// a return with no such neighbour is taken as a surface facing the beam [m].
+  double surface_neighbor_max_m = 1.0;
   std::size_t cell_budget = 1'000'000'000;  ///< most cells the map may span [cells]
   /// Threads inserting one scan: 1 = the calling thread only; 2 = the calling thread and one
   /// worker thread owned by the map, splitting the scan's cells by a line (each cell is updated by
@@ -135,6 +149,15 @@ class OccupancyMap {
   /// Model-specific insertion of prepared beams (all in continuous cell coordinates).
   struct Beam {
     Eigen::Vector2d end;  ///< end of the traced segment [cells]
+    Eigen::Vector2d dir;  ///< unit direction from the origin [cells]
+    /// Stretches of the beam that clear free space (log-odds, count): `clear_stretches_`
+    /// [first_clear, first_clear + num_clear), in order. Unused when `clear_to_end`.
+    std::uint32_t first_clear = 0;
+    std::uint32_t num_clear = 0;
+    bool clear_to_end = true;  ///< the only stretch runs from the origin to `end` (traced exactly so)
+    /// The surface line of its return (surface guard): a point [cells] and its unit normal.
+    Eigen::Vector2d guard_point = Eigen::Vector2d::Zero();
+    Eigen::Vector2d guard_normal = Eigen::Vector2d::UnitX();
     double range_cells;   ///< length of the beam up to the return [cells]
     bool hit;             ///< true: a return at `end`; false: no return (clear only)
   };
@@ -161,6 +184,12 @@ class OccupancyMap {
 
   const MapOptions options_;
   const GridGeometry geometry_;
+  /// The clearing stretches of the current scan's beams (see Beam).
+  struct ClearStretch {
+    double from, to;  ///< distances from the origin along the beam [cells]
+    bool guarded;     ///< spares the cells its beam's surface line passes through (Beam::guard_*)
+  };
+  std::vector<ClearStretch> clear_stretches_;
 
  private:
   struct Worker;
@@ -173,6 +202,11 @@ class OccupancyMap {
   std::uint64_t parallel_scans_ = 0;
   CellBox bounds_;
   std::vector<Beam> beams_;  // scratch buffer reused between scans
+  // Scratch reused between scans: beam directions, returns and surface directions (laser frame;
+  // the last two for the surface guard), which beams have a return and which a surface direction.
+  std::vector<Eigen::Vector2d> units_, points_, tangents_;
+  std::vector<std::uint8_t> hits_, has_tangent_;
+  std::vector<std::array<double, 2>> side_holes_;  // surface guard: per beam and side, a stretch not to clear
   std::vector<double> split_sums_;  // scratch of chooseSplit
   std::unique_ptr<Worker> worker_;  // started on the first scan inserted by two threads
   std::uint32_t backoff_ = 0;      // scans to insert single-threaded after a split that did not pay
