@@ -63,6 +63,29 @@ TEST(TiledGrid, StoresAcrossTileBordersAndNegativeIndices) {
   EXPECT_EQ(box.min.x % 64, 0);
 }
 
+TEST(TiledGrid, CursorGivesTheSameCellsAsTheTableAcrossTilesAndGrowth) {
+  TiledGrid<int> grid(0, 200'000'000);
+  grid.reserve(CellBox{{-200, -200}, {200, 200}});
+  TiledGrid<int>::Cursor cursor;
+  // A walk crossing tile borders both ways, at negative indices too.
+  std::vector<CellIndex> cells;
+  for (int x = -150; x <= 150; ++x) cells.push_back({x, x / 3 - 20});
+  for (int y = 150; y >= -150; --y) cells.push_back({-65, y});
+  int i = 1;
+  for (const CellIndex& c : cells) grid.cellCached(c, cursor) = i++;
+  // The table grows (moves the tile pointers, not the tiles): the cursor keeps working.
+  grid.reserve(CellBox{{-5000, -5000}, {5000, 5000}});
+  grid.cellCached({-65, 150}, cursor) += 1000000;
+  i = 1;
+  std::map<std::pair<int, int>, int> expected;
+  for (const CellIndex& c : cells) expected[{c.x, c.y}] = i++;
+  expected[{-65, 150}] += 1000000;
+  for (const auto& [k, v] : expected) {
+    EXPECT_EQ(grid.get({k.first, k.second}), v) << k.first << "," << k.second;
+    EXPECT_EQ(&grid.cellUnchecked({k.first, k.second}), &grid.cellCached({k.first, k.second}, cursor));
+  }
+}
+
 TEST(TiledGrid, AllocatesTilesLazily) {
   TiledGrid<float> grid(0.0f, 100'000'000);
   grid.reserve(CellBox{{-1000, -1000}, {1000, 1000}});

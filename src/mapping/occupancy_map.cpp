@@ -36,7 +36,7 @@ CellIndex cellOfCoords(const Eigen::Vector2d& p) {
 // (Jumping straight to the entry would recompute t_max differently from the walk's running sums and
 // could pick the other cell at a near-corner crossing.)
 template <int kAxis, typename F>
-void traceInSlabAlong(const Eigen::Vector2d& start, const Eigen::Vector2d& end, std::int32_t lo, std::int32_t hi,
+[[gnu::always_inline]] inline void traceInSlabAlong(const Eigen::Vector2d& start, const Eigen::Vector2d& end, std::int32_t lo, std::int32_t hi,
                       F&& on_pass) {
   RayWalk walk(start, end);
   // (kAxis a template parameter: the slab test then reads one coordinate without a branch.)
@@ -52,7 +52,7 @@ void traceInSlabAlong(const Eigen::Vector2d& start, const Eigen::Vector2d& end, 
 }
 
 template <typename F>
-void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int axis, std::int32_t lo, std::int32_t hi,
+[[gnu::always_inline]] inline void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int axis, std::int32_t lo, std::int32_t hi,
                  F&& on_pass) {
   if (axis < 0)
     traceRay(start, end, on_pass);
@@ -68,7 +68,7 @@ void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int a
 // before the return's cell, as `traceRay` does; the return's cell is a hit.
 // (Templated on the map's protected Beam and Slab types, which it cannot name.)
 template <typename BeamT, typename StretchT, typename SlabT, typename F>
-void forEachCleared(const Eigen::Vector2d& origin, const BeamT& b, const std::vector<StretchT>& stretches,
+[[gnu::always_inline]] inline void forEachCleared(const Eigen::Vector2d& origin, const BeamT& b, const std::vector<StretchT>& stretches,
                     const SlabT& slab, F&& on_clear) {
   if (b.clear_to_end) {
     traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, on_clear);
@@ -165,6 +165,7 @@ class LogOddsMap final : public OccupancyMap {
     // the same scan that grazes it, and cells near the sensor crossed by many beams get one miss,
     // not dozens. A per-cell scan stamp says whether the cell was updated in this scan.
     std::uint64_t updates = 0;
+    TiledGrid<LogOddsCell>::Cursor cursor;
     auto update = [this, &updates](LogOddsCell& cell, float delta) {
       if (cell.stamp == scan_) return;
       cell.stamp = scan_;
@@ -173,9 +174,9 @@ class LogOddsMap final : public OccupancyMap {
       ++updates;
     };
     for (const Beam& b : beams)
-      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), hit_);
+      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), hit_);
     for (const Beam& b : beams)
-      forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellUnchecked(c), miss_); });
+      forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellCached(c, cursor), miss_); });
     return updates;
   }
 
@@ -218,6 +219,7 @@ class CountMap final : public OccupancyMap {
     // marks the cells updated in this scan. Counts saturate below that bit. Each part clears the
     // markers of its own cells (no other part touches them).
     std::vector<HitMiss*>& touched = touched_[static_cast<std::size_t>(part)].cells;
+    TiledGrid<HitMiss>::Cursor cursor;
     touched.clear();
     auto update = [&touched](HitMiss& h, bool hit) {
       if (h.misses & kMarker) return;
@@ -227,8 +229,8 @@ class CountMap final : public OccupancyMap {
       touched.push_back(&h);
     };
     for (const Beam& b : beams)
-      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellUnchecked(cellOfCoords(b.end)), true);
-    for (const Beam& b : beams) forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellUnchecked(c), false); });
+      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), true);
+    for (const Beam& b : beams) forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellCached(c, cursor), false); });
     for (HitMiss* h : touched) h->misses &= ~kMarker;
     return touched.size();
   }
@@ -306,7 +308,8 @@ class TsdfMap final : public OccupancyMap {
   explicit TsdfMap(const MapOptions& o)
       : OccupancyMap(o),
         grid_(TsdfCell{}, o.insert.cell_budget),
-        trunc_cells_(static_cast<float>(o.tsdf.truncation_m * geometry_.inverseResolution())) {
+        trunc_cells_(static_cast<float>(o.tsdf.truncation_m * geometry_.inverseResolution())),
+        max_weight_(static_cast<float>(static_cast<std::size_t>(o.tsdf.max_weight))) {
     const auto cap = static_cast<std::size_t>(o.tsdf.max_weight);
     for (std::size_t w = 0; w <= cap; ++w) {
       inv_weight_.push_back(1.0f / static_cast<float>(std::min(w + 1, cap)));
@@ -373,6 +376,7 @@ class TsdfMap final : public OccupancyMap {
     // slab holds it, in that order, so a split scan averages exactly as an unsplit one.
     std::uint64_t updates = 0;
     const float t = trunc_cells_;
+    TiledGrid<TsdfCell>::Cursor cursor;
     for (const Beam& b : beams) {
       const Eigen::Vector2d d = b.end - origin;
       const double len = d.norm();
@@ -384,11 +388,19 @@ class TsdfMap final : public OccupancyMap {
       auto update = [&](CellIndex c) {
         const float sdf =
             b.hit ? std::clamp(offset - (dir_x * static_cast<float>(c.x) + dir_y * static_cast<float>(c.y)), -t, t) : t;
-        TsdfCell& v = grid_.cellUnchecked(c);
+        TsdfCell& v = grid_.cellCached(c, cursor);
         // Free-space carving (sdf at the truncation) leaves cells near a surface (|sdf| < t) alone:
         // beams grazing a wall clip the corners of the cells the wall passes through, and averaging
         // +t into them would move the zero crossing off the wall.
-        if (sdf >= t && v.weight > 0 && v.sdf < t) return;
+        if (sdf >= t) {
+          if (v.weight > 0 && v.sdf < t) return;
+          // Averaging the truncation into a cell holding it (carving leaves others alone) changes
+          // only the weight; at the cap, nothing: skip the writes (it still counts as an update).
+          if (v.weight >= max_weight_) {
+            ++updates;
+            return;
+          }
+        }
         // Weights are whole numbers up to the cap, so 1 / (w + 1) comes from a table.
         const auto w = static_cast<std::size_t>(v.weight);
         v.sdf += (sdf - v.sdf) * inv_weight_[w];
@@ -405,6 +417,7 @@ class TsdfMap final : public OccupancyMap {
  private:
   TiledGrid<TsdfCell> grid_;
   const float trunc_cells_;
+  const float max_weight_;  // the weight cap, a whole number
   std::vector<float> inv_weight_;   // 1 / (new weight) for each current whole weight
   std::vector<float> weight_next_;  // new weight after one more observation (capped)
 };

@@ -104,6 +104,23 @@ class TiledGrid {
     if (!tile) allocate(tile);
     return tile[static_cast<std::size_t>(((c.y & kTileMask) << kTileBits) | (c.x & kTileMask))];
   }
+  /// The tile `cellCached` used last. Consecutive cells of a ray mostly share a tile, so their
+  /// table lookup is skipped. A tile's cells never move, so a cursor stays valid when the table
+  /// grows; one cursor per thread.
+  struct Cursor {
+    std::int32_t tx = std::numeric_limits<std::int32_t>::min(), ty = std::numeric_limits<std::int32_t>::min();
+    Cell* tile = nullptr;
+  };
+  /// `cellUnchecked` through a cursor (same precondition).
+  Cell& cellCached(CellIndex c, Cursor& k) {
+    const std::int32_t tx = c.x >> kTileBits, ty = c.y >> kTileBits;
+    if (tx != k.tx || ty != k.ty) {
+      k.tile = &cellUnchecked(CellIndex{tx * kTileSize, ty * kTileSize});  // the tile's first cell
+      k.tx = tx;
+      k.ty = ty;
+    }
+    return k.tile[static_cast<std::size_t>(((c.y & kTileMask) << kTileBits) | (c.x & kTileMask))];
+  }
   /// Mutable cell; grows the table as needed (may throw as `reserve`).
   Cell& at(CellIndex c) {
     reserve(CellBox{c, c});
