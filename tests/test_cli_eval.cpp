@@ -42,13 +42,6 @@ json parse(const CliResult& r) {
   return json::parse(r.out);
 }
 
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 std::size_t filesIn(const std::filesystem::path& dir) {
   std::size_t n = 0;
   for (const auto& e : std::filesystem::directory_iterator(dir)) n += e.is_regular_file();
@@ -68,7 +61,7 @@ TEST(CliEval, TruthAgainstItselfIsZeroAndOutputFileMatchesStdout) {
   EXPECT_EQ(j.at("matched").get<int>(), 50);
   EXPECT_EQ(j.at("unmatched").get<int>(), 0);
   EXPECT_EQ(j.at("association").get<std::string>(), "index");
-  EXPECT_EQ(slurp(out), r.out);
+  EXPECT_EQ(test::readFile(out), r.out);
 }
 
 TEST(CliEval, RigidTransformIsAlignedAway) {

@@ -89,6 +89,10 @@ TEST_F(CliMap, PriorOverridesTheSensor) {
     for (int c = c0; c < c0 + 10; ++c) EXPECT_EQ(out.map.at(c, rr), io::OccupancyImage::kOccupied);
   // Elsewhere the sensor's verdict stands.
   EXPECT_EQ(out.map.at(0, 0), base.map.at(0, 0));
+  // The YAML says so in a comment (which map_server ignores; readMap just did too).
+  const std::string yaml = test::readFile(path("with-prior.yaml"));
+  EXPECT_NE(yaml.find("# prior layer prior.yaml overrides the sensor in 100 cells"), std::string::npos) << yaml;
+  EXPECT_EQ(test::readFile(path("base.yaml")).find("prior layer"), std::string::npos);
   // The same prior as a bare image works too (the written PGM is exactly the map's size).
   const auto r2 = runCli({"map", log(), "--prior", path("prior.pgm"), "-o", path("with-prior-pgm")});
   ASSERT_EQ(r2.exit_code, 0) << r2.err;

@@ -36,13 +36,6 @@ std::vector<Frame> readAll(const std::string& path) {
   return frames;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 nlohmann::json info(const std::string& log) {
   const auto r = runCli({"info", "--json", log});
   EXPECT_EQ(r.exit_code, 0) << r.err;
@@ -65,7 +58,7 @@ TEST_P(SimulateWorld, InfoReportsScansBeamsOdometryAndTruth) {
   EXPECT_NEAR(j["fov_deg"].get<double>(), 270.0 * 181 / 180, 1e-6);  // n * increment
   EXPECT_NEAR(j["duration_s"].get<double>(), 5.9, 1e-6);
   // The comment line states the world, seed and options.
-  const std::string text = slurp(log);
+  const std::string text = test::readFile(log);
   EXPECT_NE(text.find("world=" + GetParam()), std::string::npos);
   EXPECT_NE(text.find("seed=4"), std::string::npos);
   EXPECT_NE(text.find("range_noise_m=0.01"), std::string::npos);
@@ -174,8 +167,8 @@ TEST(Perturb, OdometryNoiseHasThePerStepStatistics) {
   const std::string again = (tmp / "again.log").string(), other = (tmp / "other.log").string();
   ASSERT_EQ(runCli({"perturb", clean, "--odom-noise", "0.02,0.01,0.005", "--seed", "5", "-o", again}).exit_code, 0);
   ASSERT_EQ(runCli({"perturb", clean, "--odom-noise", "0.02,0.01,0.005", "--seed", "6", "-o", other}).exit_code, 0);
-  EXPECT_EQ(slurp(noisy), slurp(again));
-  EXPECT_NE(slurp(noisy), slurp(other));
+  EXPECT_EQ(test::readFile(noisy), test::readFile(again));
+  EXPECT_NE(test::readFile(noisy), test::readFile(other));
   EXPECT_EQ(info(noisy)["has_truth"], true);
 }
 

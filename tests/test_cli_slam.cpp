@@ -18,13 +18,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string readAll(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 /// A small simulated office log shared by the tests of this file.
 class CliSlam : public ::testing::Test {
  protected:
@@ -58,11 +51,11 @@ TEST_F(CliSlam, WritesEveryOutput) {
   EXPECT_EQ(io::readTrajectory((run() / "trajectory.txt").string()).size(), 400u);
   const auto map = io::readMap((run() / "map.yaml").string());
   EXPECT_GT(map.map.width(), 100);
-  const auto summary = nlohmann::json::parse(readAll(run() / "summary.json"));
+  const auto summary = nlohmann::json::parse(test::readFile(run() / "summary.json"));
   EXPECT_EQ(summary["scans"], 400);
   EXPECT_GT(summary["nodes"].get<int>(), 10);
   // The graph file lists nodes and constraints.
-  const std::string graph = readAll(run() / "graph.txt");
+  const std::string graph = test::readFile(run() / "graph.txt");
   EXPECT_NE(graph.find("\nNODE 0 "), std::string::npos);
   EXPECT_NE(graph.find("\nEDGE sequential 0 1 "), std::string::npos);
 }
@@ -79,7 +72,7 @@ TEST_F(CliSlam, IsAccurateAgainstTheTruth) {
 }
 
 TEST_F(CliSlam, ReportIsSelfContained) {
-  const std::string html = readAll(run() / "report.html");
+  const std::string html = test::readFile(run() / "report.html");
   EXPECT_NE(html.find("data:image/png;base64,"), std::string::npos);
   EXPECT_NE(html.find("id=\"trajectory\""), std::string::npos);
   EXPECT_NE(html.find("id=\"time-plot\""), std::string::npos);
@@ -100,7 +93,7 @@ TEST_F(CliSlam, ReportRendersInHeadlessChromium) {
   ASSERT_EQ(std::system((std::string(chromium) + " " + flags + " --dump-dom " + url + " > " + dom.string() +
                          " 2>/dev/null").c_str()),
             0);
-  const std::string out = readAll(dom);
+  const std::string out = test::readFile(dom);
   // The browser parsed the page: the map image, the trajectory and the summary table are in its DOM.
   EXPECT_NE(out.find("id=\"map\""), std::string::npos);
   EXPECT_NE(out.find("<polyline id=\"trajectory\""), std::string::npos);
@@ -116,7 +109,7 @@ TEST_F(CliSlam, ConfigFileOverridesDefaultsAndRejectsMistakes) {
   writeFile(t.path() / "ok.yaml", "submap_nodes: 20\nloop_angular_window_deg: 20\nuse_odometry: false\n");
   auto r = runCli({"slam", log().string(), "-o", (t.path() / "a").string(), "--config", (t.path() / "ok.yaml").string(), "-q"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(nlohmann::json::parse(readAll(t.path() / "a" / "summary.json"))["used_odometry"], false);
+  EXPECT_EQ(nlohmann::json::parse(test::readFile(t.path() / "a" / "summary.json"))["used_odometry"], false);
 
   writeFile(t.path() / "bad.yaml", "submap_nodes: 20\nsubmap_size: 3\n");
   r = runCli({"slam", log().string(), "-o", (t.path() / "b").string(), "--config", (t.path() / "bad.yaml").string()});

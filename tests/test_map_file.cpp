@@ -38,13 +38,6 @@ Counts count(const OccupancyImage& m) {
   return c;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 // Expects readMap(yaml) to throw a lidar2d::Error whose message contains every `parts`.
 void expectError(const fs::path& yaml, std::initializer_list<std::string> parts) {
   try {
@@ -178,12 +171,12 @@ TEST(MapFile, WriteReadRoundTrip) {
   const std::string yaml = (tmp / "out.yaml").string();
   writeMap(yaml, m);
   EXPECT_TRUE(fs::exists(tmp / "out.pgm"));
-  const std::string y = slurp(tmp / "out.yaml");
+  const std::string y = test::readFile(tmp / "out.yaml");
   EXPECT_NE(y.find("image: out.pgm\n"), std::string::npos) << y;
   EXPECT_NE(y.find("mode: trinary"), std::string::npos);
   EXPECT_NE(y.find("free_thresh: 0.196"), std::string::npos);
   // Pixel bytes: top row first; 254 free, 0 occupied, 205 unknown.
-  const std::string p = slurp(tmp / "out.pgm");
+  const std::string p = test::readFile(tmp / "out.pgm");
   const std::string px = p.substr(p.size() - 8);
   // Top row (70, 25, 64, 65) -> 0 254 205 0; bottom row (-1, 0, 100, 30) -> 205 254 0 205.
   EXPECT_EQ(px, std::string("\x00\xfe\xcd\x00\xcd\xfe\x00\xcd", 8));

@@ -118,7 +118,14 @@ void run(const MapArgs& a) {
   io::OccupancyImage image = mapping::toOccupancyImage(*map);
   std::size_t overridden = 0;
   if (!a.prior.empty()) image = readPriorImage(a.prior, image, overridden);
-  std::vector<std::string> written = writeMapFiles(a.prefix, image);
+  std::string comment = fmt::format("lidar2d map: {} model, {} scans of {}", mapping::toString(a.model), scans,
+                                    std::filesystem::path(a.log).filename().string());
+  if (!a.prior.empty())
+    comment += fmt::format(
+        "\nprior layer {} overrides the sensor in {} cells of the image: black mask cells are occupied, white ones\n"
+        "free, grey ones keep the sensor's verdict (lidar2d map --prior; docs/mapping.md)",
+        std::filesystem::path(a.prior).filename().string(), overridden);
+  std::vector<std::string> written = writeMapFiles(a.prefix, image, comment);
   if (a.model == mapping::MapModel::kTsdf) {
     const auto surface = mapping::tsdfSurface(*map);
     io::AtomicFile f(a.prefix + ".surface.txt");

@@ -21,12 +21,13 @@ std::vector<std::uint8_t> encodeMapPng(const io::OccupancyImage& map, const std:
   return png;
 }
 
-std::vector<std::string> writeMapFiles(const std::string& prefix, const io::OccupancyImage& map) {
+std::vector<std::string> writeMapFiles(const std::string& prefix, const io::OccupancyImage& map,
+                                       const std::string& yaml_comment) {
   const std::string yaml = prefix + ".yaml";
   const std::string pgm = prefix + ".pgm";
   const std::string png = prefix + ".png";
   // Our images are already trinary (-1/0/100), so the writer's thresholds only pass them through.
-  io::writeMap(yaml, map, pgm);
+  io::writeMap(yaml, map, pgm, 25, 65, yaml_comment);
   const auto bytes = encodeMapPng(map, png);
   io::writeFileAtomically(png, std::string(bytes.begin(), bytes.end()));
   return {pgm, yaml, png};

@@ -14,6 +14,7 @@ namespace lidar2d::cli {
 std::vector<std::uint8_t> encodeMapPng(const io::OccupancyImage& map, const std::string& path);
 
 /// Writes PREFIX.pgm, PREFIX.yaml (map_server) and PREFIX.png, each atomically; returns the paths.
-std::vector<std::string> writeMapFiles(const std::string& prefix, const io::OccupancyImage& map);
+std::vector<std::string> writeMapFiles(const std::string& prefix, const io::OccupancyImage& map,
+                                       const std::string& yaml_comment = {});
 
 }  // namespace lidar2d::cli

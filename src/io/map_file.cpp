@@ -299,7 +299,7 @@ MapFile readMap(const std::string& yaml_path) {
 }
 
 void writeMap(const std::string& yaml_path, const OccupancyImage& map, const std::string& image_path, int free_max,
-              int occupied_min) {
+              int occupied_min, const std::string& comment) {
   if (map.width() < 1) throw invalidArgument("cannot write an empty map", {yaml_path});
   const std::string img = image_path.empty() ? fs::path(yaml_path).replace_extension(".pgm").string() : image_path;
   {
@@ -321,10 +321,15 @@ void writeMap(const std::string& yaml_path, const OccupancyImage& map, const std
   const fs::path yaml_dir = fs::absolute(fs::path(yaml_path)).parent_path();
   const fs::path rel = fs::absolute(fs::path(img)).lexically_normal().lexically_relative(yaml_dir.lexically_normal());
   const SE2& o = map.origin();
-  writeFileAtomically(yaml_path, fmt::format("image: {}\nresolution: {}\norigin: [{}, {}, {}]\nnegate: 0\n"
-                                             "occupied_thresh: 0.65\nfree_thresh: 0.196\nmode: trinary\n",
-                                             rel.empty() ? img : rel.string(), map.resolution(), o.x(), o.y(),
-                                             o.theta()));
+  std::string header;
+  if (!comment.empty()) {
+    std::istringstream lines(comment);
+    for (std::string line; std::getline(lines, line);) header += "# " + line + "\n";
+  }
+  writeFileAtomically(yaml_path, header + fmt::format("image: {}\nresolution: {}\norigin: [{}, {}, {}]\nnegate: 0\n"
+                                                      "occupied_thresh: 0.65\nfree_thresh: 0.196\nmode: trinary\n",
+                                                      rel.empty() ? img : rel.string(), map.resolution(), o.x(), o.y(),
+                                                      o.theta()));
 }
 
 }  // namespace lidar2d::io

@@ -74,6 +74,13 @@ void writeFile(const std::filesystem::path& path, const std::string& content) {
   out << content;
 }
 
+std::string readFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
 void writeGzip(const std::filesystem::path& path, const std::string& content) {
   gzFile f = gzopen(path.string().c_str(), "wb");
   if (!f) throw std::runtime_error("gzopen failed");

@@ -48,6 +48,8 @@ CliResult runCli(const std::vector<std::string>& args);
 
 /// Writes `content` to `path` (for malformed-input tests).
 void writeFile(const std::filesystem::path& path, const std::string& content);
+/// The whole content of the file at `path` (empty when it cannot be read).
+std::string readFile(const std::filesystem::path& path);
 /// Writes gzip-compressed `content` to `path`.
 void writeGzip(const std::filesystem::path& path, const std::string& content);
 

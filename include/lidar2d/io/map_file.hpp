@@ -105,8 +105,9 @@ MapFile readMap(const std::string& yaml_path);
 /// its extension replaced by ".pgm") and the YAML at `yaml_path`, whose `image` is the PGM's path
 /// relative to the YAML's folder. Cells 0..`free_max` become 254 (free), `occupied_min`..100 become
 /// 0 (occupied), everything else 205 (unknown). Both files are written atomically; throws
-/// `lidar2d::Error` (kIo) when they cannot be written.
+/// `lidar2d::Error` (kIo) when they cannot be written. `comment` (may hold several lines) is written
+/// at the top of the YAML as `#` lines, which map_server and rviz ignore.
 void writeMap(const std::string& yaml_path, const OccupancyImage& map, const std::string& image_path = {},
-              int free_max = 25, int occupied_min = 65);
+              int free_max = 25, int occupied_min = 65, const std::string& comment = {});
 
 }  // namespace lidar2d::io
