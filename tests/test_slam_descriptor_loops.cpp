@@ -6,11 +6,15 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <numbers>
 #include <string>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/trajectory.hpp"
+#include "lidar2d/localization/lines.hpp"
+#include "lidar2d/localization/localizer.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
 #include "lidar2d/slam/slam.hpp"
@@ -51,6 +55,7 @@ struct RunResult {
   double worst_descriptor_error_rad = 0.0;
   std::size_t wrong_loops = 0;             ///< accepted descriptor closures more than 0.5 m / 5 deg off the truth
   std::size_t aliases_rejected = 0;        ///< rejected descriptor closures more than 1 m or 10 deg off the truth
+  std::string events;                      ///< every event, one a line
 };
 
 RunResult runSlam(const std::vector<Frame>& frames, const SlamOptions& o) {
@@ -66,6 +71,7 @@ RunResult runSlam(const std::vector<Frame>& frames, const SlamOptions& o) {
   RunResult r;
   r.ate = eval::evaluateTrajectory(est, truth).ate.trans_m.rmse;
   r.stats = slam.stats();
+  for (const auto& ev : slam.events()) r.events += ev.what + "\n";
   for (std::size_t i = frames.size() > 50 ? frames.size() - 50 : 0; i < frames.size(); ++i)
     r.end_error = std::max(r.end_error, (traj[i].T_world_robot.translation() - frames[i].T_world_robot->translation()).norm());
   for (const auto& c : slam.constraints()) {
@@ -101,6 +107,10 @@ TEST(SlamDescriptorLoops, ClosesALoopAfterDriftBeyondTheSearchRadius) {
   EXPECT_LT(with.worst_descriptor_error_m, 0.2);
   EXPECT_LT(with.worst_descriptor_error_rad, 2.0 * kDeg);
   EXPECT_EQ(with.wrong_loops, 0u);
+  EXPECT_NE(with.events.find("loop closure found by descriptors"), std::string::npos) << with.events;
+  std::printf("ATE %.3f m -> %.3f m, last scans' error %.2f m -> %.2f m, %zu descriptor closures (worst %.3f m)\n",
+              without.ate, with.ate, without.end_error, with.end_error, with.descriptor_loops,
+              with.worst_descriptor_error_m);
   // Back in the west room the estimate is where the robot is again (the odometry's bias, which the
   // graph cannot know to be eastbound only, is spread over the whole corridor: the ATE improves less).
   EXPECT_GT(without.end_error, 5.0);
@@ -134,6 +144,44 @@ TEST(SlamDescriptorLoops, AliasedPlacesAreNotClosed) {
     }
   // The test has something to catch: look-alike places passed the branch-and-bound and ICP checks.
   EXPECT_GT(aliases, 0u);
+}
+
+TEST(SlamDescriptorLoops, VoteLinePairsFindsTheRelativePoseOfTwoScans) {
+  // The lookup SLAM shares with the localizer, on a database of real scans: one scan of the office
+  // as the database position (at its true pose) and another scan from 10 cm away, turned by 50
+  // degrees, as the query (the keys are the lines' distances: invariant to the rotation only).
+  const sim::Scenario sc = sim::builtinScenario("office");
+  const SE2 T_a(3.0, 3.0, 0.3), T_b(3.08, 2.95, 1.2);
+  sim::SimulatorOptions so;
+  so.laser.fov_rad = 2.0 * std::numbers::pi;
+  const auto frames = sim::simulate(sc.world, {{0.0, T_a}, {0.1, T_b}}, so);
+  ASSERT_EQ(frames.size(), 2u);
+  auto linesOf = [](const Frame& f) {
+    return localization::extractLines(f.scan.toPoints(f.T_robot_laser), localization::LineExtractionOptions{});
+  };
+  const auto la = linesOf(frames[0]), lb = linesOf(frames[1]);
+  ASSERT_GE(la.size(), 4u);
+  ASSERT_GE(lb.size(), 4u);
+  localization::Database::Position pos;
+  pos.x = static_cast<float>(T_a.x());
+  pos.y = static_cast<float>(T_a.y());
+  pos.num_lines = static_cast<std::uint32_t>(la.size());
+  std::vector<localization::Database::LineFeature> features;
+  for (const auto& l : la)
+    features.push_back({static_cast<float>(wrapAngle(l.normal_angle + T_a.theta())), static_cast<float>(l.distance),
+                        static_cast<float>(l.length)});
+  const auto db = localization::Database::fromParts(localization::DatabaseOptions{}, 0, {pos}, features);
+  std::size_t hits = 0;
+  const auto votes = localization::voteLinePairs(db, lb, localization::LocalizerOptions{}, 3, &hits);
+  ASSERT_FALSE(votes.empty());
+  EXPECT_GT(hits, 0u);
+  EXPECT_LE(votes.size(), 3u);
+  for (std::size_t i = 1; i < votes.size(); ++i) EXPECT_GE(votes[i - 1].votes, votes[i].votes);
+  EXPECT_LT((votes[0].T_world_robot.translation() - T_b.translation()).norm(), 0.3);
+  EXPECT_LT(std::abs(angleDiff(votes[0].T_world_robot.theta(), T_b.theta())), 6.0 * kDeg);
+  // An empty database answers nothing.
+  const auto empty = localization::Database::fromParts(localization::DatabaseOptions{}, 0, {}, {});
+  EXPECT_TRUE(localization::voteLinePairs(empty, lb, localization::LocalizerOptions{}, 3).empty());
 }
 
 TEST(SlamDescriptorLoops, OptionsAreValidated) {
