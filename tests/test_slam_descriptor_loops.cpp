@@ -7,17 +7,23 @@
 
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <sstream>
 #include <numbers>
 #include <string>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
+#include "lidar2d/io/carmen_writer.hpp"
 #include "lidar2d/io/trajectory.hpp"
 #include "lidar2d/localization/lines.hpp"
 #include "lidar2d/localization/localizer.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
 #include "lidar2d/slam/slam.hpp"
+#include "support/test_support.hpp"
 
 namespace lidar2d::slam {
 namespace {
@@ -116,6 +122,42 @@ TEST(SlamDescriptorLoops, ClosesALoopAfterDriftBeyondTheSearchRadius) {
   EXPECT_GT(without.end_error, 5.0);
   EXPECT_LT(with.end_error, 0.5);
   EXPECT_LT(with.ate, 0.8 * without.ate) << "without descriptors " << without.ate;
+}
+
+TEST(SlamDescriptorLoops, CliRecordsDescriptorClosuresInGraphSummaryAndReport) {
+  const auto frames = corridorThereAndBack(0.15, 1);
+  test::TempDir t;
+  const std::string log = (t.path() / "corridor.log").string();
+  {
+    io::CarmenWriter w(log);
+    for (const auto& f : frames) w.write(f);
+    w.commit();
+  }
+  const auto r = test::runCli({"slam", log, "-o", (t.path() / "out").string(), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ifstream graph(t.path() / "out" / "graph.txt");
+  std::size_t accepted = 0;
+  for (std::string line; std::getline(graph, line);) {
+    std::istringstream in(line);
+    std::string tag, kind;
+    std::size_t from = 0, to = 0;
+    double dx = 0, dy = 0, dth = 0;
+    int acc = 0, searched = 0;
+    in >> tag >> kind >> from >> to >> dx >> dy >> dth >> acc >> searched;
+    if (tag == "EDGE" && kind == "loop_descriptor" && acc == 1) {
+      EXPECT_EQ(searched, 1) << line;
+      ++accepted;
+    }
+  }
+  EXPECT_GE(accepted, 2u);  // the closure and the one confirming it
+  std::ifstream sj(t.path() / "out" / "summary.json");
+  const auto summary = nlohmann::json::parse(sj);
+  EXPECT_EQ(summary.at("descriptor_closures_accepted").get<std::size_t>(), accepted);
+  EXPECT_GT(summary.at("descriptor_queries").get<std::size_t>(), 0u);
+  std::ifstream html(t.path() / "out" / "report.html");
+  const std::string page((std::istreambuf_iterator<char>(html)), std::istreambuf_iterator<char>());
+  EXPECT_NE(page.find("class=\"loop-descriptor\""), std::string::npos);
+  EXPECT_NE(page.find("loop closure found by descriptors"), std::string::npos);
 }
 
 TEST(SlamDescriptorLoops, AliasedPlacesAreNotClosed) {
