@@ -2,8 +2,10 @@
 /// @file
 /// 2D SLAM: a scan-to-local-map front end (point-to-line ICP, the correlative matcher when the match
 /// is poor, odometry as the prediction, degeneracy-aware), submaps of consecutive nodes, loop
-/// closure by proximity (branch-and-bound search + ICP refinement + strict acceptance), and an SE(2)
-/// pose graph solved with Ceres (robust loss on loop closures), periodically and at the end.
+/// closure candidates by proximity and, after a drift too large for that, by the global
+/// localizer's line-pair descriptors (each verified by branch-and-bound search + ICP refinement +
+/// strict acceptance), and an SE(2) pose graph solved with Ceres (robust loss on loop closures),
+/// periodically and at the end.
 ///
 /// Frames: the front end tracks `T_local_robot` in its own drift-prone "local" frame (it is never
 /// corrected, so scan matching stays locally consistent, as in Cartographer's local trajectory
