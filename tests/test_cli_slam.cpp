@@ -127,6 +127,24 @@ TEST_F(CliSlam, ConfigFileOverridesDefaultsAndRejectsMistakes) {
   r = runCli({"slam", log().string(), "-o", (t.path() / "d").string(), "--config", (t.path() / "range.yaml").string()});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("loop_min_score"), std::string::npos) << r.err;
+
+  // The descriptor loop-closure options (issue 7).
+  writeFile(t.path() / "desc.yaml", "descriptor_loops: true\ndescriptor_every_nodes: 5\ndescriptor_max_rotation_deg: 20\n");
+  r = runCli({"slam", log().string(), "-o", (t.path() / "e").string(), "--config", (t.path() / "desc.yaml").string(), "-q"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  const auto summary = nlohmann::json::parse(readAll(t.path() / "e" / "summary.json"));
+  EXPECT_TRUE(summary.contains("descriptor_queries"));
+  EXPECT_TRUE(summary.contains("descriptor_closures_accepted"));
+  writeFile(t.path() / "desc_type.yaml", "submap_nodes: 20\ndescriptor_loops: maybe\n");
+  r = runCli({"slam", log().string(), "-o", (t.path() / "f").string(), "--config", (t.path() / "desc_type.yaml").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("desc_type.yaml:2"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("descriptor_loops"), std::string::npos) << r.err;
+  writeFile(t.path() / "desc_range.yaml", "descriptor_max_see_through: 1.5\n");
+  r = runCli({"slam", log().string(), "-o", (t.path() / "g").string(), "--config", (t.path() / "desc_range.yaml").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("descriptor_max_see_through"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(t.path() / "g"));
 }
 
 TEST_F(CliSlam, BadInputIsOneClearError) {

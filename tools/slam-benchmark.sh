@@ -5,6 +5,9 @@
 #
 #   tools/slam-benchmark.sh [BUILD_DIR] [OUT_DIR]
 #
+# LIDAR2D_SLAM_CONFIG=FILE.yaml passes `--config FILE.yaml` to every slam run (e.g. to compare with
+# `descriptor_loops: false`).
+#
 # Data from ../shared/data (or $LIDAR2D_DATA_DIR). Wall time, CPU time and peak memory come from
 # /usr/bin/time around the whole process (reading the bag, SLAM, writing map and report).
 set -euo pipefail
@@ -18,7 +21,9 @@ row() {  # name log truth [slam args...]
   local name=$1 log=$2 truth=$3
   shift 3
   local dir=$OUT/$name
-  /usr/bin/time -f "%e %U %M" -o "$dir.time" "$BIN" slam "$log" -o "$dir" -q "$@"
+  local config=()
+  if [ -n "${LIDAR2D_SLAM_CONFIG:-}" ]; then config=(--config "$LIDAR2D_SLAM_CONFIG"); fi
+  /usr/bin/time -f "%e %U %M" -o "$dir.time" "$BIN" slam "$log" -o "$dir" -q "${config[@]}" "$@"
   "$BIN" eval "$dir/trajectory.txt" --truth "$truth" >"$dir.eval.json"
   python3 - "$dir" "$name" <<'PY'
 import json, sys

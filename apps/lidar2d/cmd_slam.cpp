@@ -97,6 +97,19 @@ std::map<std::string, std::variant<FieldRef, AngleRef>> configFields(slam::SlamO
       {"odometry_sigma_deg", AngleRef{&o.odometry_sigma_rad}},
       {"optimize_every_nodes", FieldRef(&o.optimize_every_nodes)},
       {"intermediate_iterations", FieldRef(&o.intermediate_iterations)},
+      {"descriptor_loops", FieldRef(&o.descriptor_loops)},
+      {"descriptor_every_nodes", FieldRef(&o.descriptor_every_nodes)},
+      {"descriptor_quiet_nodes", FieldRef(&o.descriptor_quiet_nodes)},
+      {"descriptor_min_age_nodes", FieldRef(&o.descriptor_min_age_nodes)},
+      {"descriptor_min_votes", FieldRef(&o.descriptor_min_votes)},
+      {"descriptor_max_candidates", FieldRef(&o.descriptor_max_candidates)},
+      {"descriptor_max_lines", FieldRef(&o.descriptor_max_lines)},
+      {"descriptor_linear_window_m", FieldRef(&o.descriptor_linear_window_m)},
+      {"descriptor_angular_window_deg", AngleRef{&o.descriptor_angular_window_rad}},
+      {"descriptor_max_correction_m", FieldRef(&o.descriptor_max_correction_m)},
+      {"descriptor_drift_fraction", FieldRef(&o.descriptor_drift_fraction)},
+      {"descriptor_max_rotation_deg", AngleRef{&o.descriptor_max_rotation_rad}},
+      {"descriptor_max_see_through", FieldRef(&o.descriptor_max_see_through)},
       {"graph_max_iterations", FieldRef(&o.graph.max_iterations)},
       {"graph_threads", FieldRef(&o.graph.threads)},
   };
@@ -188,7 +201,7 @@ void writeGraph(const std::string& path, const slam::Slam& slam) {
                      n.T_world_robot.y(), n.T_world_robot.theta(), n.submap, n.degenerate ? 1 : 0, n.degenerate_dir_rad);
   }
   for (const auto& c : slam.constraints())
-    o << fmt::format("EDGE {} {} {} {:.6f} {:.6f} {:.6f} {} {} {:.3f} {:.3f} {}\n", slam::toString(c.kind), c.from, c.to,
+    o << fmt::format("EDGE {} {} {} {:.6f} {:.6f} {:.6f} {} {} {:.3f} {:.3f} {}\n", c.descriptor ? "loop_descriptor" : slam::toString(c.kind), c.from, c.to,
                      c.T_from_to.x(), c.T_from_to.y(), c.T_from_to.theta(), c.accepted ? 1 : 0, c.searched ? 1 : 0,
                      c.score, c.explained, c.reason.empty() ? "-" : c.reason);
   f.commit();
@@ -268,6 +281,10 @@ void run(const SlamArgs& a) {
   j["loop_searches"] = s.loop_searches;
   j["loop_closures_accepted"] = s.loop_accepted;
   j["loop_closures_rejected"] = s.loop_rejected;
+  j["descriptor_queries"] = s.descriptor_queries;
+  j["descriptor_hypotheses"] = s.descriptor_hypotheses;
+  j["descriptor_closures_accepted"] = s.descriptor_accepted;
+  j["descriptor_seconds"] = s.descriptor_seconds;
   j["optimizations"] = s.optimizations;
   j["optimization_s"] = s.optimization_seconds;
   j["slam_s"] = slam_seconds;

@@ -93,7 +93,8 @@ std::string slamReportHtml(const ReportInput& in) {
     const auto b = px(nodes[c.to].T_world_robot.translation());
     (c.accepted ? accepted : rejected)++;
     svg << fmt::format(R"(<line class="{}" x1="{:.1f}" y1="{:.1f}" x2="{:.1f}" y2="{:.1f}" stroke="{}" stroke-width="{:.2f}"{}/>)",
-                       c.accepted ? "loop" : "loop-rejected", a.x(), a.y(), b.x(), b.y(), c.accepted ? "#2ca02c" : "#d62728",
+                       c.accepted ? (c.descriptor ? "loop-descriptor" : "loop") : "loop-rejected", a.x(), a.y(), b.x(), b.y(),
+                       c.accepted ? (c.descriptor ? "#9467bd" : "#2ca02c") : "#d62728",
                        stroke, c.accepted ? "" : R"( stroke-dasharray="4 3")")
         << "\n";
   }
@@ -157,6 +158,10 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
   row("loop closures", fmt::format("{} accepted, {} rejected; {} searched by branch and bound (drawn: {} accepted, {} rejected)",
                                    j.value("loop_closures_accepted", 0), j.value("loop_closures_rejected", 0),
                                    j.value("loop_searches", 0), accepted, rejected));
+  row("loop closures by descriptors (large drift)",
+      fmt::format("{} accepted; {} look-ups, {} hypotheses verified, {:.2f} s (purple on the map)",
+                  j.value("descriptor_closures_accepted", 0), j.value("descriptor_queries", 0),
+                  j.value("descriptor_hypotheses", 0), j.value("descriptor_seconds", 0.0)));
   row("pose-graph optimisations", fmt::format("{} ({:.2f} s)", j.value("optimizations", 0), j.value("optimization_s", 0.0)));
   row("time", fmt::format("read + slam {:.2f} s, map {:.2f} s", j.value("slam_s", 0.0),
                           j.value("map_s", 0.0)));
@@ -167,6 +172,7 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
   html << "</table>\n";
   html << "<h2>Map and trajectory</h2>\n<p class=\"legend\"><span style=\"background:#1f77b4\"></span>trajectory"
           "<span style=\"background:#2ca02c\"></span>loop closure found by search"
+          "<span style=\"background:#9467bd\"></span>... through the descriptors"
           "<span style=\"background:#d62728\"></span>rejected closure"
           "<span style=\"background:#ff7f0e\"></span>degenerate direction</p>\n";
   html << "<div class=\"mapbox\"><img id=\"map\" alt=\"occupancy map\" src=\"data:image/png;base64," << base64(png)

@@ -462,48 +462,10 @@ double Localizer::score(const Points2& points_robot, const SE2& T_world_robot,
   return std::clamp((static_cast<double>(hit) - static_cast<double>(through)) / static_cast<double>(n), 0.0, 1.0);
 }
 
-LocalizationResult Localizer::localize(const LaserScan& scan, const SE2& T_robot_laser) const {
-  return localize(scan.toPoints(T_robot_laser), T_robot_laser.translation());
-}
-
-LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen::Vector2d& sensor_robot) const {
-  using Clock = std::chrono::steady_clock;
-  const auto ms = [](Clock::time_point a, Clock::time_point b) {
-    return std::chrono::duration<double, std::milli>(b - a).count();
-  };
-  const auto t0 = Clock::now();
-  const LocalizerOptions& o = s_->options;
-  const DatabaseOptions& dbo = s_->db.options();
-  const Database::Impl& db = s_->db.impl();
-  LocalizationResult res;
-
-  Points2 pts;
-  pts.reserve(points_robot.size());
-  for (const auto& p : points_robot)
-    if (p.allFinite() && p.norm() <= o.max_range_m) pts.push_back(p);
-  res.num_points = pts.size();
-  auto finish = [&](const char* reason) {
-    res.reason = reason;
-    res.total_ms = ms(t0, Clock::now());
-    return res;
-  };
-  if (pts.size() < 10) return finish("no points");
-
-  // 1. Describe: lines of the scan (robot frame), from every point.
-  std::vector<Line> lines = extractLines(pts, o.lines);
-  // Verification needs no more than max_verify_points (evenly subsampled) to score and refine.
-  if (pts.size() > o.max_verify_points) {
-    Points2 thin;
-    const double stride = static_cast<double>(pts.size()) / static_cast<double>(o.max_verify_points);
-    for (std::size_t k = 0; k < o.max_verify_points; ++k) thin.push_back(pts[static_cast<std::size_t>(k * stride)]);
-    pts = std::move(thin);
-  }
-  if (lines.size() > o.max_query_lines) lines.resize(o.max_query_lines);
-  res.num_lines = lines.size();
-  const auto t1 = Clock::now();
-  res.describe_ms = ms(t0, t1);
-
-  // 2. Look up every ordered pair; each hit gives a pose that votes for a bin.
+std::vector<PoseVote> voteLinePairs(const Database& database, const std::vector<Line>& lines,
+                                    const LocalizerOptions& o, std::size_t max_bins, std::size_t* num_hits) {
+  const DatabaseOptions& dbo = database.options();
+  const Database::Impl& db = database.impl();
   struct Bin {
     double votes = 0;
     std::uint32_t stamp = 0xffffffffu;
@@ -532,7 +494,7 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
           const float q[3] = {static_cast<float>(li.distance), static_cast<float>(lj.distance), static_cast<float>(ka)};
           hits.clear();
           db.tree->radiusSearch(q, r2, hits, nanoflann::SearchParams(32, 0.0f, false));
-          res.num_hits += hits.size();
+          if (num_hits) *num_hits += hits.size();
           for (const auto& h : hits) {
             const Pair& pr = db.pairs[h.first];
             const Database::LineFeature& ma = db.lines[pr.ref];
@@ -575,9 +537,60 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   std::vector<std::pair<double, const Bin*>> ranked;
   ranked.reserve(bins.size());
   for (const auto& [key, b] : bins) ranked.push_back({b.votes, &b});
-  const std::size_t n_cand = std::min(o.max_candidates, ranked.size());
+  const std::size_t n_cand = std::min(max_bins, ranked.size());
   std::partial_sort(ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(n_cand), ranked.end(),
                     [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::vector<PoseVote> out;
+  out.reserve(n_cand);
+  for (std::size_t c = 0; c < n_cand; ++c) {
+    const Bin& b = *ranked[c].second;
+    out.push_back({SE2(b.sx / b.n, b.sy / b.n, std::atan2(b.ss, b.sc)), b.votes, static_cast<std::size_t>(b.n)});
+  }
+  return out;
+}
+
+LocalizationResult Localizer::localize(const LaserScan& scan, const SE2& T_robot_laser) const {
+  return localize(scan.toPoints(T_robot_laser), T_robot_laser.translation());
+}
+
+LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen::Vector2d& sensor_robot) const {
+  using Clock = std::chrono::steady_clock;
+  const auto ms = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+  };
+  const auto t0 = Clock::now();
+  const LocalizerOptions& o = s_->options;
+  LocalizationResult res;
+
+  Points2 pts;
+  pts.reserve(points_robot.size());
+  for (const auto& p : points_robot)
+    if (p.allFinite() && p.norm() <= o.max_range_m) pts.push_back(p);
+  res.num_points = pts.size();
+  auto finish = [&](const char* reason) {
+    res.reason = reason;
+    res.total_ms = ms(t0, Clock::now());
+    return res;
+  };
+  if (pts.size() < 10) return finish("no points");
+
+  // 1. Describe: lines of the scan (robot frame), from every point.
+  std::vector<Line> lines = extractLines(pts, o.lines);
+  // Verification needs no more than max_verify_points (evenly subsampled) to score and refine.
+  if (pts.size() > o.max_verify_points) {
+    Points2 thin;
+    const double stride = static_cast<double>(pts.size()) / static_cast<double>(o.max_verify_points);
+    for (std::size_t k = 0; k < o.max_verify_points; ++k) thin.push_back(pts[static_cast<std::size_t>(k * stride)]);
+    pts = std::move(thin);
+  }
+  if (lines.size() > o.max_query_lines) lines.resize(o.max_query_lines);
+  res.num_lines = lines.size();
+  const auto t1 = Clock::now();
+  res.describe_ms = ms(t0, t1);
+
+  // 2. Look up every ordered pair; each hit gives a pose that votes for a bin.
+  const std::vector<PoseVote> ranked = voteLinePairs(s_->db, lines, o, o.max_candidates, &res.num_hits);
+  const std::size_t n_cand = ranked.size();
   const auto t2 = Clock::now();
   res.lookup_ms = ms(t1, t2);
 
@@ -598,14 +611,13 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   // points are, not just whether they are within a tolerance).
   const double pre_sigma = 2.0 * o.hit_distance_m;
   for (std::size_t c = 0; c < n_cand; ++c) {
-    const Bin& b = *ranked[c].second;
-    const SE2 guess(b.sx / b.n, b.sy / b.n, std::atan2(b.ss, b.sc));
+    const SE2& guess = ranked[c].T_world_robot;
     double acc = 0;
     for (const auto& p : sub) {
       const double v = s_->field.sample(guess * p, 0).value / pre_sigma;
       acc += v < 1.0 ? 1.0 - v * v : 0.0;
     }
-    pre.push_back({guess, acc / static_cast<double>(sub.size()), b.votes});
+    pre.push_back({guess, acc / static_cast<double>(sub.size()), ranked[c].votes});
   }
   std::sort(pre.begin(), pre.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
   // Stage B: the best distinct ones (neighbouring bins of one pose suppressed, so that distinct

@@ -12,6 +12,8 @@
 #include <optional>
 
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/localization/lines.hpp"
+#include "lidar2d/localization/localizer.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
 
@@ -90,6 +92,7 @@ struct Submap {
   std::optional<std::size_t> last_link_node;
   SE2 last_link_T_anchor_node;
   std::optional<Constraint> pending;  // searched closure awaiting confirmation
+  std::unique_ptr<localization::Database> db;  // line-pair descriptors of its nodes (anchor frame)
 };
 
 }  // namespace
@@ -150,6 +153,20 @@ void SlamOptions::validate() const {
   requirePositive(odometry_sigma_m, "odometry_sigma_m");
   requirePositive(odometry_sigma_rad, "odometry_sigma_rad");
   if (optimize_every_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "optimize_every_nodes"});
+  if (descriptor_every_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "descriptor_every_nodes"});
+  if (descriptor_quiet_nodes < 0) throw invalidArgument("must be >= 0", {"SlamOptions", 0, "descriptor_quiet_nodes"});
+  if (descriptor_min_age_nodes < 0) throw invalidArgument("must be >= 0", {"SlamOptions", 0, "descriptor_min_age_nodes"});
+  if (!(descriptor_min_votes >= 1.0) || !std::isfinite(descriptor_min_votes))
+    throw invalidArgument("must be a finite value >= 1", {"SlamOptions", 0, "descriptor_min_votes"});
+  if (descriptor_max_candidates < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "descriptor_max_candidates"});
+  if (descriptor_max_lines < 2) throw invalidArgument("must be >= 2", {"SlamOptions", 0, "descriptor_max_lines"});
+  requirePositive(descriptor_linear_window_m, "descriptor_linear_window_m");
+  requirePositive(descriptor_angular_window_rad, "descriptor_angular_window_rad");
+  requireNonNegative(descriptor_max_correction_m, "descriptor_max_correction_m");
+  requireNonNegative(descriptor_drift_fraction, "descriptor_drift_fraction");
+  requireNonNegative(descriptor_max_rotation_rad, "descriptor_max_rotation_rad");
+  if (!(descriptor_max_see_through >= 0.0 && descriptor_max_see_through <= 1.0))
+    throw invalidArgument("must be in [0, 1]", {"SlamOptions", 0, "descriptor_max_see_through"});
 }
 
 struct Slam::Impl {
@@ -175,16 +192,30 @@ struct Slam::Impl {
     loop_search.linear_window_m = opt.loop_linear_window_m;
     loop_search.angular_window_rad = opt.loop_angular_window_rad;
     loop_search.min_score = 0.0;
+    descriptor_search = loop_search;
+    descriptor_search.linear_window_m = opt.descriptor_linear_window_m;
+    descriptor_search.angular_window_rad = opt.descriptor_angular_window_rad;
+    // The localizer's query options (line extraction, key radius, vote bins) describe SLAM's scans
+    // too: both sides of the lookup are real scans here.
+    descriptor_query.max_query_lines = opt.descriptor_max_lines;
+    descriptor_query.max_range_m = opt.max_range_m;
+    descriptor_db.lines = descriptor_query.lines;
+    descriptor_db.max_lines = std::min<std::size_t>(64, std::max<std::size_t>(2, opt.descriptor_max_lines));
   }
 
   SlamOptions opt;
   IcpOptions icp, loop_icp;
-  CorrelativeOptions fallback, loop_search;
+  CorrelativeOptions fallback, loop_search, descriptor_search;
+  localization::LocalizerOptions descriptor_query;
+  localization::DatabaseOptions descriptor_db;
 
   std::vector<ScanRecord> scans;
   std::vector<Node> nodes;
   std::vector<Points2> node_points;  // robot frame
   std::vector<std::optional<SE2>> node_odometry;
+  std::vector<std::vector<localization::Line>> node_lines;  // robot frame, longest first (descriptor loops)
+  std::vector<double> node_path_m;  // front-end path length from the first node [m]
+  std::optional<std::size_t> last_loop_node;  // latest node with an accepted closure
   std::vector<Constraint> constraints;
   std::vector<PoseGraphEdge> edges;  // of the accepted constraints
   std::vector<Event> events;
@@ -212,6 +243,7 @@ struct Slam::Impl {
   std::size_t nodes_since_optimization = 0;
   std::size_t loops_since_optimization = 0;
   bool searched_loop_pending = false;
+  bool descriptor_loop_accepted = false;
   bool finished = false;
 
   void event(const Frame& f, std::string what) { events.push_back({f.index, f.time, std::move(what)}); }
@@ -226,6 +258,42 @@ struct Slam::Impl {
       if (target.nearest(T * p, &d2) < target.size() && d2 <= d2max) ++n;
     }
     return static_cast<double>(n) / static_cast<double>(pts.size());
+  }
+
+  /// The share of (up to 150 evenly chosen) beams of `pts` (robot frame, seen from the robot's
+  /// origin) that cross a line of `target` (a point with a normal, within 0.1 m of the crossing,
+  /// the beam at least 20 degrees off the line) more than 0.3 m before their endpoint, with the
+  /// robot at `T`: walls of the target the scan should have seen but looked through.
+  static double seeThroughFraction(const IcpTarget& target, const Points2& pts, const SE2& T) {
+    if (pts.empty() || target.size() == 0) return 0.0;
+    constexpr double kMargin = 0.3, kStep = 0.1, kNear2 = 0.1 * 0.1;
+    const double min_sin = std::sin(20.0 * kDeg);
+    const std::size_t stride = std::max<std::size_t>(1, pts.size() / 150);
+    const Eigen::Vector2d o = T.translation();
+    std::size_t n = 0, through = 0;
+    for (std::size_t i = 0; i < pts.size(); i += stride) {
+      ++n;
+      const Eigen::Vector2d q = T * pts[i];
+      const double len = (q - o).norm() - kMargin;
+      const Eigen::Vector2d dir = (q - o).normalized();
+      for (double t = kMargin; t < len; t += kStep) {
+        const Eigen::Vector2d a = o + t * dir;
+        double d2 = 0.0;
+        const std::size_t j = target.nearestWithin(a, kNear2, &d2);
+        if (j >= target.size()) continue;
+        const Eigen::Vector2d& nj = target.normals()[j];
+        if (nj.squaredNorm() < 0.5 || std::abs(nj.dot(dir)) < min_sin) continue;
+        const Eigen::Vector2d& pj = target.points()[j];
+        const double d0 = nj.dot(a - pj), d1 = d0 + kStep * nj.dot(dir);
+        if (d0 * d1 > 0.0) continue;
+        const Eigen::Vector2d c = a + dir * (kStep * d0 / (d0 - d1));
+        if ((c - pj).squaredNorm() <= kNear2) {
+          ++through;
+          break;
+        }
+      }
+    }
+    return static_cast<double>(through) / static_cast<double>(n);
   }
 
   Points2 scanPoints(const Frame& f) const {
@@ -317,8 +385,8 @@ struct Slam::Impl {
     return Eigen::Vector3d(1.0 / sm, 1.0 / sm, 1.0 / sr).asDiagonal();
   }
 
-  void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, bool degenerate,
-               const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
+  void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
+               bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
     const std::size_t n = nodes.size();
     Node node;
     node.scan = scan_index;
@@ -339,6 +407,17 @@ struct Slam::Impl {
     nodes.push_back(node);
     node_points.push_back(std::move(pts));
     node_odometry.push_back(f.T_odom_robot && odom_trusted ? f.T_odom_robot : std::nullopt);
+    node_path_m.push_back(n == 0 ? 0.0
+                                 : node_path_m[n - 1] +
+                                       (nodes[n - 1].T_local_robot.translation() - T_local.translation()).norm());
+    node_lines.emplace_back();
+    if (opt.descriptor_loops) {
+      const auto t0 = Clock::now();
+      // From every point in scan order (the voxel filter would blur the corners the split needs).
+      node_lines.back() = localization::extractLines(raw, descriptor_query.lines);
+      if (node_lines.back().size() > opt.descriptor_max_lines) node_lines.back().resize(opt.descriptor_max_lines);
+      stats.descriptor_seconds += secondsSince(t0);
+    }
 
     if (n > 0) {
       const Node& prev = nodes[n - 1];
@@ -387,7 +466,14 @@ struct Slam::Impl {
     // it): optimise soon. Closures that follow a link refine what is known: optimise now and then.
     const bool prompt = searched_loop_pending && static_cast<int>(nodes_since_optimization) >= opt.optimize_every_nodes;
     const bool periodic = loops_since_optimization > 0 && static_cast<int>(nodes_since_optimization) >= 10 * opt.optimize_every_nodes;
-    if (periodic || prompt) optimize(opt.intermediate_iterations);
+    if (descriptor_loop_accepted) {
+      // A descriptor closure corrects a large drift: the estimate must follow it at once, or the
+      // proximity search keeps looking in the wrong place.
+      optimize(std::max(opt.intermediate_iterations, opt.graph.max_iterations));
+      descriptor_loop_accepted = false;
+    } else if (periodic || prompt) {
+      optimize(opt.intermediate_iterations);
+    }
   }
 
   void finishSubmap(Submap& sm) {
@@ -403,6 +489,29 @@ struct Slam::Impl {
     sm.points_anchor = voxelFilter(sm.points_anchor, opt.map_voxel_m);
     sm.icp = std::make_unique<IcpTarget>(sm.points_anchor, loop_icp);
     sm.finished = true;
+    if (opt.descriptor_loops) {
+      // Every node is a database position (anchor frame) with its lines turned into the anchor's
+      // orientation: the localizer's lookup then answers poses in the anchor frame.
+      const auto t0 = Clock::now();
+      std::vector<localization::Database::Position> positions;
+      std::vector<localization::Database::LineFeature> features;
+      for (std::size_t n : sm.nodes) {
+        if (node_lines[n].size() < 2) continue;
+        const SE2 T = T_anchor_local * nodes[n].T_local_robot;
+        localization::Database::Position pos;
+        pos.x = static_cast<float>(T.x());
+        pos.y = static_cast<float>(T.y());
+        pos.first_line = static_cast<std::uint32_t>(features.size());
+        pos.num_lines = static_cast<std::uint32_t>(node_lines[n].size());
+        for (const auto& l : node_lines[n])
+          features.push_back({static_cast<float>(wrapAngle(l.normal_angle + T.theta())), static_cast<float>(l.distance),
+                              static_cast<float>(l.length)});
+        positions.push_back(pos);
+      }
+      sm.db = std::make_unique<localization::Database>(
+          localization::Database::fromParts(descriptor_db, 0, std::move(positions), std::move(features)));
+      stats.descriptor_seconds += secondsSince(t0);
+    }
   }
 
   void searchLoops(std::size_t n) {
@@ -411,6 +520,7 @@ struct Slam::Impl {
     if (pts.size() < opt.min_points) return;
     // Candidate submaps by distance, nearest first.
     std::vector<std::pair<double, std::size_t>> candidates;
+    std::vector<char> covered(submaps.size(), 0);  // submaps this search considers
     for (std::size_t s = 0; s < submaps.size(); ++s) {
       const Submap& sm = submaps[s];
       if (!sm.finished) continue;
@@ -418,7 +528,10 @@ struct Slam::Impl {
       if (sm.nodes.back() + static_cast<std::size_t>(opt.local_map_nodes) >= n) continue;
       const Eigen::Vector2d center_world = nodes[sm.anchor].T_world_robot * sm.center_anchor;
       const double d = (center_world - node.T_world_robot.translation()).norm();
-      if (d <= opt.loop_search_radius_m) candidates.emplace_back(d, s);
+      if (d <= opt.loop_search_radius_m) {
+        candidates.emplace_back(d, s);
+        covered[s] = 1;
+      }
     }
     std::sort(candidates.begin(), candidates.end());
     int searches_left = opt.loop_searches_per_node;
@@ -473,36 +586,189 @@ struct Slam::Impl {
         continue;
       }
       if (c.searched) {
-        // A searched closure is only accepted once a second, independent search from a later node
-        // agrees with it through the front end's chain of relative poses (a wrong match in a
-        // self-similar place rarely repeats consistently); until then it is pending.
-        std::optional<Constraint> confirmed;
-        if (sm.pending) {
-          const Constraint& p = *sm.pending;
-          const SE2 predicted = p.T_from_to * (nodes[p.to].T_local_robot.inverse() * node.T_local_robot);
-          const SE2 diff = predicted.inverse() * c.T_from_to;
-          const bool recent = n - p.to <= static_cast<std::size_t>(opt.loop_confirm_window_nodes);
-          if (recent && diff.translation().norm() <= opt.loop_confirm_tolerance_m &&
-              std::abs(diff.theta()) <= opt.loop_confirm_tolerance_rad) {
-            confirmed = p;
-          } else {
-            Constraint old = p;
-            old.accepted = false;
-            old.reason = recent ? "contradicted by a later search" : "not confirmed by a later search";
-            ++stats.loop_rejected;
-            addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
-          }
-          sm.pending.reset();
-        }
-        if (!confirmed) {
-          sm.pending = c;
-          continue;
-        }
-        acceptLoop(*confirmed, sm);
-        searched_loop_pending = true;
+        submitSearched(std::move(c), sm);
+        continue;
       }
       acceptLoop(c, sm);
     }
+    descriptorLoops(n, covered);
+  }
+
+  /// A searched closure is only accepted once a second, independent search from a later node
+  /// agrees with it through the front end's chain of relative poses (a wrong match in a
+  /// self-similar place rarely repeats consistently); until then it is pending.
+  void submitSearched(Constraint c, Submap& sm) {
+    std::optional<Constraint> confirmed;
+    if (sm.pending) {
+      const Constraint& p = *sm.pending;
+      const SE2 predicted = p.T_from_to * (nodes[p.to].T_local_robot.inverse() * nodes[c.to].T_local_robot);
+      const SE2 diff = predicted.inverse() * c.T_from_to;
+      const bool recent = c.to - p.to <= static_cast<std::size_t>(opt.loop_confirm_window_nodes);
+      if (recent && diff.translation().norm() <= opt.loop_confirm_tolerance_m &&
+          std::abs(diff.theta()) <= opt.loop_confirm_tolerance_rad) {
+        confirmed = p;
+      } else {
+        Constraint old = p;
+        old.accepted = false;
+        old.reason = recent ? "contradicted by a later search" : "not confirmed by a later search";
+        ++stats.loop_rejected;
+        addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
+      }
+      sm.pending.reset();
+    }
+    if (!confirmed) {
+      sm.pending = std::move(c);
+      return;
+    }
+    acceptLoop(*confirmed, sm);
+    searched_loop_pending = true;
+    acceptLoop(std::move(c), sm);
+  }
+
+  /// Descriptor loop candidates (large drift): the current node's lines are looked up in the
+  /// descriptor index of every old submap; the best-voted (submap, pose) hypotheses are verified
+  /// like searched closures (branch and bound in a small window, ICP, score, explained fraction).
+  /// Only a hypothesis in a submap the proximity search does not consider can become a descriptor
+  /// closure, and only when it is plausible for the drift (the correction it makes), the submaps
+  /// around the current estimate do not explain the scan already, and no distinct hypothesis
+  /// passes as well (an aliased place). Hypotheses in the submaps the proximity search considers
+  /// take part as competitors only: when one of them wins, the estimate has not drifted.
+  void descriptorLoops(std::size_t n, const std::vector<char>& covered) {
+    if (!opt.descriptor_loops || node_lines[n].size() < 2) return;
+    const auto t0 = Clock::now();
+    const Node& node = nodes[n];
+    // Look up one node in descriptor_every_nodes while the proximity search finds nothing, and
+    // every node on from a pending descriptor closure until a second one confirms it (from a node
+    // some way on: the same view from nearly the same pose confirms nothing).
+    bool confirming = false;
+    for (std::size_t s = 0; s < submaps.size(); ++s) {
+      const auto& p = submaps[s].pending;
+      confirming = confirming || (!covered[s] && p && p->descriptor &&
+                                  n - p->to >= static_cast<std::size_t>(opt.loop_search_every_nodes) &&
+                                  n - p->to <= static_cast<std::size_t>(opt.loop_confirm_window_nodes));
+    }
+    const bool quiet = !last_loop_node || n - *last_loop_node > static_cast<std::size_t>(opt.descriptor_quiet_nodes);
+    if (!confirming && !(quiet && n % static_cast<std::size_t>(opt.descriptor_every_nodes) == 0)) return;
+    std::vector<std::size_t> targets;
+    for (std::size_t s = 0; s < submaps.size(); ++s) {
+      const Submap& sm = submaps[s];
+      if (!sm.db || sm.db->empty()) continue;
+      if (sm.nodes.back() + static_cast<std::size_t>(opt.descriptor_min_age_nodes) > n) continue;
+      targets.push_back(s);
+    }
+    if (targets.empty()) return;
+    ++stats.descriptor_queries;
+
+    struct Hypothesis {
+      double votes = 0.0;
+      std::size_t submap = 0;
+      SE2 T_anchor_node;
+    };
+    std::vector<Hypothesis> hyps;
+    for (std::size_t s : targets)
+      for (const auto& v : localization::voteLinePairs(*submaps[s].db, node_lines[n], descriptor_query, 4))
+        if (v.votes >= opt.descriptor_min_votes) hyps.push_back({v.votes, s, v.T_world_robot});
+    std::stable_sort(hyps.begin(), hyps.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.votes > b.votes; });
+
+    const Points2& pts = node_points[n];
+    const Points2 coarse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
+    // How well the submaps around the current estimate explain the scan where it is now: when they
+    // do, the estimate has not drifted and a hypothesis elsewhere is an aliased place.
+    double current_explained = 0.0;
+    for (std::size_t s = 0; s < submaps.size(); ++s)
+      if (covered[s] && submaps[s].icp)
+        current_explained = std::max(current_explained,
+                                     explainedFraction(*submaps[s].icp, pts,
+                                                       nodes[submaps[s].anchor].T_world_robot.inverse() * node.T_world_robot));
+    std::vector<Constraint> passed;  // verified and plausible, in vote order
+    std::vector<char> passed_covered;
+    std::vector<SE2> tried;  // world poses of the hypotheses verified (neighbouring bins of one pose are skipped)
+    for (const Hypothesis& h : hyps) {
+      if (static_cast<int>(tried.size()) >= opt.descriptor_max_candidates) break;
+      Submap& sm = submaps[h.submap];
+      const SE2& T_world_anchor = nodes[sm.anchor].T_world_robot;
+      const SE2 guess_world = T_world_anchor * h.T_anchor_node;
+      bool dup = false;
+      for (const SE2& t : tried)
+        dup = dup || ((t.translation() - guess_world.translation()).norm() < 2.0 * descriptor_query.vote_bin_m &&
+                      std::abs(angleDiff(t.theta(), guess_world.theta())) < 2.0 * descriptor_query.vote_bin_rad);
+      if (dup) continue;
+      tried.push_back(guess_world);
+      ++stats.descriptor_hypotheses;
+      const auto cr = registration::matchCorrelative(gridOf(h.submap), coarse, h.T_anchor_node, descriptor_search);
+      if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) continue;  // no candidate: nothing to record
+      Constraint c;
+      c.kind = Constraint::Kind::kLoop;
+      c.from = sm.anchor;
+      c.to = n;
+      c.searched = true;
+      c.descriptor = true;
+      c.score = cr.score;
+      const registration::Result res = alignIcp(*sm.icp, pts, cr.T_search, loop_icp);
+      c.T_from_to = res.T_target_source;
+      c.explained = res.T_target_source.isFinite() ? explainedFraction(*sm.icp, pts, res.T_target_source) : 0.0;
+      const bool ok = res.status == registration::Status::kConverged || res.status == registration::Status::kMaxIterations;
+      const SE2 d = cr.T_search.inverse() * res.T_target_source;
+      // The correction the closure makes to the current estimate must fit the drift the front end
+      // can have accumulated since it last saw that submap.
+      const SE2 implied = T_world_anchor * c.T_from_to;
+      const double correction = (implied.translation() - node.T_world_robot.translation()).norm();
+      const double turn = std::abs(angleDiff(implied.theta(), node.T_world_robot.theta()));
+      const double path = node_path_m[n] - node_path_m[sm.nodes.back()];
+      const double allowed = opt.descriptor_max_correction_m + opt.descriptor_drift_fraction * path;
+      if (!ok) {
+        c.accepted = false;
+        c.reason = fmt::format("refinement failed ({})", registration::toString(res.status));
+      } else if (c.explained < opt.loop_min_explained_fraction) {
+        c.accepted = false;
+        c.reason = fmt::format("explains {:.0f}% of the points", 100.0 * c.explained);
+      } else if (d.translation().norm() > 0.3 || std::abs(d.theta()) > 5.0 * kDeg) {
+        c.accepted = false;
+        c.reason = "refinement left the search's answer";
+      } else if (correction > allowed || turn > opt.descriptor_max_rotation_rad) {
+        c.accepted = false;
+        c.reason = fmt::format("implausible correction of {:.1f} m / {:.0f} deg after {:.0f} m of path", correction,
+                               turn / kDeg, path);
+      } else if (const double through = seeThroughFraction(*sm.icp, pts, c.T_from_to);
+                 through > opt.descriptor_max_see_through) {
+        c.accepted = false;
+        c.reason = fmt::format("sees through the submap's walls ({:.0f}% of the beams)", 100.0 * through);
+      } else if (!covered[h.submap] && current_explained >= opt.loop_min_explained_fraction) {
+        c.accepted = false;
+        c.reason = fmt::format("the current estimate explains {:.0f}% of the points already", 100.0 * current_explained);
+      }
+      if (c.accepted) {
+        passed.push_back(std::move(c));
+        passed_covered.push_back(covered[h.submap]);
+      } else if (!covered[h.submap]) {
+        ++stats.loop_rejected;
+        addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+      }
+    }
+    // Two distinct places that both pass: the scan cannot tell them apart (a symmetric building).
+    bool ambiguous = false;
+    for (std::size_t i = 1; i < passed.size(); ++i) {
+      const SE2 a = nodes[passed[0].from].T_world_robot * passed[0].T_from_to;
+      const SE2 b = nodes[passed[i].from].T_world_robot * passed[i].T_from_to;
+      ambiguous = ambiguous || (a.translation() - b.translation()).norm() > 1.0 ||
+                  std::abs(angleDiff(a.theta(), b.theta())) > 10.0 * kDeg;
+    }
+    bool near_estimate = false;  // a submap around the current estimate matches: no drift to correct
+    for (char cov : passed_covered) near_estimate = near_estimate || cov;
+    for (std::size_t i = 0; i < passed.size(); ++i) {
+      if (passed_covered[i]) continue;
+      Constraint& c = passed[i];
+      if (ambiguous) {
+        c.accepted = false;
+        c.reason = fmt::format("ambiguous: {} distinct places match", passed.size());
+        ++stats.loop_rejected;
+        addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+      } else if (!near_estimate && i == 0) {
+        Submap& sm = submaps[nodes[c.from].submap];
+        submitSearched(std::move(c), sm);
+      }
+    }
+    stats.descriptor_seconds += secondsSince(t0);
   }
 
   /// The correlative grid of submap `s`, built on demand. Only the most recently used few are kept:
@@ -521,12 +787,27 @@ struct Slam::Impl {
 
   void acceptLoop(Constraint c, Submap& sm) {
     ++stats.loop_accepted;
+    if (!last_loop_node || c.to > *last_loop_node) last_loop_node = c.to;
+    const bool descriptor = c.descriptor;
+    if (descriptor) {
+      ++stats.descriptor_accepted;
+      descriptor_loop_accepted = true;
+      const ScanRecord& r = scans[nodes[c.to].scan];
+      const double correction =
+          ((nodes[c.from].T_world_robot * c.T_from_to).translation() - nodes[c.to].T_world_robot.translation()).norm();
+      events.push_back({r.frame_index, r.time,
+                        fmt::format("loop closure found by descriptors: node {} to submap {}, correcting {:.2f} m of drift",
+                                    c.to, nodes[c.from].submap, correction)});
+    }
     if (!sm.last_link_node || c.to > *sm.last_link_node) {
       sm.last_link_node = c.to;
       sm.last_link_T_anchor_node = c.T_from_to;
     }
     ++loops_since_optimization;
-    addEdge(std::move(c), diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad), opt.loop_huber);
+    // A descriptor closure corrects metres of drift: under the robust loss it could not pull the
+    // chain of stiff front-end edges that far. It has passed the stricter tests (and a second
+    // closure confirms it), so it is a plain quadratic constraint.
+    addEdge(std::move(c), diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad), descriptor ? 0.0 : opt.loop_huber);
   }
 
   /// Pending closures that were never confirmed are listed as rejected at the end.
@@ -563,7 +844,8 @@ struct Slam::Impl {
   void add(const Frame& f) {
     const auto t0 = Clock::now();
     if (finished) throw invalidArgument("add() after finish()", {"Slam", 0, "add"});
-    Points2 pts = voxelFilter(scanPoints(f), opt.scan_voxel_m);
+    const Points2 raw = scanPoints(f);
+    Points2 pts = voxelFilter(raw, opt.scan_voxel_m);
     ScanRecord rec;
     rec.frame_index = f.index;
     rec.time = f.time;
@@ -614,7 +896,7 @@ struct Slam::Impl {
       rec.is_node = true;
       rec.matched = true;
       scans.push_back(rec);
-      addNode(f, scan_index, T0, std::move(pts), false, Eigen::Vector2d::Zero(), false, true);
+      addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), false, true);
       T_local_prev = T0;
     } else {
       const SE2 T_pred = T_local_prev * delta;
@@ -658,7 +940,7 @@ struct Slam::Impl {
         rec.node = nodes.size();
         rec.is_node = true;
         scans.push_back(rec);
-        addNode(f, scan_index, T_est, std::move(pts), degenerate, dir, restart, odom_trusted);
+        addNode(f, scan_index, T_est, std::move(pts), raw, degenerate, dir, restart, odom_trusted);
       } else {
         rec.node = nodes.size() - 1;
         rec.T_node_scan = rel;

@@ -155,6 +155,23 @@ struct LocalizerOptions {
   void validate() const;
 };
 
+/// One bin of the descriptor vote: the mean pose of the hits that fell into it.
+struct PoseVote {
+  SE2 T_world_robot;      ///< mean pose of the bin's hits (database frame)
+  double votes = 0.0;     ///< scan line pairs voting for the bin (one vote per pair and bin)
+  std::size_t hits = 0;   ///< database pairs that fell into the bin
+};
+
+/// The descriptor lookup of the localizer without its map-based verification: every ordered pair
+/// of `lines` (robot frame) is looked up in `database` within `options.key_radius_m`; each hit fixes
+/// a pose that votes for an (x, y, theta) bin of `options.vote_bin_m` / `options.vote_bin_rad`.
+/// Returns at most `max_bins` bins, most voted first; adds the database pairs matched to
+/// `*num_hits` when given. Also usable on a database assembled with `Database::fromParts` from
+/// real scans (SLAM describes its nodes this way). An empty database gives an empty list.
+std::vector<PoseVote> voteLinePairs(const Database& database, const std::vector<Line>& lines,
+                                    const LocalizerOptions& options, std::size_t max_bins,
+                                    std::size_t* num_hits = nullptr);
+
 /// One verified pose hypothesis.
 struct Candidate {
   SE2 T_world_robot;   ///< refined pose

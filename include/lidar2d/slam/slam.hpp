@@ -2,8 +2,10 @@
 /// @file
 /// 2D SLAM: a scan-to-local-map front end (point-to-line ICP, the correlative matcher when the match
 /// is poor, odometry as the prediction, degeneracy-aware), submaps of consecutive nodes, loop
-/// closure by proximity (branch-and-bound search + ICP refinement + strict acceptance), and an SE(2)
-/// pose graph solved with Ceres (robust loss on loop closures), periodically and at the end.
+/// closure candidates by proximity and, after a drift too large for that, by the global
+/// localizer's line-pair descriptors (each verified by branch-and-bound search + ICP refinement +
+/// strict acceptance), and an SE(2) pose graph solved with Ceres (robust loss on loop closures),
+/// periodically and at the end.
 ///
 /// Frames: the front end tracks `T_local_robot` in its own drift-prone "local" frame (it is never
 /// corrected, so scan matching stays locally consistent, as in Cartographer's local trajectory
@@ -89,6 +91,38 @@ struct SlamOptions {
   /// estimate instead of a search, >= 0.
   int loop_link_memory_nodes = 15;
 
+  // --- loop closure by descriptors (drift too large for the radius above) ---
+  /// Describe every node's scan by the localization module's line-pair descriptors (one index per
+  /// finished submap) and look the current node up in the submaps the proximity search does not
+  /// cover; hypotheses are verified like searched closures (branch and bound in a small window,
+  /// ICP, score, explained fraction, confirmation by a second closure) plus a drift-plausibility
+  /// and an ambiguity test.
+  bool descriptor_loops = true;
+  int descriptor_every_nodes = 10;   ///< query one node in this many, >= 1
+  /// Query only when no closure was accepted within this many nodes (the proximity search is
+  /// working otherwise), >= 0.
+  int descriptor_quiet_nodes = 30;
+  /// Submaps whose last node is fewer than this many nodes before the query are not looked up
+  /// (recent ground is the front end's), >= 0.
+  int descriptor_min_age_nodes = 60;
+  double descriptor_min_votes = 6.0;       ///< a hypothesis needs this many line-pair votes, >= 1
+  int descriptor_max_candidates = 3;       ///< hypotheses verified per query (most votes first), >= 1
+  std::size_t descriptor_max_lines = 14;   ///< longest lines of a scan described and queried, >= 2
+  double descriptor_linear_window_m = 0.6;           ///< branch-and-bound window around a hypothesis [m], > 0
+  double descriptor_angular_window_rad = 6.0 * kDeg; ///< [rad], > 0
+  /// The correction a descriptor closure makes to the current estimate must be at most
+  /// descriptor_max_correction_m + descriptor_drift_fraction * (path travelled since the submap)
+  /// [m], >= 0; a larger one is implausible for the front end's drift (an aliased place).
+  double descriptor_max_correction_m = 2.0;
+  double descriptor_drift_fraction = 0.1;    ///< [m/m], >= 0
+  /// ... and must turn the current estimate by at most this [rad], >= 0: the front end's heading
+  /// drifts slowly, while aliased places in buildings are typically turned by 90 or 180 degrees.
+  double descriptor_max_rotation_rad = 30.0 * kDeg;
+  /// A descriptor hypothesis is rejected when more than this share of the scan's beams pass
+  /// through the submap's points (more than 0.3 m before their endpoint): the scan sees through
+  /// the walls it should see there, the signature of a look-alike place, in [0, 1].
+  double descriptor_max_see_through = 0.05;
+
   // --- pose graph ---
   double sequential_sigma_m = 0.02;          ///< front-end relative pose between nodes [m], > 0
   double sequential_sigma_rad = 0.25 * kDeg; ///< [rad], > 0
@@ -137,6 +171,7 @@ struct Constraint {
   SE2 T_from_to;                 ///< measurement
   bool accepted = true;          ///< loop closures may be rejected (kept for the report)
   bool searched = false;         ///< loop closure found by branch-and-bound search (not ICP from a link)
+  bool descriptor = false;       ///< ... in a submap proposed by the descriptor index (large drift); implies searched
   double score = 0.0;            ///< correlative score (searched loops)
   double explained = 0.0;        ///< fraction of points explained after refinement (loops)
   std::string reason;            ///< why a loop closure was rejected
@@ -155,6 +190,10 @@ struct SlamStats {
   std::size_t scans = 0, nodes = 0, submaps = 0;
   std::size_t matched = 0, correlative_fallbacks = 0, unmatched = 0, degenerate = 0;
   std::size_t loop_searches = 0, loop_accepted = 0, loop_rejected = 0;
+  std::size_t descriptor_queries = 0;      ///< descriptor look-ups
+  std::size_t descriptor_hypotheses = 0;   ///< hypotheses verified by branch and bound
+  std::size_t descriptor_accepted = 0;     ///< closures found through descriptors that entered the graph
+  double descriptor_seconds = 0.0;         ///< time of describing, indexing, looking up and verifying [s]
   std::size_t optimizations = 0;
   double optimization_seconds = 0.0;
   double total_seconds = 0.0;
