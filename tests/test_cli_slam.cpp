@@ -132,7 +132,7 @@ TEST_F(CliSlam, ConfigFileOverridesDefaultsAndRejectsMistakes) {
   writeFile(t.path() / "desc.yaml", "descriptor_loops: true\ndescriptor_every_nodes: 5\ndescriptor_max_rotation_deg: 20\n");
   r = runCli({"slam", log().string(), "-o", (t.path() / "e").string(), "--config", (t.path() / "desc.yaml").string(), "-q"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  const auto summary = nlohmann::json::parse(readAll(t.path() / "e" / "summary.json"));
+  const auto summary = nlohmann::json::parse(test::readFile(t.path() / "e" / "summary.json"));
   EXPECT_TRUE(summary.contains("descriptor_queries"));
   EXPECT_TRUE(summary.contains("descriptor_closures_accepted"));
   writeFile(t.path() / "desc_type.yaml", "submap_nodes: 20\ndescriptor_loops: maybe\n");

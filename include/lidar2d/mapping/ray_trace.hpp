@@ -23,7 +23,9 @@ namespace lidar2d::mapping {
 /// visit the same cells in the same order.
 class RayWalk {
  public:
-  RayWalk(const Eigen::Vector2d& start, const Eigen::Vector2d& end)
+  // (Forced inline: the walk is the innermost loop of map insertion, and GCC stops inlining it into
+  // the large insertion functions otherwise - 10-20% slower, measured with perf.)
+  [[gnu::always_inline]] RayWalk(const Eigen::Vector2d& start, const Eigen::Vector2d& end)
       : x_(static_cast<std::int32_t>(std::floor(start.x()))), y_(static_cast<std::int32_t>(std::floor(start.y()))) {
     const auto ex = static_cast<std::int32_t>(std::floor(end.x()));
     const auto ey = static_cast<std::int32_t>(std::floor(end.y()));
@@ -44,7 +46,7 @@ class RayWalk {
   std::int32_t y() const { return y_; }
   CellIndex cell() const { return CellIndex{x_, y_}; }
   /// Moves to the next cell. Precondition: !done().
-  void step() {
+  [[gnu::always_inline]] void step() {
     if (left_y_ == 0 || (left_x_ > 0 && t_max_x_ < t_max_y_)) {
       x_ += step_x_;
       t_max_x_ += t_delta_x_;
@@ -67,7 +69,7 @@ class RayWalk {
 /// is called for each cell before the end cell, in order from the start; the end cell is returned
 /// (not passed to `on_pass`).
 template <typename F>
-CellIndex traceRay(const Eigen::Vector2d& start, const Eigen::Vector2d& end, F&& on_pass) {
+[[gnu::always_inline]] inline CellIndex traceRay(const Eigen::Vector2d& start, const Eigen::Vector2d& end, F&& on_pass) {
   RayWalk walk(start, end);
   while (!walk.done()) {
     on_pass(walk.cell());
