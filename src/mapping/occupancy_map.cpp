@@ -9,6 +9,7 @@
 #include <numbers>
 #include <system_error>
 #include <thread>
+#include <type_traits>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/mapping/ray_trace.hpp"
@@ -25,7 +26,7 @@ Error badOption(const std::string& field, const std::string& msg) {
 // Most beams on each side of an occluding edge that the surface guard spares (InsertOptions).
 constexpr std::size_t kGuardNeighbors = 8;
 
-CellIndex cellOfCoords(const Eigen::Vector2d& p) {
+[[gnu::always_inline]] inline CellIndex cellOfCoords(const Eigen::Vector2d& p) {
   return {static_cast<std::int32_t>(std::floor(p.x())), static_cast<std::int32_t>(std::floor(p.y()))};
 }
 
@@ -35,9 +36,18 @@ CellIndex cellOfCoords(const Eigen::Vector2d& p) {
 // of steps: the steps before it are only walked (no cell access), the walk stops at the exit.
 // (Jumping straight to the entry would recompute t_max differently from the walk's running sums and
 // could pick the other cell at a near-corner crossing.)
+// `on_pass(cell)`, or `on_pass(cell, steps)` with the walk's steps left to the end cell.
+template <typename F>
+[[gnu::always_inline]] inline void pass(F& on_pass, const RayWalk& walk) {
+  if constexpr (std::is_invocable_v<F&, CellIndex, std::int32_t>)
+    on_pass(walk.cell(), walk.stepsLeft());
+  else
+    on_pass(walk.cell());
+}
+
 template <int kAxis, typename F>
-[[gnu::always_inline]] inline void traceInSlabAlong(const Eigen::Vector2d& start, const Eigen::Vector2d& end, std::int32_t lo, std::int32_t hi,
-                      F&& on_pass) {
+[[gnu::always_inline]] inline void traceInSlabAlong(const Eigen::Vector2d& start, const Eigen::Vector2d& end, std::int32_t lo,
+                                                    std::int32_t hi, F&& on_pass) {
   RayWalk walk(start, end);
   // (kAxis a template parameter: the slab test then reads one coordinate without a branch.)
   auto inside = [&] {
@@ -46,20 +56,25 @@ template <int kAxis, typename F>
   };
   while (!walk.done() && !inside()) walk.step();
   while (!walk.done() && inside()) {
-    on_pass(walk.cell());
+    pass(on_pass, walk);
     walk.step();
   }
 }
 
 template <typename F>
-[[gnu::always_inline]] inline void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int axis, std::int32_t lo, std::int32_t hi,
-                 F&& on_pass) {
-  if (axis < 0)
-    traceRay(start, end, on_pass);
-  else if (axis == 0)
+[[gnu::always_inline]] inline void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int axis,
+                                               std::int32_t lo, std::int32_t hi, F&& on_pass) {
+  if (axis < 0) {
+    RayWalk walk(start, end);  // traceRay, with the steps left available to on_pass
+    while (!walk.done()) {
+      pass(on_pass, walk);
+      walk.step();
+    }
+  } else if (axis == 0) {
     traceInSlabAlong<0>(start, end, lo, hi, on_pass);
-  else
+  } else {
     traceInSlabAlong<1>(start, end, lo, hi, on_pass);
+  }
 }
 
 // The cells a beam clears (log-odds, count), restricted to `slab`: each clearing stretch's cells
@@ -70,28 +85,54 @@ template <typename F>
 template <typename BeamT, typename StretchT, typename SlabT, typename F>
 [[gnu::always_inline]] inline void forEachCleared(const Eigen::Vector2d& origin, const BeamT& b, const std::vector<StretchT>& stretches,
                     const SlabT& slab, F&& on_clear) {
+  constexpr double kMargin = 1e-6;  // see below
+  auto crosses = [](const auto& g, CellIndex c) {
+    const double v = g.nx * c.x + g.ny * c.y + g.offset;
+    return v + g.corner_min < -kMargin && v + g.corner_max > kMargin;
+  };
   if (b.clear_to_end) {
-    traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, on_clear);
+    if (b.own_guard) {
+      // One walk: a beam meets its own surface line only at its return, so the cells of the beam
+      // that the line passes through all lie near the return; `guard_reach_sq` caps how near.
+      // Only the last `guard_steps` cells of the walk can be near the return.
+      const auto& g = b.guards[0];
+      auto guarded = [&](CellIndex c, std::int32_t steps_left) {
+        if (steps_left <= b.guard_steps && crosses(g, c)) {
+          const double dx = c.x + 0.5 - b.guard_return.x(), dy = c.y + 0.5 - b.guard_return.y();
+          if (dx * dx + dy * dy <= b.guard_reach_sq) return;
+        }
+        on_clear(c);
+      };
+      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, guarded);
+    } else {
+      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, on_clear);
+    }
     if (slab.contains(cellOfCoords(b.end))) on_clear(cellOfCoords(b.end));  // a hit's cell keeps its hit (stamp)
     return;
   }
-  // A guarded stretch spares the cells whose open square the beam's surface line passes through:
-  // its corners lie on both sides of the line (n . (corner - p) takes both signs). The margin keeps
-  // a line along a cell border (a wall at a multiple of the cell size) from catching the cells on
-  // both sides through rounding [cells].
-  constexpr double kMargin = 1e-6;
-  const Eigen::Vector2d& n = b.guard_normal;
-  const double lo_off = std::min(n.x(), 0.0) + std::min(n.y(), 0.0) + kMargin;
-  const double hi_off = std::max(n.x(), 0.0) + std::max(n.y(), 0.0) - kMargin;
-  auto guarded = [&](CellIndex c) {
-    const double v = n.x() * (c.x - b.guard_point.x()) + n.y() * (c.y - b.guard_point.y());
-    if (!(v + lo_off < 0 && v + hi_off > 0)) on_clear(c);
-  };
+  // A guarded stretch spares the cells whose open square one of its surface lines passes through:
+  // the cell's corners lie on both sides of the line (n . (corner - p) takes both signs). The
+  // margin keeps a line along a cell border (a wall at a multiple of the cell size) from catching
+  // the cells on both sides through rounding [cells].
   for (std::size_t k = b.first_clear; k < b.first_clear + b.num_clear; ++k) {
     const auto& s = stretches[k];
     const Eigen::Vector2d from = origin + b.dir * s.from;
     const Eigen::Vector2d to = origin + b.dir * s.to;
-    if (s.guarded) {
+    if (s.lines != 0) {
+      if (s.lines == 1) {  // the common case: only the beam's own surface
+        const auto& g = b.guards[0];
+        auto guarded = [&](CellIndex c) {
+          if (!crosses(g, c)) on_clear(c);
+        };
+        traceInSlab(from, to, slab.axis, slab.lo, slab.hi, guarded);
+        if (slab.contains(cellOfCoords(to))) guarded(cellOfCoords(to));
+        continue;
+      }
+      auto guarded = [&](CellIndex c) {
+        for (std::size_t l = 0; l < 3; ++l)
+          if ((s.lines & (1u << l)) && crosses(b.guards[l], c)) return;
+        on_clear(c);
+      };
       traceInSlab(from, to, slab.axis, slab.lo, slab.hi, guarded);
       if (slab.contains(cellOfCoords(to))) guarded(cellOfCoords(to));
     } else {
@@ -702,12 +743,12 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   const double d = std::numbers::sqrt2 * geometry_.resolution();
   // Edges of occluding surfaces: a return nearer than its neighbour on one side (by more than
   // 2 d, or that neighbour has no return) is the edge of a surface that the beams on that side
-  // pass. Those beams, as far as they pass within 2 d of the edge, get a stretch that must not
-  // clear: where they come within d of the edge's surface line (its own beam's surface). A beam
-  // keeps one such stretch per side (the hull, if several edges reach it). Along a continuous
-  // surface no stretch is needed: a beam's own stretch covers its neighbours' surface.
+  // pass. Those beams, as far as they pass within 2 d of the edge, get a guarded stretch for the
+  // edge's surface line (its own beam's surface): where they come within d of it. A beam keeps the
+  // nearest edge on each side. Along a continuous surface nothing is needed: a beam's own guarded
+  // stretch covers its neighbours' surface.
   if (guard_max > 0) {
-    side_holes_.assign(2 * n, {0.0, -1.0});  // [2 i + (side > 0)]; empty when to < from
+    side_guards_.assign(2 * n, SideGuard{});  // [2 i + slot]; none when to < from
     for (std::size_t j = 0; j < n; ++j) {
       if (!hits_[j]) continue;
       const double rj = scan.ranges()[j];
@@ -736,12 +777,8 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
             continue;  // (nearly) parallel to it and never within d
           }
           const double h = sin_angle * guard_max > d ? d / sin_angle : guard_max;
-          auto& hole = side_holes_[2 * i + (side > 0 ? 0 : 1)];  // seen from beam i, the edge lies on the other side
-          if (hole[1] < hole[0]) {
-            hole = {centre - h, centre + h};
-          } else {
-            hole = {std::min(hole[0], centre - h), std::max(hole[1], centre + h)};
-          }
+          SideGuard& g = side_guards_[2 * i + (side > 0 ? 0 : 1)];  // seen from beam i, the edge is on the other side
+          if (g.to < g.from || k < g.beams_away) g = SideGuard{centre - h, centre + h, j, k};
         }
       }
     }
@@ -756,57 +793,68 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
     const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
     const Eigen::Vector2d end = origin + dir * (len * inv_res);
     grow(end);
-    Beam beam{end, dir, 0, 0, true, Eigen::Vector2d::Zero(), Eigen::Vector2d::UnitX(), r * inv_res, hit};
+    Beam beam{end, dir, 0, 0, true, false, 0.0, 0, Eigen::Vector2d::Zero(), {}, r * inv_res, hit};
     if (guard_max > 0) {
-      // Stretches [from, to] of this beam (metres from the laser) that must not clear: edges of
-      // surfaces it passes.
       const Eigen::Vector2d u(ca, sa);
       const double clear_len = hit ? r : len;
-      // Kept sorted and disjoint: overlapping stretches are merged as they come (usually one or two).
-      std::array<std::array<double, 2>, 3> holes{};
-      std::size_t num_holes = 0;
-      auto addHole = [&](double from, double to) {
-        std::size_t kept = 0;
-        for (std::size_t k = 0; k < num_holes; ++k) {
-          if (holes[k][1] < from || holes[k][0] > to) {
-            holes[kept++] = holes[k];
-          } else {
-            from = std::min(from, holes[k][0]);
-            to = std::max(to, holes[k][1]);
-          }
-        }
-        std::size_t at = kept;
-        for (; at > 0 && holes[at - 1][0] > from; --at) holes[at] = holes[at - 1];
-        holes[at] = {from, to};
-        num_holes = kept + 1;
+      // Up to three guarded intervals [from, to] (metres from the laser), each with its surface
+      // line: the beam's own surface (from where the beam comes within d of it to the return) and
+      // the nearest occluding edge on each side (see above).
+      std::array<std::array<double, 2>, 3> spans{};
+      std::uint8_t lines = 0;
+      auto setLine = [&](int k, std::size_t j, double from, double to) {
+        const Eigen::Vector2d& t = tangents_[j];  // laser frame
+        const Eigen::Vector2d point =
+            origin + inv_res * Eigen::Vector2d(c0 * points_[j].x() - s0 * points_[j].y(), s0 * points_[j].x() + c0 * points_[j].y());
+        const Eigen::Vector2d normal(-(s0 * t.x() + c0 * t.y()), c0 * t.x() - s0 * t.y());  // world, unit
+        beam.guards[static_cast<std::size_t>(k)] =
+            GuardLine{normal.x(), normal.y(), -normal.dot(point), std::min(normal.x(), 0.0) + std::min(normal.y(), 0.0),
+                      std::max(normal.x(), 0.0) + std::max(normal.y(), 0.0)};
+        spans[static_cast<std::size_t>(k)] = {std::max(from, 0.0), std::min(to, clear_len)};
+        if (spans[static_cast<std::size_t>(k)][1] > spans[static_cast<std::size_t>(k)][0]) lines |= std::uint8_t(1u << k);
       };
-      auto halfWidth = [&](double sin_angle) { return sin_angle * guard_max > d ? d / sin_angle : guard_max; };
-      // Its own surface: from where the beam comes within d of the surface line to the return, the
-      // cells are cleared unless that line passes through them (guarded stretch).
-      double own_start = clear_len;
       if (hit) {
-        const Eigen::Vector2d& t = tangents_[i];  // laser frame
-        own_start = std::max(0.0, r - halfWidth(std::abs(cross(t, u))));
-        beam.guard_point = origin + dir * (r * inv_res);
-        beam.guard_normal = Eigen::Vector2d(-(s0 * t.x() + c0 * t.y()), c0 * t.x() - s0 * t.y());  // world, unit
+        const double sin_incidence = std::abs(cross(tangents_[i], u));
+        setLine(0, i, r - (sin_incidence * guard_max > d ? d / sin_incidence : guard_max), r);
       }
-      for (std::size_t k = 2 * i; k < 2 * i + 2; ++k)  // edges of surfaces it passes (see above)
-        if (side_holes_[k][0] <= side_holes_[k][1] && side_holes_[k][0] < clear_len && side_holes_[k][1] > 0)
-          addHole(side_holes_[k][0], side_holes_[k][1]);
-      beam.clear_to_end = false;
-      auto addStretch = [&](double from, double to, bool guarded) {
-        if (!(to > from)) return;
-        if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(clear_stretches_.size());
-        clear_stretches_.push_back({from * inv_res, to * inv_res, guarded});
-      };
-      double from = 0.0;
-      for (std::size_t k = 0; k <= num_holes && from < clear_len; ++k) {
-        const double to = k < num_holes ? std::min(holes[k][0], clear_len) : clear_len;
-        if (to > from) {  // [from, to] split at own_start into a plain and a guarded part
-          addStretch(from, std::min(to, own_start), false);
-          addStretch(std::max(from, own_start), to, true);
+      for (int k = 0; k < 2; ++k) {
+        const SideGuard& g = side_guards_[2 * i + static_cast<std::size_t>(k)];
+        if (g.from <= g.to) setLine(1 + k, g.edge, g.from, g.to);
+      }
+      if (lines == 1) {  // only its own surface (no edge nearby): one walk, see forEachCleared
+        beam.own_guard = true;
+        beam.guard_return = origin + dir * (r * inv_res);
+        const double reach = (r - spans[0][0]) * inv_res + 1.0;  // (+1: the cell centre may lie ahead of the walk)
+        beam.guard_reach_sq = reach * reach;
+        // A walk over a distance L takes at most |L dx| + |L dy| + 2 steps.
+        beam.guard_steps = static_cast<std::int32_t>(std::ceil(reach * (std::abs(dir.x()) + std::abs(dir.y())))) + 2;
+      } else if (lines != 0) {
+        // Stretches between consecutive interval ends, each guarded by the lines covering it.
+        std::array<double, 8> cuts{};
+        std::size_t num_cuts = 0;
+        cuts[num_cuts++] = 0.0;
+        cuts[num_cuts++] = clear_len;
+        for (std::size_t k = 0; k < 3; ++k)
+          if (lines & (1u << k)) {
+            cuts[num_cuts++] = spans[k][0];
+            cuts[num_cuts++] = spans[k][1];
+          }
+        std::sort(cuts.begin(), cuts.begin() + static_cast<std::ptrdiff_t>(num_cuts));
+        beam.clear_to_end = false;
+        for (std::size_t c = 0; c + 1 < num_cuts; ++c) {
+          const double from = cuts[c], to = cuts[c + 1];
+          if (!(to > from)) continue;
+          const double mid = 0.5 * (from + to);
+          std::uint8_t mask = 0;
+          for (std::size_t k = 0; k < 3; ++k)
+            if ((lines & (1u << k)) && spans[k][0] <= mid && mid <= spans[k][1]) mask |= std::uint8_t(1u << k);
+          if (beam.num_clear > 0 && clear_stretches_.back().lines == mask) {
+            clear_stretches_.back().to = to * inv_res;  // continues the previous stretch
+            continue;
+          }
+          if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(clear_stretches_.size());
+          clear_stretches_.push_back({from * inv_res, to * inv_res, mask});
         }
-        if (k < num_holes) from = std::max(from, holes[k][1]);
       }
     }
     beams_.push_back(beam);

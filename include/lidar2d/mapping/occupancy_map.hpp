@@ -147,6 +147,13 @@ class OccupancyMap {
  protected:
   explicit OccupancyMap(const MapOptions& options);
   /// Model-specific insertion of prepared beams (all in continuous cell coordinates).
+  /// A surface line n . x + offset = 0 [cells], n a unit normal, and the extremes of n . (corner -
+  /// lower-left corner) over a cell's corners: a cell's open square holds the line when
+  /// n . c + offset + corner_min < 0 < n . c + offset + corner_max (c its lower-left corner).
+  struct GuardLine {
+    double nx = 1.0, ny = 0.0, offset = 0.0;
+    double corner_min = 0.0, corner_max = 1.0;
+  };
   struct Beam {
     Eigen::Vector2d end;  ///< end of the traced segment [cells]
     Eigen::Vector2d dir;  ///< unit direction from the origin [cells]
@@ -155,9 +162,15 @@ class OccupancyMap {
     std::uint32_t first_clear = 0;
     std::uint32_t num_clear = 0;
     bool clear_to_end = true;  ///< the only stretch runs from the origin to `end` (traced exactly so)
-    /// The surface line of its return (surface guard): a point [cells] and its unit normal.
-    Eigen::Vector2d guard_point = Eigen::Vector2d::Zero();
-    Eigen::Vector2d guard_normal = Eigen::Vector2d::UnitX();
+    /// With `clear_to_end`: spares the cells that guards[0] (its own surface line) passes through
+    /// within `guard_reach_sq` (squared, [cells^2]) of the return at `guard_return` [cells].
+    bool own_guard = false;
+    double guard_reach_sq = 0.0;
+    std::int32_t guard_steps = 0;  ///< walk steps before the return's cell within which they lie
+    Eigen::Vector2d guard_return = Eigen::Vector2d::Zero();
+    /// Surface lines guarding its stretches (surface guard): its own return's, and the nearest
+    /// occluding edge's on each side (see `ClearStretch::lines`).
+    std::array<GuardLine, 3> guards;
     double range_cells;   ///< length of the beam up to the return [cells]
     bool hit;             ///< true: a return at `end`; false: no return (clear only)
   };
@@ -186,8 +199,8 @@ class OccupancyMap {
   const GridGeometry geometry_;
   /// The clearing stretches of the current scan's beams (see Beam).
   struct ClearStretch {
-    double from, to;  ///< distances from the origin along the beam [cells]
-    bool guarded;     ///< spares the cells its beam's surface line passes through (Beam::guard_*)
+    double from, to;     ///< distances from the origin along the beam [cells]
+    std::uint8_t lines;  ///< bit k: spares the cells that Beam::guards[k] passes through (0: clears all)
   };
   std::vector<ClearStretch> clear_stretches_;
 
@@ -206,7 +219,13 @@ class OccupancyMap {
   // the last two for the surface guard), which beams have a return and which a surface direction.
   std::vector<Eigen::Vector2d> units_, points_, tangents_;
   std::vector<std::uint8_t> hits_, has_tangent_;
-  std::vector<std::array<double, 2>> side_holes_;  // surface guard: per beam and side, a stretch not to clear
+  // Surface guard: per beam and side, the nearest occluding edge it passes (a guarded interval
+  // [from, to] in metres from the laser, none when to < from; the edge's beam; how many beams away).
+  struct SideGuard {
+    double from = 0.0, to = -1.0;
+    std::size_t edge = 0, beams_away = 0;
+  };
+  std::vector<SideGuard> side_guards_;
   std::vector<double> split_sums_;  // scratch of chooseSplit
   std::unique_ptr<Worker> worker_;  // started on the first scan inserted by two threads
   std::uint32_t backoff_ = 0;      // scans to insert single-threaded after a split that did not pay

@@ -42,6 +42,8 @@ class RayWalk {
     left_y_ = std::abs(ey - y_);
   }
   bool done() const { return left_x_ + left_y_ == 0; }
+  /// Steps left to the end cell.
+  std::int32_t stepsLeft() const { return left_x_ + left_y_; }
   std::int32_t x() const { return x_; }
   std::int32_t y() const { return y_; }
   CellIndex cell() const { return CellIndex{x_, y_}; }
