@@ -99,10 +99,10 @@ void runMapBenchmark(const std::string& data_dir) {
         if (!guard && threads > 1) continue;
         o.insert.threads = threads;
         o.insert.adaptive_threads = adaptive;
-        // Speed: every scan; best of 3 runs to damp the noise of a shared machine.
+        // Speed: every scan; best of 5 runs to damp the noise of a shared machine.
         double best = 1e30;
         std::uint64_t updates = 0, visits = 0, split = 0;
-        for (int rep = 0; rep < 3; ++rep) {
+        for (int rep = 0; rep < 5; ++rep) {
           auto map = mapping::makeMap(model, o);
           const auto t0 = std::chrono::steady_clock::now();
           for (const Frame& f : frames) map->insert(f.scan, *f.T_world_robot * f.T_robot_laser);

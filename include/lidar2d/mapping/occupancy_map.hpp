@@ -32,15 +32,15 @@ struct InsertOptions {
   /// Beams without a return (>= range_max, +inf, or beyond max_range_m) clear free space up to
   /// this distance and mark nothing occupied; 0 ignores them [m].
   double no_return_clear_m = 5.0;
-  /// Surface guard (log-odds and count): free-space clearing spares the cells that may hold a
-  /// surface the scan saw, those within sqrt(2) cells of it. For each return the surface is the
-  /// line through it along the neighbouring return; a beam stops clearing where it comes within
-  /// sqrt(2) cells of its own surface (sqrt(2) * resolution / sin(a) before the return, a = the
-  /// incidence angle, 90 deg = head-on) and skips the stretch where it passes that close to a
-  /// neighbouring beam's surface in front of it (the edge of an occluding object). Each such stretch
-  /// is at most twice this long [m]. Without the guard, beams that graze a wall and end further
-  /// along it, or pass the edge of an obstacle, clear the cells the surface passes through
-  /// (BENCHMARK.md, simulated office). 0 disables the guard.
+  /// Surface guard (log-odds and count): free-space clearing spares the cells that a surface the
+  /// scan saw passes through. For each return the surface is the line through it along the nearer
+  /// neighbouring return. Near its return - from sqrt(2) * resolution / sin(a) before it (a = the
+  /// incidence angle, 90 deg = head-on), at most this far [m] - a beam clears only the cells its
+  /// own surface line does not pass through; beams passing the edge of an occluding surface (a
+  /// return much nearer than its neighbour) likewise spare the cells of that edge's line. Without
+  /// the guard, beams that graze a wall and end further along it, or pass the edge of an obstacle,
+  /// clear the cells the surface passes through (BENCHMARK.md, simulated office; docs/mapping.md).
+  /// 0 disables the guard.
   double surface_guard_max_m = 1.0;
   /// Neighbouring returns farther apart than this are not taken as one surface by the surface guard;
   /// a return with no such neighbour is taken as a surface facing the beam [m].
