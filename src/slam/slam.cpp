@@ -39,6 +39,9 @@ void requireNonNegative(double v, const char* field) {
 void requireFraction(double v, const char* field) {
   if (!(v > 0.0 && v <= 1.0)) throw invalidArgument("must be in (0, 1]", {"SlamOptions", 0, field});
 }
+void requireAtLeast(int v, int min, const char* field) {
+  if (v < min) throw invalidArgument(fmt::format("must be >= {}", min), {"SlamOptions", 0, field});
+}
 
 /// Centroid of the points in each `cell_m` square. Stacked scans of the same wall would otherwise
 /// give each target point near-duplicate neighbours from other scans, and a line fit over a
@@ -111,16 +114,16 @@ const char* toString(Constraint::Kind k) {
 
 void SlamOptions::validate() const {
   requirePositive(max_range_m, "max_range_m");
-  if (min_points < 3) throw invalidArgument("must be >= 3", {"SlamOptions", 0, "min_points"});
+  requireAtLeast(min_points, 3, "min_points");
   requireNonNegative(node_min_translation_m, "node_min_translation_m");
   requireNonNegative(node_min_rotation_rad, "node_min_rotation_rad");
   requirePositive(node_max_interval_s, "node_max_interval_s");
-  if (local_map_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "local_map_nodes"});
+  requireAtLeast(local_map_nodes, 1, "local_map_nodes");
   requirePositive(icp_max_correspondence_m, "icp_max_correspondence_m");
   requirePositive(map_voxel_m, "map_voxel_m");
   if (!(max_line_flatness > 0.0 && max_line_flatness <= 1.0))
     throw invalidArgument("must be in (0, 1]", {"SlamOptions", 0, "max_line_flatness"});
-  if (normal_neighbors < 2) throw invalidArgument("must be >= 2", {"SlamOptions", 0, "normal_neighbors"});
+  requireAtLeast(normal_neighbors, 2, "normal_neighbors");
   requirePositive(scan_voxel_m, "scan_voxel_m");
   requirePositive(match_inlier_distance_m, "match_inlier_distance_m");
   requireFraction(min_explained_fraction, "min_explained_fraction");
@@ -132,19 +135,19 @@ void SlamOptions::validate() const {
   requirePositive(odometry_jump_m, "odometry_jump_m");
   requirePositive(odometry_jump_rad, "odometry_jump_rad");
   requirePositive(time_gap_s, "time_gap_s");
-  if (submap_nodes < 2) throw invalidArgument("must be >= 2", {"SlamOptions", 0, "submap_nodes"});
+  requireAtLeast(submap_nodes, 2, "submap_nodes");
   requirePositive(loop_search_radius_m, "loop_search_radius_m");
-  if (loop_search_every_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "loop_search_every_nodes"});
-  if (loop_searches_per_node < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "loop_searches_per_node"});
-  if (intermediate_iterations < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "intermediate_iterations"});
+  requireAtLeast(loop_search_every_nodes, 1, "loop_search_every_nodes");
+  requireAtLeast(loop_searches_per_node, 1, "loop_searches_per_node");
+  requireAtLeast(intermediate_iterations, 1, "intermediate_iterations");
   requirePositive(loop_linear_window_m, "loop_linear_window_m");
   requirePositive(loop_angular_window_rad, "loop_angular_window_rad");
   requireFraction(loop_min_score, "loop_min_score");
   requireFraction(loop_min_explained_fraction, "loop_min_explained_fraction");
-  if (loop_confirm_window_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "loop_confirm_window_nodes"});
+  requireAtLeast(loop_confirm_window_nodes, 1, "loop_confirm_window_nodes");
   requirePositive(loop_confirm_tolerance_m, "loop_confirm_tolerance_m");
   requirePositive(loop_confirm_tolerance_rad, "loop_confirm_tolerance_rad");
-  if (loop_link_memory_nodes < 0) throw invalidArgument("must be >= 0", {"SlamOptions", 0, "loop_link_memory_nodes"});
+  requireAtLeast(loop_link_memory_nodes, 0, "loop_link_memory_nodes");
   requirePositive(sequential_sigma_m, "sequential_sigma_m");
   requirePositive(sequential_sigma_rad, "sequential_sigma_rad");
   requirePositive(loop_sigma_m, "loop_sigma_m");
@@ -152,14 +155,14 @@ void SlamOptions::validate() const {
   requirePositive(loop_huber, "loop_huber");
   requirePositive(odometry_sigma_m, "odometry_sigma_m");
   requirePositive(odometry_sigma_rad, "odometry_sigma_rad");
-  if (optimize_every_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "optimize_every_nodes"});
-  if (descriptor_every_nodes < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "descriptor_every_nodes"});
-  if (descriptor_quiet_nodes < 0) throw invalidArgument("must be >= 0", {"SlamOptions", 0, "descriptor_quiet_nodes"});
-  if (descriptor_min_age_nodes < 0) throw invalidArgument("must be >= 0", {"SlamOptions", 0, "descriptor_min_age_nodes"});
+  requireAtLeast(optimize_every_nodes, 1, "optimize_every_nodes");
+  requireAtLeast(descriptor_every_nodes, 1, "descriptor_every_nodes");
+  requireAtLeast(descriptor_quiet_nodes, 0, "descriptor_quiet_nodes");
+  requireAtLeast(descriptor_min_age_nodes, 0, "descriptor_min_age_nodes");
   if (!(descriptor_min_votes >= 1.0) || !std::isfinite(descriptor_min_votes))
     throw invalidArgument("must be a finite value >= 1", {"SlamOptions", 0, "descriptor_min_votes"});
-  if (descriptor_max_candidates < 1) throw invalidArgument("must be >= 1", {"SlamOptions", 0, "descriptor_max_candidates"});
-  if (descriptor_max_lines < 2) throw invalidArgument("must be >= 2", {"SlamOptions", 0, "descriptor_max_lines"});
+  requireAtLeast(descriptor_max_candidates, 1, "descriptor_max_candidates");
+  requireAtLeast(descriptor_max_lines, 2, "descriptor_max_lines");
   requirePositive(descriptor_linear_window_m, "descriptor_linear_window_m");
   requirePositive(descriptor_angular_window_rad, "descriptor_angular_window_rad");
   requireNonNegative(descriptor_max_correction_m, "descriptor_max_correction_m");
