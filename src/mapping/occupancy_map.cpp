@@ -706,7 +706,7 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   // Beam directions in the laser frame, and for the surface guard (see InsertOptions::
   // surface_guard_max_m) each return's point and the unit direction of its surface: towards the
   // nearer neighbouring return within surface_neighbor_max_m (the farther one is more likely across
-  // a depth jump), or else facing the beam (has_tangent_ 0).
+  // a depth jump), or else facing the beam.
   units_.resize(n);
   hits_.assign(n, 0);
   for (std::size_t i = 0; i < n; ++i) {
@@ -717,7 +717,6 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   if (guard_max > 0) {
     points_.resize(n);
     tangents_.resize(n);
-    has_tangent_.assign(n, 0);
     for (std::size_t i = 0; i < n; ++i)
       if (hits_[i]) points_[i] = scan.ranges()[i] * units_[i];
     const double neighbor_max_sq = options_.insert.surface_neighbor_max_m * options_.insert.surface_neighbor_max_m;
@@ -732,7 +731,6 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
         if (sq > 0 && sq <= best) {
           best = sq;
           tangents_[i] = t / std::sqrt(sq);
-          has_tangent_[i] = 1;
         }
       }
     }
@@ -741,6 +739,8 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   // A cell holding two lines lies within sqrt(2) cells of each; two lines meeting at angle a are
   // within d of each other for d / sin(a) either side of their crossing.
   const double d = std::numbers::sqrt2 * geometry_.resolution();
+  // How far either side of the crossing a beam meeting a line at sin_angle stays within d of it.
+  auto halfWidth = [&](double sin_angle) { return sin_angle * guard_max > d ? d / sin_angle : guard_max; };
   // Edges of occluding surfaces: a return nearer than its neighbour on one side (by more than
   // 2 d, or that neighbour has no return) is the edge of a surface that the beams on that side
   // pass. Those beams, as far as they pass within 2 d of the edge, get a guarded stretch for the
@@ -776,7 +776,7 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
           } else if (lateral >= d) {
             continue;  // (nearly) parallel to it and never within d
           }
-          const double h = sin_angle * guard_max > d ? d / sin_angle : guard_max;
+          const double h = halfWidth(sin_angle);
           SideGuard& g = side_guards_[2 * i + (side > 0 ? 0 : 1)];  // seen from beam i, the edge is on the other side
           if (g.to < g.from || k < g.beams_away) g = SideGuard{centre - h, centre + h, j, k};
         }
@@ -815,7 +815,7 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
       };
       if (hit) {
         const double sin_incidence = std::abs(cross(tangents_[i], u));
-        setLine(0, i, r - (sin_incidence * guard_max > d ? d / sin_incidence : guard_max), r);
+        setLine(0, i, r - halfWidth(sin_incidence), r);
       }
       for (int k = 0; k < 2; ++k) {
         const SideGuard& g = side_guards_[2 * i + static_cast<std::size_t>(k)];

@@ -216,9 +216,9 @@ class OccupancyMap {
   CellBox bounds_;
   std::vector<Beam> beams_;  // scratch buffer reused between scans
   // Scratch reused between scans: beam directions, returns and surface directions (laser frame;
-  // the last two for the surface guard), which beams have a return and which a surface direction.
+  // the last two for the surface guard), and which beams have a return.
   std::vector<Eigen::Vector2d> units_, points_, tangents_;
-  std::vector<std::uint8_t> hits_, has_tangent_;
+  std::vector<std::uint8_t> hits_;
   // Surface guard: per beam and side, the nearest occluding edge it passes (a guarded interval
   // [from, to] in metres from the laser, none when to < from; the edge's beam; how many beams away).
   struct SideGuard {
