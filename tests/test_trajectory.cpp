@@ -18,27 +18,10 @@ namespace lidar2d::io {
 namespace {
 
 using test::TempDir;
+using test::throwsError;
 using test::writeFile;
 
 constexpr double kPi = std::numbers::pi;
-
-/// Runs `f`, expecting a lidar2d::Error of `kind` whose message contains every string of `parts`.
-template <typename F>
-::testing::AssertionResult throwsError(F&& f, ErrorKind kind, std::initializer_list<std::string> parts) {
-  try {
-    f();
-  } catch (const Error& e) {
-    if (e.kind() != kind) return ::testing::AssertionFailure() << "wrong kind, message: " << e.what();
-    const std::string what = e.what();
-    for (const auto& p : parts)
-      if (what.find(p) == std::string::npos)
-        return ::testing::AssertionFailure() << "message '" << what << "' lacks '" << p << "'";
-    return ::testing::AssertionSuccess();
-  } catch (const std::exception& e) {
-    return ::testing::AssertionFailure() << "not a lidar2d::Error: " << e.what();
-  }
-  return ::testing::AssertionFailure() << "no exception";
-}
 
 TEST(ReadTrajectory, PlainWithCommentsBlankLinesTabsAndCrlf) {
   TempDir tmp;

@@ -19,13 +19,13 @@
 #include <iostream>
 #include <memory>
 #include <numbers>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/image.hpp"
 #include "lidar2d/io/prefetch.hpp"
 
 namespace lidar2d::cli {
@@ -111,9 +111,7 @@ void writeSnapshot(const std::string& path, const Frame& f, const Points2& pts, 
   const cv::Scalar text = r.degenerate() ? cv::Scalar(0, 0, 200) : cv::Scalar(0, 0, 0);
   cv::putText(img, line1, {8, 16}, cv::FONT_HERSHEY_SIMPLEX, 0.5, text, 1, cv::LINE_AA);
   cv::putText(img, line2, {8, 34}, cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
-  std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", img, png, {cv::IMWRITE_PNG_COMPRESSION, 9}))
-    throw ioError("PNG encoding failed", ErrorLocation(path));
+  const auto png = io::encodePng(img.data, img.cols, img.rows, 3, img.step, path);
   io::writeFileAtomically(path, std::string(png.begin(), png.end()));
 }
 

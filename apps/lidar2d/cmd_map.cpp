@@ -8,13 +8,13 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
-#include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
 #include "map_output.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/image.hpp"
 #include "lidar2d/io/map_file.hpp"
 #include "lidar2d/io/prefetch.hpp"
 #include "lidar2d/io/trajectory.hpp"
@@ -69,18 +69,16 @@ io::OccupancyImage readPriorImage(const std::string& path, const io::OccupancyIm
     }
     // A bare image of exactly the exported map's size: black = occupied, white = free, any other
     // grey = no override (the PNG/PGM that `lidar2d map` wrote, painted over, works directly).
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(path, ec)) throw ioError("no such file", ErrorLocation(path));
-    const cv::Mat img = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (img.empty()) throw badInput("cannot read the prior image (PGM or PNG expected)", ErrorLocation(path));
-    std::vector<std::int8_t> cells(static_cast<std::size_t>(img.rows) * static_cast<std::size_t>(img.cols));
-    for (int r = 0; r < img.rows; ++r)
-      for (int c = 0; c < img.cols; ++c) {
-        const std::uint8_t v = img.at<std::uint8_t>(img.rows - 1 - r, c);
-        cells[static_cast<std::size_t>(r) * static_cast<std::size_t>(img.cols) + static_cast<std::size_t>(c)] =
+    const io::GreyImage img = io::readGreyImage(path, "prior");
+    std::vector<std::int8_t> cells(img.value.size());
+    const auto w = static_cast<std::size_t>(img.width);
+    for (int r = 0; r < img.height; ++r)
+      for (int c = 0; c < img.width; ++c) {
+        const std::uint8_t v = img.value[static_cast<std::size_t>(img.height - 1 - r) * w + static_cast<std::size_t>(c)];
+        cells[static_cast<std::size_t>(r) * w + static_cast<std::size_t>(c)] =
             v < 50 ? io::OccupancyImage::kOccupied : (v > 250 ? io::OccupancyImage::kFree : io::OccupancyImage::kUnknown);
       }
-    overridden = mapping::applyPriorSameSize(out, cells, img.cols, img.rows);
+    overridden = mapping::applyPriorSameSize(out, cells, img.width, img.height);
     return out;
   } catch (const Error& e) {
     if (!e.where().file.empty()) throw;

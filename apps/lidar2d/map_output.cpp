@@ -1,24 +1,21 @@
 #include "map_output.hpp"
 
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
-
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/image.hpp"
 
 namespace lidar2d::cli {
 
 std::vector<std::uint8_t> encodeMapPng(const io::OccupancyImage& map, const std::string& path) {
-  cv::Mat img(map.height(), map.width(), CV_8UC1);
+  const auto w = static_cast<std::size_t>(map.width());
+  std::vector<std::uint8_t> img(w * static_cast<std::size_t>(map.height()));
   for (int row = 0; row < map.height(); ++row)
     for (int col = 0; col < map.width(); ++col) {
       const std::int8_t v = map.at(col, row);
-      img.at<std::uint8_t>(map.height() - 1 - row, col) =
+      img[static_cast<std::size_t>(map.height() - 1 - row) * w + static_cast<std::size_t>(col)] =
           v == io::OccupancyImage::kOccupied ? 0 : (v == io::OccupancyImage::kFree ? 255 : 160);
     }
-  std::vector<std::uint8_t> png;
-  if (!cv::imencode(".png", img, png)) throw ioError("PNG encoding failed", ErrorLocation(path));
-  return png;
+  return io::encodePng(img.data(), map.width(), map.height(), 1, w, path);
 }
 
 std::vector<std::string> writeMapFiles(const std::string& prefix, const io::OccupancyImage& map,

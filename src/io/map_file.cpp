@@ -8,12 +8,11 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/image.hpp"
 
 namespace lidar2d::io {
 namespace fs = std::filesystem;
@@ -144,119 +143,6 @@ MapYaml parseYaml(const std::string& file) {
   return y;
 }
 
-// ---- images ----
-
-/// A decoded image: grey value (mean of the colour channels) and alpha per pixel, top row first.
-struct Grey {
-  int width = 0, height = 0;
-  std::vector<std::uint8_t> value;
-  std::vector<std::uint8_t> alpha;  // empty: opaque
-};
-
-std::string readAll(const std::string& path, const std::string& yaml_file) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ioError(fs::exists(path) ? "cannot read map image" : "map image does not exist", {path, 0, "image"});
-  std::stringstream ss;
-  ss << in.rdbuf();
-  (void)yaml_file;
-  return ss.str();
-}
-
-Grey parsePgm(const std::string& data, const std::string& path) {
-  const bool binary = data[1] == '5';
-  std::size_t pos = 2;
-  auto skipSpaceAndComments = [&] {
-    while (pos < data.size()) {
-      if (std::isspace(static_cast<unsigned char>(data[pos]))) {
-        ++pos;
-      } else if (data[pos] == '#') {
-        while (pos < data.size() && data[pos] != '\n') ++pos;
-      } else {
-        break;
-      }
-    }
-  };
-  auto number = [&](const char* field) -> std::uint64_t {
-    skipSpaceAndComments();
-    if (pos >= data.size() || !std::isdigit(static_cast<unsigned char>(data[pos])))
-      throw badInput("truncated or malformed PGM header", {path, 0, field});
-    std::uint64_t v = 0;
-    while (pos < data.size() && std::isdigit(static_cast<unsigned char>(data[pos]))) {
-      v = v * 10 + static_cast<std::uint64_t>(data[pos] - '0');
-      if (v > 100000000000ULL) throw badInput("value too large", {path, 0, field});
-      ++pos;
-    }
-    return v;
-  };
-  const std::uint64_t w = number("width"), h = number("height");
-  const std::uint64_t maxval = number("maxval");
-  if (w == 0 || h == 0) throw badInput(fmt::format("image is {} x {} pixels", w, h), {path, 0, "width"});
-  if (w * h > OccupancyImage::kMaxCells)
-    throw badInput(fmt::format("{} x {} pixels exceed the limit of 10^9", w, h), {path, 0, "width"});
-  if (maxval == 0 || maxval > 255)
-    throw badInput(fmt::format("maxval {} not supported (8-bit images only)", maxval), {path, 0, "maxval"});
-  Grey g;
-  g.width = static_cast<int>(w);
-  g.height = static_cast<int>(h);
-  const std::size_t n = static_cast<std::size_t>(w * h);
-  g.value.resize(n);
-  if (binary) {
-    // Exactly one whitespace byte separates maxval from the pixels (Netpbm spec).
-    if (pos >= data.size() || !std::isspace(static_cast<unsigned char>(data[pos])))
-      throw badInput("truncated PGM header", {path, 0, "maxval"});
-    ++pos;
-    if (data.size() - pos < n)
-      throw badInput(fmt::format("truncated PGM: {} pixel bytes expected, {} present", n, data.size() - pos),
-                     {path, 0, "pixels"});
-    for (std::size_t i = 0; i < n; ++i) g.value[i] = static_cast<std::uint8_t>(data[pos + i]);
-  } else {
-    for (std::size_t i = 0; i < n; ++i) {
-      skipSpaceAndComments();
-      if (pos >= data.size())
-        throw badInput(fmt::format("truncated PGM: {} pixels expected, {} present", n, i), {path, 0, "pixels"});
-      const std::uint64_t v = number("pixels");
-      if (v > maxval) throw badInput(fmt::format("pixel {} value {} exceeds maxval {}", i, v, maxval), {path, 0, "pixels"});
-      g.value[i] = static_cast<std::uint8_t>(v);
-    }
-  }
-  if (maxval != 255)
-    for (auto& v : g.value) v = static_cast<std::uint8_t>((v * 255u + static_cast<unsigned>(maxval) / 2) / maxval);
-  return g;
-}
-
-Grey decodeOther(const std::string& data, const std::string& path) {
-  cv::Mat img;
-  try {
-    const cv::Mat buf(1, static_cast<int>(data.size()), CV_8UC1, const_cast<char*>(data.data()));
-    img = cv::imdecode(buf, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception&) {
-    img.release();
-  }
-  if (img.empty()) throw badInput("unrecognised image format (expected PGM P5/P2 or PNG)", {path, 0, "magic"});
-  if (img.depth() != CV_8U) throw badInput("only 8-bit images are supported", {path, 0, "depth"});
-  const int ch = img.channels();
-  const bool has_alpha = ch == 2 || ch == 4;
-  const int colour = has_alpha ? ch - 1 : ch;
-  Grey g;
-  g.width = img.cols;
-  g.height = img.rows;
-  if (static_cast<std::uint64_t>(g.width) * static_cast<std::uint64_t>(g.height) > OccupancyImage::kMaxCells)
-    throw badInput("image exceeds the limit of 10^9 pixels", {path, 0, "width"});
-  g.value.resize(static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height));
-  if (has_alpha) g.alpha.resize(g.value.size());
-  for (int r = 0; r < img.rows; ++r) {
-    const std::uint8_t* p = img.ptr<std::uint8_t>(r);
-    for (int c = 0; c < img.cols; ++c, p += ch) {
-      int sum = 0;
-      for (int k = 0; k < colour; ++k) sum += p[k];
-      const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(c);
-      g.value[i] = static_cast<std::uint8_t>(sum / colour);  // integer mean, as map_server
-      if (has_alpha) g.alpha[i] = p[ch - 1];
-    }
-  }
-  return g;
-}
-
 std::int8_t classify(int grey, int alpha, const MapYaml& y) {
   // ROS1 map_server image_loader.cpp (loadMapFromFile), pixel by pixel.
   if (y.negate) grey = 255 - grey;
@@ -276,15 +162,7 @@ MapFile readMap(const std::string& yaml_path) {
   out.yaml = parseYaml(yaml_path);
   const fs::path img(out.yaml.image);
   out.image_path = img.is_absolute() ? img.string() : (fs::path(yaml_path).parent_path() / img).string();
-  const std::string data = readAll(out.image_path, yaml_path);
-  if (data.empty()) throw badInput("map image is empty", {out.image_path, 0, "magic"});
-  Grey g;
-  if (data.size() >= 2 && data[0] == 'P' && (data[1] == '5' || data[1] == '2'))
-    g = parsePgm(data, out.image_path);
-  else if (data.size() >= 2 && data[0] == 'P' && data[1] >= '1' && data[1] <= '7')
-    throw badInput(fmt::format("PGM magic P5 or P2 expected, found P{}", data[1]), {out.image_path, 0, "magic"});
-  else
-    g = decodeOther(data, out.image_path);
+  const GreyImage g = readGreyImage(out.image_path, "image");
   std::vector<std::int8_t> cells(g.value.size());
   for (int r = 0; r < g.height; ++r) {
     const int row = g.height - 1 - r;  // image top row = map's top (largest y)

@@ -3,9 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <exception>
 #include <filesystem>
+#include <initializer_list>
 #include <string>
 
+#include "lidar2d/core/error.hpp"
 #include "lidar2d/core/se2.hpp"
 
 namespace lidar2d::test {
@@ -55,5 +58,23 @@ void writeGzip(const std::filesystem::path& path, const std::string& content);
 
 /// gtest predicate: poses agree within tolerances; prints both on failure.
 ::testing::AssertionResult IsNearPose(const SE2& expected, const SE2& actual, double tol_m, double tol_deg);
+
+/// Runs `f`, expecting a lidar2d::Error of `kind` whose message contains every string of `parts`.
+template <typename F>
+::testing::AssertionResult throwsError(F&& f, ErrorKind kind, std::initializer_list<std::string> parts) {
+  try {
+    f();
+  } catch (const Error& e) {
+    if (e.kind() != kind) return ::testing::AssertionFailure() << "wrong kind, message: " << e.what();
+    const std::string what = e.what();
+    for (const auto& p : parts)
+      if (what.find(p) == std::string::npos)
+        return ::testing::AssertionFailure() << "message '" << what << "' lacks '" << p << "'";
+    return ::testing::AssertionSuccess();
+  } catch (const std::exception& e) {
+    return ::testing::AssertionFailure() << "not a lidar2d::Error: " << e.what();
+  }
+  return ::testing::AssertionFailure() << "no exception";
+}
 
 }  // namespace lidar2d::test
