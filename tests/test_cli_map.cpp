@@ -140,6 +140,7 @@ INSTANTIATE_TEST_SUITE_P(
                       BadMapCase{"AbsurdResolution", {"LOG", "--resolution", "1e-9"}, "resolution"},
                       BadMapCase{"OverCellBudget", {"LOG", "--resolution", "0.001", "--cell-budget", "1000000"}, "budget"},
                       BadMapCase{"NegativeSurfaceGuard", {"LOG", "--surface-guard", "-1"}, "surface_guard"},
+                      BadMapCase{"ZeroThreads", {"LOG", "--threads", "0"}, "threads"},
                       BadMapCase{"TrajectoryMissingTimestamp", {"LOG", "--poses", "short-traj.txt"}, "timestamp"},
                       BadMapCase{"MaskOfAnotherSize", {"LOG", "--prior", "tiny-mask.pgm"}, "size"},
                       BadMapCase{"LogWithoutPoses", {"noposes.log"}, "has no odometry pose"},

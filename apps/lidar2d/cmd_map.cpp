@@ -166,6 +166,9 @@ void addMapCommand(CLI::App& app) {
                   "logodds/count: beams do not clear the cells next to the surfaces the scan saw (grazing beams, "
                   "edges of obstacles); longest stretch spared [m] (0: off)")
       ->default_val(1.0);
+  sub->add_option("--threads", a->options.insert.threads,
+                  "insertion threads: 1, or 2 (larger values too) to split each scan between two")
+      ->default_val(a->options.insert.threads);
   sub->add_option("--cell-budget", a->options.insert.cell_budget, "largest map extent allowed [cells]")->default_val(1000000000);
   sub->add_flag("--classic", a->options.logodds.classic_integer,
                 "logodds: the classic integer scheme (+2 per hit, -1 per pass, 1..100 around 50)");

@@ -51,11 +51,12 @@ struct InsertOptions {
   /// one thread, in the single-threaded order, so the map is identical). Scans too small or too
   /// lopsided to split run on the calling thread, and so do the next scans after a split that
   /// was slower than one thread (busy cores). Larger values currently use 2 threads.
-  /// On the 2-core reference machine two threads about break even per scan (the split costs
-  /// 20-35% extra work - walking to the split line, the clipped traversal - and two busy cores run
-  /// each thread about 25% slower); `lidar2d map` on freiburg-079 gains 5-8% wall time (the
-  /// log reader's thread shares the cores). More cores would pay more.
-  unsigned threads = 2;
+  /// On the 2-core reference machine two threads do not pay: the split costs 20-35% extra work
+  /// (walking to the split line, the clipped traversal) and two busy cores run each thread about
+  /// 25% slower; `lidar2d map` on freiburg-079, whose log reader already keeps the second core
+  /// busy, took 1.24 s best / 1.48 s median with one thread and 1.50 / 1.55 s with two, at 30%
+  /// more CPU time (BENCHMARK.md). More cores would pay more.
+  unsigned threads = 1;
   /// With threads > 1: after a split scan that took longer than one thread would have (cores busy
   /// with other work, so the worker got its time slice late), insert the next scans on one thread
   /// (8 at first, doubling up to 1024 while it recurs). False splits every scan worth splitting.
