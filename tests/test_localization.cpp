@@ -27,6 +27,7 @@ namespace {
 using localization::Database;
 using localization::DatabaseOptions;
 using localization::Localizer;
+using localization::LocalizerOptions;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 bool near(const SE2& a, const SE2& b, double m = 0.3, double deg = 5.0) {
@@ -152,6 +153,58 @@ TEST(Localization, OfficeScansLocalizeCorrectly) {
   EXPECT_GE(correct, n * 8 / 10) << "answered " << answered << " of " << n;
 }
 
+TEST(Localization, RangeProfilesLocalizeScansWithoutLines) {
+  // Scans whose lines give no pair (corridors, curved or cluttered walls) are the range profile's
+  // job. Here the query extracts no line at all, so only the profile can find the pose; without it
+  // every scan is declined.
+  const SimMap& s = office();
+  LocalizerOptions profile_only;
+  profile_only.lines.min_length_m = 1000.0;  // no line is that long
+  LocalizerOptions neither = profile_only;
+  neither.profile_candidates = 0;
+  const Localizer loc(s.map, profile_only, fastDb());
+  const Localizer none(s.map, neither, fastDb());
+  std::size_t n = 0, correct = 0;
+  for (std::size_t i = 3; i < s.frames.size(); i += 10) {
+    const Frame& f = s.frames[i];
+    const auto r = loc.localize(f.scan, f.T_robot_laser);
+    ++n;
+    EXPECT_EQ(r.num_lines, 0u);
+    EXPECT_EQ(r.num_profile_candidates, loc.options().profile_candidates);
+    if (!r.declined) {
+      correct += near(*f.T_world_robot, r.T_world_robot);
+      EXPECT_TRUE(near(*f.T_world_robot, r.T_world_robot))
+          << "scan " << i << ": answer " << r.T_world_robot.x() << " " << r.T_world_robot.y() << " "
+          << r.T_world_robot.theta() << " truth " << f.T_world_robot->x() << " " << f.T_world_robot->y() << " "
+          << f.T_world_robot->theta() << " score " << r.score;
+    }
+    const auto r0 = none.localize(f.scan, f.T_robot_laser);
+    EXPECT_TRUE(r0.declined);
+    EXPECT_EQ(r0.reason, "no lines");
+  }
+  EXPECT_GE(correct, n * 8 / 10) << "correct " << correct << " of " << n;
+}
+
+TEST(LocalizationDatabase, ProfilesOfTheWrongSizeAreRefused) {
+  DatabaseOptions o;
+  o.profile_bins = 8;
+  std::vector<Database::Position> pos(2);
+  const std::vector<float> seven(7, 1.0f), sixteen(16, 1.0f);
+  EXPECT_NO_THROW((void)Database::fromParts(o, 0, pos, {}, sixteen));
+  EXPECT_NO_THROW((void)Database::fromParts(o, 0, pos, {}, {}));  // no profiles at all
+  for (const auto& bad : {seven, std::vector<float>(16, -1.0f), std::vector<float>(16, NAN)}) {
+    try {
+      (void)Database::fromParts(o, 0, pos, {}, bad);
+      FAIL() << "no error";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kBadInput);
+      EXPECT_EQ(e.where().field, "profiles");
+    }
+  }
+  o.profile_bins = 5;
+  EXPECT_THROW(o.validate(), Error);
+}
+
 TEST(Localization, SymmetricWorldDeclinesOrListsEverySymmetricPose) {
   const SimMap s = simMap("symmetric", 400);
   const Localizer loc(s.map, {}, fastDb());
@@ -228,6 +281,9 @@ TEST(LocalizationDatabase, RoundTripKeepsEverythingAndTheAnswers) {
     EXPECT_EQ(back.lines()[i].normal_angle, db.lines()[i].normal_angle);
     EXPECT_EQ(back.lines()[i].distance, db.lines()[i].distance);
   }
+  EXPECT_EQ(back.options().profile_bins, db.options().profile_bins);
+  ASSERT_EQ(db.profiles().size(), db.positions().size() * static_cast<std::size_t>(db.options().profile_bins));
+  EXPECT_EQ(back.profiles(), db.profiles());
   const Localizer a(s.map, std::move(db));
   const Localizer b(s.map, std::move(back));
   for (std::size_t i = 7; i < s.frames.size(); i += 30) {
@@ -279,9 +335,9 @@ TEST(LocalizationDatabase, OtherVersionCorruptionAndTruncationAreRefused) {
       EXPECT_EQ(e.where().file, p);
     }
   };
-  std::string v2 = bytes;
-  v2[8] = 2;  // version (u32 after the 8-byte magic)
-  expectError(v2, ErrorKind::kUnsupported, "version");
+  std::string v1 = bytes;
+  v1[8] = 1;  // version (u32 after the 8-byte magic): version 1 had no range profiles
+  expectError(v1, ErrorKind::kUnsupported, "version");
   std::string magic = bytes;
   magic[0] = 'X';
   expectError(magic, ErrorKind::kBadInput, "magic");

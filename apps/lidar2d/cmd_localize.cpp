@@ -210,6 +210,9 @@ void addDbOptions(CLI::App* sub, localization::DatabaseOptions& o, double* fov_d
   sub->add_option("--max-range", o.max_range_m, "range of the virtual scans [m]")->capture_default_str();
   sub->add_option("--clearance", o.clearance_m, "positions keep this distance from obstacles and unknown space [m]")
       ->capture_default_str();
+  sub->add_option("--profile-bins", o.profile_bins,
+                  "sectors of each position's range profile, the second signature (0: none, else 8..720)")
+      ->capture_default_str();
 }
 
 }  // namespace
@@ -246,6 +249,9 @@ void addLocalizeCommands(CLI::App& app) {
                   "decline when a distinct alternative scores at least this fraction of the best")
       ->capture_default_str();
   sub->add_option("--candidates", a->options.max_candidates, "candidates verified per scan")->capture_default_str();
+  sub->add_option("--profile-candidates", a->options.profile_candidates,
+                  "candidates from the range profiles, for scans with few lines (0: off)")
+      ->capture_default_str();
   sub->add_flag("--fallback", a->options.fallback_branch_and_bound,
                 "when no candidate scores, search the whole map by branch and bound (slow)");
   addDbOptions(sub, a->db_options, nullptr);

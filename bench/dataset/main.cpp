@@ -74,6 +74,8 @@ int main(int argc, char** argv) {
   loc->add_option("--key-radius", loc_options.loc.key_radius_m, "key search radius")->capture_default_str();
   loc->add_option("--refined", loc_options.loc.max_refined, "candidates refined")->capture_default_str();
   loc->add_option("--bin", loc_options.loc.vote_bin_m, "vote bin [m]")->capture_default_str();
+  loc->add_option("--profile-bins", loc_options.db.profile_bins, "range-profile sectors per position (0: no profiles)")->capture_default_str();
+  loc->add_option("--profile-candidates", loc_options.loc.profile_candidates, "candidates from the range profiles (0: off)")->capture_default_str();
   loc->add_flag("--fallback", loc_options.loc.fallback_branch_and_bound, "branch-and-bound fallback");
   loc->add_flag("-v,--verbose", loc_options.verbose, "print each failure");
   loc->callback([&] { lidar2d::bench::runLocalizeBenchmark(data, loc_options); });

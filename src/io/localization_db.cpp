@@ -2,7 +2,9 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -124,9 +126,11 @@ void writeLocalizationDatabase(const std::string& path, const localization::Data
   w.put(static_cast<std::uint64_t>(o.max_lines));
   w.put(o.min_pair_angle_rad);
   w.put(o.key_angle_scale_m_per_rad);
+  w.put(static_cast<std::int32_t>(o.profile_bins));
   putLineOptions(w, o.lines);
   w.put(static_cast<std::uint64_t>(db.positions().size()));
   w.put(static_cast<std::uint64_t>(db.lines().size()));
+  w.put(static_cast<std::uint64_t>(db.profiles().size()));
   for (const auto& p : db.positions()) {
     w.put(p.x);
     w.put(p.y);
@@ -138,6 +142,9 @@ void writeLocalizationDatabase(const std::string& path, const localization::Data
     w.put(l.distance);
     w.put(l.length);
   }
+  // Profile ranges in centimetres (u16: up to 655 m; the virtual scans reach max_range_m).
+  for (const float v : db.profiles())
+    w.put(static_cast<std::uint16_t>(std::lround(std::clamp(static_cast<double>(v) * 100.0, 0.0, 65535.0))));
   w.put(fnv1a(w.buf.data(), w.buf.size()));
   writeFileAtomically(path, w.buf);
 }
@@ -168,14 +175,16 @@ localization::Database readLocalizationDatabase(const std::string& path) {
   o.max_lines = static_cast<std::size_t>(r.get<std::uint64_t>("max_lines"));
   o.min_pair_angle_rad = r.get<double>("min_pair_angle_rad");
   o.key_angle_scale_m_per_rad = r.get<double>("key_angle_scale_m_per_rad");
+  o.profile_bins = r.get<std::int32_t>("profile_bins");
   o.lines = getLineOptions(r);
   const auto n_pos = r.get<std::uint64_t>("positions");
   const auto n_lines = r.get<std::uint64_t>("lines");
-  const std::uint64_t body = n_pos * 16 + n_lines * 12;
-  if (n_pos > data.size() || n_lines > data.size() || r.pos() + body + 8 != data.size())
-    throw badInput(fmt::format("localization database size does not match its counts ({} positions, {} lines): "
-                               "truncated or corrupt",
-                               n_pos, n_lines),
+  const auto n_profile = r.get<std::uint64_t>("profile values");
+  if (n_pos > data.size() || n_lines > data.size() || n_profile > data.size() ||
+      r.pos() + n_pos * 16 + n_lines * 12 + n_profile * 2 + 8 != data.size())
+    throw badInput(fmt::format("localization database size does not match its counts ({} positions, {} lines, {} "
+                               "profile values): truncated or corrupt",
+                               n_pos, n_lines, n_profile),
                    ErrorLocation(path, 0, "positions"));
   if (fnv1a(data.data(), data.size() - 8) != stored)
     throw badInput("localization database checksum mismatch (corrupt file)", ErrorLocation(path, 0, "checksum"));
@@ -192,8 +201,11 @@ localization::Database readLocalizationDatabase(const std::string& path) {
     l.distance = r.get<float>("line.distance");
     l.length = r.get<float>("line.length");
   }
+  std::vector<float> profiles(n_profile);
+  for (auto& v : profiles) v = static_cast<float>(r.get<std::uint16_t>("profile") / 100.0);
   try {
-    return localization::Database::fromParts(o, map_checksum, std::move(positions), std::move(lines));
+    return localization::Database::fromParts(o, map_checksum, std::move(positions), std::move(lines),
+                                             std::move(profiles));
   } catch (const Error& e) {
     throw badInput(e.message(), ErrorLocation(path, 0, e.where().field));
   }

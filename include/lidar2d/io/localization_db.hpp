@@ -2,8 +2,8 @@
 /// @file
 /// The global localizer's descriptor database file (written by `lidar2d localize-index`). Layout in
 /// docs/file-formats.md: magic "L2DLOCDB", format version, the build options, the checksum of the map
-/// it describes, the positions and their lines, and a trailing FNV-1a 64 checksum of everything
-/// before it. Little-endian. The k-d tree is rebuilt when the file is read (deterministic).
+/// it describes, the positions, their lines and range profiles, and a trailing FNV-1a 64 checksum
+/// of everything before it. Little-endian. The k-d tree is rebuilt when the file is read (deterministic).
 
 #include <cstdint>
 #include <string>
@@ -13,7 +13,7 @@
 namespace lidar2d::io {
 
 /// Current version of the database format; files of any other version are refused.
-inline constexpr std::uint32_t kLocalizationDbVersion = 1;
+inline constexpr std::uint32_t kLocalizationDbVersion = 2;
 
 /// Writes `db` to `path` atomically. Throws `lidar2d::Error` (kIo) when the file cannot be written.
 void writeLocalizationDatabase(const std::string& path, const localization::Database& db);

@@ -19,8 +19,11 @@
 /// field (registration::matchLikelihoodField) and scored as the fraction of its points that land on
 /// an obstacle. The result is the best pose, its score and the distinct alternatives; the localizer
 /// declines when nothing scores well enough or a distinct alternative scores nearly as well (a
-/// symmetric building). Optionally, when the descriptor path declines for want of candidates, it
-/// falls back to branch-and-bound over the whole map (registration::matchCorrelativeGlobal).
+/// symmetric building). A second signature finds the scans whose lines give no pair (corridors,
+/// clutter): each position's range profile (nearest obstacle per sector of the circle), compared
+/// with the scan's at every whole-sector turn; its best positions join the line candidates.
+/// Optionally, when nothing scores, it falls back to branch-and-bound over the whole map
+/// (registration::matchCorrelativeGlobal).
 ///
 /// Frames: the map's world frame; results are `T_world_robot` for points given in the robot frame.
 
@@ -54,6 +57,10 @@ struct DatabaseOptions {
   double key_angle_scale_m_per_rad = 2.0;
   double min_pair_angle_rad =
       20.0 * std::numbers::pi / 180.0;  ///< pairs closer to parallel are not indexed [rad], in [0, pi/2]
+  /// Second signature, for scans with too few lines: each position's range profile, the nearest
+  /// obstacle of its virtual scan in each of this many equal sectors of the circle (world-oriented);
+  /// 0 = none, else 8..720.
+  int profile_bins = 72;
   /// Line extraction of the virtual scans: more permissive than the query's (shorter lines, fewer
   /// points), so that the database holds a superset of what a real scan extracts.
   LineExtractionOptions lines = permissiveLines();
@@ -98,16 +105,22 @@ class Database {
   /// "free space") when the map has no free cell with the clearance.
   static Database build(const io::OccupancyImage& map, const DatabaseOptions& options = {}, unsigned threads = 0,
                         ProgressCallback progress = nullptr, void* progress_user = nullptr);
-  /// Assembles a database from stored parts (what a reader loaded) and builds its index. Throws
-  /// `lidar2d::Error` (kBadInput) when the parts are inconsistent (line ranges out of bounds,
-  /// non-finite values).
+  /// Assembles a database from stored parts (what a reader loaded) and builds its index.
+  /// `profiles`: empty (no range profiles), or options.profile_bins ranges [m] per position,
+  /// position by position (see profiles()). Throws `lidar2d::Error` (kBadInput) when the parts are
+  /// inconsistent (line ranges out of bounds, non-finite or negative values, a profile size that
+  /// does not match).
   static Database fromParts(const DatabaseOptions& options, std::uint64_t map_checksum, std::vector<Position> positions,
-                            std::vector<LineFeature> lines);
+                            std::vector<LineFeature> lines, std::vector<float> profiles = {});
 
   const DatabaseOptions& options() const;
   std::uint64_t mapChecksum() const;  ///< mapChecksum() of the map it was built from
   const std::vector<Position>& positions() const;
   const std::vector<LineFeature>& lines() const;
+  /// Range profiles: options().profile_bins values per position (empty when there are none); bin k
+  /// of a position holds the range [m] of the nearest obstacle its virtual scan saw at world angles
+  /// [-pi + k w, -pi + (k + 1) w), w = 2 pi / bins (max_range_m when it saw none).
+  const std::vector<float>& profiles() const;
   std::size_t numPairs() const;     ///< indexed line pairs
   std::size_t memoryBytes() const;  ///< approximate heap use, index included
   bool empty() const;
@@ -149,6 +162,10 @@ struct LocalizerOptions {
   double ambiguity_ratio = 0.95;
   double distinct_distance_m = 1.0;  ///< alternatives farther than this from the best are distinct [m]
   double distinct_angle_rad = 20.0 * std::numbers::pi / 180.0;  ///< ... or turned by more than this [rad]
+  /// Candidates from the range-profile signature (database positions whose profile, turned in
+  /// steps of one sector, best matches the scan's), verified with the line candidates; they find
+  /// the scans whose lines give no usable pair (corridors, clutter). 0 = off.
+  std::size_t profile_candidates = 64;
   /// When no descriptor candidate scores at least min_score, search the whole map by branch and
   /// bound (slow: seconds on a building-sized map). Off by default.
   bool fallback_branch_and_bound = false;
@@ -190,6 +207,7 @@ struct LocalizationResult {
   std::size_t num_lines = 0;            ///< scan lines used
   std::size_t num_hits = 0;             ///< database pairs matched
   std::size_t num_candidates = 0;       ///< candidates verified
+  std::size_t num_profile_candidates = 0;  ///< of the pre-scored candidates, those from the range profiles
   bool used_fallback = false;           ///< the branch-and-bound fallback ran
   double describe_ms = 0, lookup_ms = 0, verify_ms = 0, total_ms = 0;  ///< timings [ms]
 };
