@@ -74,6 +74,31 @@ TEST(CliMatch, IdentityInitAndOdometryInitBothWork) {
   EXPECT_EQ(io::readRelativePoses(out).size(), 19u);
 }
 
+// Pairs are matched in chunks of frames on several threads; the output must not depend on how many
+// (300 scans cross two chunk borders).
+TEST(CliMatch, ThreadCountDoesNotChangeTheOutput) {
+  TempDir tmp;
+  const std::string log = (tmp / "sim.log").string();
+  ASSERT_EQ(runCli({"simulate", "--world", "office", "-o", log, "--scans", "300", "--beams", "181"}).exit_code, 0);
+  std::string first;
+  for (const char* threads : {"1", "2", "3"}) {
+    const std::string out = (tmp / (std::string("m") + threads + ".txt")).string();
+    const auto r = runCli({"match", log, "--threads", threads, "-o", out, "-q"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const std::string content = test::readFile(out);
+    const auto pairs = io::readRelativePoses(out);
+    ASSERT_EQ(pairs.size(), 299u);
+    for (std::size_t k = 1; k < pairs.size(); ++k) {  // consecutive scans, also across chunk borders
+      EXPECT_EQ(pairs[k].t_prev, pairs[k - 1].t_cur) << k;
+      EXPECT_LT(pairs[k].T_prev_cur.translation().norm(), 0.5) << k;  // the route moves a few cm per scan
+    }
+    if (first.empty())
+      first = content;
+    else
+      EXPECT_EQ(content, first) << threads << " threads";
+  }
+}
+
 // Correlative search (default window 1 m, 30 degrees) then point-to-line ICP, from no guess at all.
 TEST(CliMatch, CorrelativeThenIcpFromIdentity) {
   TempDir tmp;

@@ -10,17 +10,24 @@
 //   t_prev t_cur dx dy dtheta converged iterations    [s, s, m, m, rad, 0/1, count]
 // written atomically. --eval compares the pairs with the log's truth (eval::evaluatePairs: success =
 // error < 10 cm and < 2 deg) and prints the success rate, median errors and time per pair.
+// Pairs are matched on all cores (--threads); the output does not depend on the thread count.
 // Exit codes: 1 for bad input (unreadable log, no odometry with --init odom, no truth with --eval,
 // unwritable output; no output file appears then), 2 for usage errors.
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <exception>
 #include <iostream>
 #include <map>
 #include <memory>
 #include <numbers>
+#include <mutex>
 #include <optional>
+#include <thread>
+#include <vector>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
@@ -43,8 +50,32 @@ struct MatchArgs {
   Init init = Init::kOdom;
   bool eval = false;
   bool quiet = false;
+  unsigned threads = std::max(1u, std::thread::hardware_concurrency());
   io::ReaderOptions reader;
 };
+
+// Calls f(i) for i in [0, n) on `threads` threads (the caller's included); rethrows the first
+// exception after all have finished.
+template <typename F>
+void parallelFor(std::size_t n, unsigned threads, F&& f) {
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  auto work = [&] {
+    try {
+      for (std::size_t i; (i = next.fetch_add(1)) < n;) f(i);
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+      next = n;
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads && t < n; ++t) pool.emplace_back(work);
+  work();
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+}
 
 void run(const MatchArgs& a) {
   using Clock = std::chrono::steady_clock;
@@ -67,56 +98,91 @@ void run(const MatchArgs& a) {
                               registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity");
   out.stream() << "# t_prev t_cur dx dy dtheta converged iterations\n";
 
-  std::optional<registration::PreparedTarget> prev, prev_then;
+  // Pairs are independent, so they are matched in chunks of frames, each chunk's targets prepared
+  // and its pairs matched by all cores (the log reader runs on its own thread); results are
+  // written in log order and equal a sequential run's.
+  const unsigned threads = std::max(1u, std::min(a.threads, 64u));
+  constexpr std::size_t kChunk = 128;
+  std::optional<registration::PreparedTarget> prev, prev_then;  // the last frame of the previous chunk
   std::optional<Frame> prev_frame;
   std::vector<io::RelativePose> pairs;
   io::Trajectory truth;
-  double match_s = 0.0;
+  double match_s = 0.0;  // preparation and matching, summed over the threads
   std::size_t scans = 0, converged = 0;
-  while (auto f = source->next()) {
-    ++scans;
-    if (a.init == Init::kOdom && !f->T_odom_robot)
-      throw badInput(fmt::format("scan {} (time {:.6f}) has no odometry (use --init identity)", f->index, f->time),
-                     ErrorLocation(a.log));
-    if (a.eval) {
-      if (!f->T_world_robot)
-        throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
-                                   f->index, f->time),
-                       ErrorLocation(a.log));
-      truth.push_back({f->time, *f->T_world_robot});
-    }
-    const auto t0 = Clock::now();
-    registration::PreparedTarget cur(f->scan.toPoints(f->T_robot_laser), first_options);
-    std::optional<registration::PreparedTarget> cur_then;
-    if (a.then) cur_then.emplace(cur.points(), then_options);
-    if (prev) {
-      const SE2 init = a.init == Init::kOdom ? prev_frame->T_odom_robot->inverse() * *f->T_odom_robot : SE2();
-      registration::Result r = registration::matchScans(*prev, cur.points(), init, first_options);
-      if (r.status == registration::Status::kInvalidInput)
-        throw invalidArgument(fmt::format("method {}: {}", registration::toString(a.options.method), r.message));
-      if (a.then) {
-        r = registration::matchScans(*prev_then, cur.points(), r.T_target_source, then_options);
-        if (r.status == registration::Status::kInvalidInput)
-          throw invalidArgument(fmt::format("method {}: {}", registration::toString(*a.then), r.message));
+  std::vector<Frame> chunk;
+  bool more = true;
+  while (more) {
+    chunk.clear();
+    while (chunk.size() < kChunk) {
+      auto f = source->next();
+      if (!f) {
+        more = false;
+        break;
       }
-      match_s += std::chrono::duration<double>(Clock::now() - t0).count();
-      const SE2& T = r.T_target_source;
-      out.stream() << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {} {}\n", prev_frame->time, f->time, T.x(), T.y(),
-                                  T.theta(), r.converged ? 1 : 0, r.iterations);
-      pairs.push_back({prev_frame->time, f->time, T, r.converged, r.iterations});
-      converged += r.converged;
-    } else {
-      match_s += std::chrono::duration<double>(Clock::now() - t0).count();
+      ++scans;
+      if (a.init == Init::kOdom && !f->T_odom_robot)
+        throw badInput(fmt::format("scan {} (time {:.6f}) has no odometry (use --init identity)", f->index, f->time),
+                       ErrorLocation(a.log));
+      if (a.eval) {
+        if (!f->T_world_robot)
+          throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
+                                     f->index, f->time),
+                         ErrorLocation(a.log));
+        truth.push_back({f->time, *f->T_world_robot});
+      }
+      chunk.push_back(std::move(*f));
     }
-    prev.emplace(std::move(cur));
-    if (a.then) prev_then.emplace(std::move(*cur_then));
-    f->scan = LaserScan();  // only the times and poses of the previous frame are needed
-    prev_frame = std::move(f);
+    const std::size_t n = chunk.size();
+    if (n == 0) break;
+    std::vector<std::optional<registration::PreparedTarget>> targets(n), targets_then(n);
+    std::vector<std::optional<registration::Result>> results(n);
+    std::vector<double> seconds(n, 0.0);
+    std::vector<char> second_stage(n, 0);  // the result is the --then stage's
+    parallelFor(n, threads, [&](std::size_t i) {
+      const auto t0 = Clock::now();
+      targets[i].emplace(chunk[i].scan.toPoints(chunk[i].T_robot_laser), first_options);
+      if (a.then) targets_then[i].emplace(targets[i]->points(), then_options);
+      seconds[i] += std::chrono::duration<double>(Clock::now() - t0).count();
+    });
+    parallelFor(n, threads, [&](std::size_t i) {
+      const Frame* before = i > 0 ? &chunk[i - 1] : (prev_frame ? &*prev_frame : nullptr);
+      if (!before) return;  // the log's first scan
+      const registration::PreparedTarget& target = i > 0 ? *targets[i - 1] : *prev;
+      const auto t0 = Clock::now();
+      const SE2 init = a.init == Init::kOdom ? before->T_odom_robot->inverse() * *chunk[i].T_odom_robot : SE2();
+      registration::Result r = registration::matchScans(target, targets[i]->points(), init, first_options);
+      if (a.then && r.status != registration::Status::kInvalidInput) {
+        const registration::PreparedTarget& target_then = i > 0 ? *targets_then[i - 1] : *prev_then;
+        r = registration::matchScans(target_then, targets[i]->points(), r.T_target_source, then_options);
+        second_stage[i] = 1;
+      }
+      seconds[i] += std::chrono::duration<double>(Clock::now() - t0).count();
+      results[i] = std::move(r);
+    });
+    for (std::size_t i = 0; i < n; ++i) {
+      match_s += seconds[i];
+      if (!results[i]) continue;
+      const registration::Result& r = *results[i];
+      if (r.status == registration::Status::kInvalidInput)
+        throw invalidArgument(fmt::format("method {}: {}",
+                                          registration::toString(second_stage[i] ? *a.then : a.options.method),
+                                          r.message));
+      const double t_before = i > 0 ? chunk[i - 1].time : prev_frame->time;
+      const SE2& T = r.T_target_source;
+      out.stream() << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {} {}\n", t_before, chunk[i].time, T.x(), T.y(),
+                                  T.theta(), r.converged ? 1 : 0, r.iterations);
+      pairs.push_back({t_before, chunk[i].time, T, r.converged, r.iterations});
+      converged += r.converged;
+    }
+    prev = std::move(targets[n - 1]);
+    if (a.then) prev_then = std::move(targets_then[n - 1]);
+    chunk[n - 1].scan = LaserScan();  // only the times and poses of the previous frame are needed
+    prev_frame = std::move(chunk[n - 1]);
   }
   if (scans < 2) throw badInput(fmt::format("log has {} scan(s); matching needs at least 2", scans), ErrorLocation(a.log));
   out.commit();
   const double total_s = std::chrono::duration<double>(Clock::now() - t_start).count();
-  const double per_pair_ms = 1e3 * match_s / static_cast<double>(pairs.size());
+  const double per_pair_ms = 1e3 * match_s / static_cast<double>(pairs.size());  // CPU time per pair
   if (a.eval) {
     const eval::PairsResult e = eval::evaluatePairs(pairs, truth);
     constexpr double kDeg = 180.0 / std::numbers::pi;
@@ -125,7 +191,8 @@ void run(const MatchArgs& a) {
     std::cout << fmt::format("success rate: {:.1f}% (error < 10 cm and < 2 deg)\n", 100.0 * e.success_rate);
     std::cout << fmt::format("median translation error: {:.2f} cm\n", 100.0 * e.trans_m.median);
     std::cout << fmt::format("median rotation error: {:.3f} deg\n", e.rot_rad.median * kDeg);
-    std::cout << fmt::format("ms per pair: {:.3f} (preparation and matching, parsing excluded)\n", per_pair_ms);
+    std::cout << fmt::format("ms per pair: {:.3f} (preparation and matching on one core, parsing excluded)\n",
+                             per_pair_ms);
   }
   if (!a.quiet)
     std::cerr << fmt::format("matched {} pairs ({} converged) with {}{}/{} in {:.3f} s ({:.3f} ms per pair) -> {}\n",
@@ -171,6 +238,7 @@ void addMatchCommand(CLI::App& app) {
   sub->add_option("--max-iterations", a->options.icp.max_iterations, "ICP: max iterations")->capture_default_str();
   sub->add_flag("--eval", a->eval,
                 "compare with the log's truth: success rate (< 10 cm and < 2 deg), median errors, ms per pair");
+  sub->add_option("--threads", a->threads, "threads matching pairs (default: all cores)")->capture_default_str();
   sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
   addReaderOptions(sub, a->reader);
   sub->callback([a] { run(*a); });
