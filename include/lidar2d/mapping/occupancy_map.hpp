@@ -53,9 +53,9 @@ struct InsertOptions {
   /// was slower than one thread (busy cores). Larger values currently use 2 threads.
   /// On the 2-core reference machine two threads do not pay: the split costs 20-35% extra work
   /// (walking to the split line, the clipped traversal) and two busy cores run each thread about
-  /// 25% slower; `lidar2d map` on freiburg-079, whose log reader already keeps the second core
-  /// busy, took 1.24 s best / 1.48 s median with one thread and 1.50 / 1.55 s with two, at 30%
-  /// more CPU time (BENCHMARK.md). More cores would pay more.
+  /// 25% slower; `lidar2d map` on freiburg-079, whose log reader already uses the second core,
+  /// took a median 1.05 s either way over 10 interleaved runs, with 49% more CPU time on two
+  /// threads (and slower on two when the machine was busy; BENCHMARK.md). More cores would pay.
   unsigned threads = 1;
   /// With threads > 1: after a split scan that took longer than one thread would have (cores busy
   /// with other work, so the worker got its time slice late), insert the next scans on one thread
