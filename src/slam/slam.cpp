@@ -14,6 +14,8 @@
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/localization/lines.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
 
@@ -215,6 +217,7 @@ struct Slam::Impl {
   std::vector<ScanRecord> scans;
   std::vector<Node> nodes;
   std::vector<Points2> node_points;  // robot frame
+  std::vector<std::pair<LaserScan, SE2>> node_scans;  // each node's scan and T_robot_laser (submap grids)
   std::vector<std::optional<SE2>> node_odometry;
   std::vector<std::vector<localization::Line>> node_lines;  // robot frame, longest first (descriptor loops)
   std::vector<double> node_path_m;  // front-end path length from the first node [m]
@@ -409,6 +412,7 @@ struct Slam::Impl {
     submaps.back().nodes.push_back(n);
     nodes.push_back(node);
     node_points.push_back(std::move(pts));
+    node_scans.emplace_back(f.scan, f.T_robot_laser);
     node_odometry.push_back(f.T_odom_robot && odom_trusted ? f.T_odom_robot : std::nullopt);
     node_path_m.push_back(n == 0 ? 0.0
                                  : node_path_m[n - 1] +
@@ -774,13 +778,30 @@ struct Slam::Impl {
     stats.descriptor_seconds += secondsSince(t0);
   }
 
+  /// The score grid of a finished submap for the branch-and-bound searches, from its occupancy grid
+  /// built with the mapping module: every node's scan inserted (log-odds, ray traced) at its pose in
+  /// the anchor's frame. A finished submap is frozen (the front end's relative poses of its nodes
+  /// no longer change), so the grid can be dropped and rebuilt alike.
+  CorrelativeGrid submapGrid(const Submap& sm) const {
+    mapping::MapOptions mo;
+    mo.resolution_m = loop_search.resolution_m;
+    mo.insert.max_range_m = opt.max_range_m;
+    const auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
+    const SE2 T_anchor_local = nodes[sm.anchor].T_local_robot.inverse();
+    for (const std::size_t n : sm.nodes)
+      map->insert(node_scans[n].first, T_anchor_local * nodes[n].T_local_robot * node_scans[n].second);
+    const io::OccupancyImage image = mapping::toOccupancyImage(*map);
+    if (image.width() == 0) return CorrelativeGrid::fromPoints(sm.points_anchor, loop_search);
+    return CorrelativeGrid::fromMap(image, loop_search);
+  }
+
   /// The correlative grid of submap `s`, built on demand. Only the most recently used few are kept:
   /// a grid with its max-grids takes megabytes, and a long run would otherwise hold one per submap.
   const CorrelativeGrid& gridOf(std::size_t s) {
     Submap& sm = submaps[s];
     grid_lru.erase(std::remove(grid_lru.begin(), grid_lru.end(), s), grid_lru.end());
     grid_lru.push_back(s);
-    if (!sm.grid) sm.grid = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(sm.points_anchor, loop_search));
+    if (!sm.grid) sm.grid = std::make_unique<CorrelativeGrid>(submapGrid(sm));
     while (grid_lru.size() > kMaxGrids) {
       submaps[grid_lru.front()].grid.reset();
       grid_lru.erase(grid_lru.begin());

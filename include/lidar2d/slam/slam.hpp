@@ -1,7 +1,8 @@
 #pragma once
 /// @file
 /// 2D SLAM: a scan-to-local-map front end (point-to-line ICP, the correlative matcher when the match
-/// is poor, odometry as the prediction, degeneracy-aware), submaps of consecutive nodes, loop
+/// is poor, odometry as the prediction, degeneracy-aware), submaps of consecutive nodes (their
+/// search grids built with the mapping module's occupancy grid), loop
 /// closure candidates by proximity and, after a drift too large for that, by the global
 /// localizer's line-pair descriptors (each verified by branch-and-bound search + ICP refinement +
 /// strict acceptance), and an SE(2) pose graph solved with Ceres (robust loss on loop closures),
