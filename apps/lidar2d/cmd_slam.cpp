@@ -98,6 +98,7 @@ std::map<std::string, std::variant<FieldRef, AngleRef>> configFields(slam::SlamO
       {"optimize_every_nodes", FieldRef(&o.optimize_every_nodes)},
       {"intermediate_iterations", FieldRef(&o.intermediate_iterations)},
       {"descriptor_loops", FieldRef(&o.descriptor_loops)},
+      {"front_end_likelihood_field", FieldRef(&o.front_end_likelihood_field)},
       {"descriptor_every_nodes", FieldRef(&o.descriptor_every_nodes)},
       {"descriptor_quiet_nodes", FieldRef(&o.descriptor_quiet_nodes)},
       {"descriptor_min_age_nodes", FieldRef(&o.descriptor_min_age_nodes)},

@@ -18,6 +18,7 @@
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
+#include "lidar2d/registration/likelihood_field.hpp"
 
 namespace lidar2d::slam {
 namespace {
@@ -185,6 +186,11 @@ struct Slam::Impl {
     icp.normal_neighbors = opt.normal_neighbors;
     icp.max_line_flatness = opt.max_line_flatness;
     loop_icp = icp;
+    // The local map's points are merged from several scans (not in beam order): no wall segments.
+    local_lf.resolution_m = opt.map_voxel_m;
+    local_lf.levels = 2;
+    local_lf.truncation_m = 0.2;
+    local_lf.connect_max_gap_m = 0.0;
     loop_icp.max_correspondence_dist_m = std::min(opt.icp_max_correspondence_m, 0.3);
     fallback.linear_window_m = opt.fallback_linear_window_m;
     fallback.angular_window_rad = opt.fallback_angular_window_rad;
@@ -210,6 +216,7 @@ struct Slam::Impl {
 
   SlamOptions opt;
   IcpOptions icp, loop_icp;
+  registration::LikelihoodFieldOptions local_lf;  // front_end_likelihood_field
   CorrelativeOptions fallback, loop_search, descriptor_search;
   localization::LocalizerOptions descriptor_query;
   localization::DatabaseOptions descriptor_db;
@@ -241,6 +248,7 @@ struct Slam::Impl {
   int consecutive_failures = 0;
   std::deque<std::size_t> local_nodes;
   std::unique_ptr<IcpTarget> local_target;
+  std::unique_ptr<registration::LikelihoodField> local_field;  // front_end_likelihood_field
   Points2 local_points;
   std::unique_ptr<CorrelativeGrid> local_grid;
 
@@ -321,6 +329,9 @@ struct Slam::Impl {
       for (const auto& p : node_points[n]) local_points.push_back(nodes[n].T_local_robot * p);
     local_points = voxelFilter(local_points, opt.map_voxel_m);
     local_target = std::make_unique<IcpTarget>(local_points, icp);
+    if (opt.front_end_likelihood_field)
+      local_field = std::make_unique<registration::LikelihoodField>(
+          registration::LikelihoodField::fromPoints(local_points, local_lf));
     local_grid.reset();
   }
 
@@ -332,7 +343,8 @@ struct Slam::Impl {
     used_fallback = false;
     if (!local_target || local_target->size() < opt.min_points || pts.size() < opt.min_points) return std::nullopt;
     auto tryFrom = [&](const SE2& init, registration::Result& out, double& explained) {
-      out = alignIcp(*local_target, pts, init, icp);
+      out = opt.front_end_likelihood_field ? registration::matchLikelihoodField(*local_field, pts, init, local_lf)
+                                           : alignIcp(*local_target, pts, init, icp);
       const bool ok = out.status == registration::Status::kConverged || out.status == registration::Status::kMaxIterations;
       explained = ok && out.T_target_source.isFinite() ? explainedFraction(*local_target, pts, out.T_target_source) : 0.0;
     };

@@ -44,6 +44,10 @@ struct SlamOptions {
 
   // --- front end ---
   int local_map_nodes = 12;                 ///< nodes whose points form the local map, >= 1
+  /// Match scans against the local map's likelihood field (registration::matchLikelihoodField,
+  /// Gauss-Newton, two resolutions) instead of point-to-line ICP (the default; the two are compared
+  /// in BENCHMARK.md).
+  bool front_end_likelihood_field = false;
   double icp_max_correspondence_m = 0.5;    ///< ICP pairs farther apart are rejected [m], > 0
   /// A scan keeps one point (the centroid) per cell of this size before matching: dense returns
   /// near the robot add work, not information [m], > 0.
