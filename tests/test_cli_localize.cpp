@@ -20,15 +20,21 @@ using test::runCli;
 
 class CliLocalize : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new test::TempDir();
+  // The logs and maps are made on first use (once per process): the tests skipped under the
+  // sanitizers then do not pay for them (about 16 s there).
+  static void SetUpTestSuite() { dir_ = new test::TempDir(); }
+  static void needOffice() {
+    if (fs::exists(path("office.yaml"))) return;
     auto r = runCli({"simulate", "--world", "office", "--scans", "300", "--seed", "5", "-o", path("office.log")});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     r = runCli({"simulate", "--world", "office", "--scans", "20", "--seed", "9", "-o", path("query.log")});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     r = runCli({"map", path("office.log"), "-o", path("office"), "-q"});
     ASSERT_EQ(r.exit_code, 0) << r.err;
-    r = runCli({"simulate", "--world", "symmetric", "--scans", "200", "--seed", "5", "-o", path("sym.log")});
+  }
+  static void needSymmetric() {
+    if (fs::exists(path("sym.yaml"))) return;
+    auto r = runCli({"simulate", "--world", "symmetric", "--scans", "200", "--seed", "5", "-o", path("sym.log")});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     r = runCli({"map", path("sym.log"), "-o", path("sym"), "-q"});
     ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -56,6 +62,7 @@ TEST_F(CliLocalize, IndexThenLocalizeWritesOneLinePerScanAndJson) {
   GTEST_SKIP() << "building a database through the CLI takes minutes under the sanitizers; make test runs it "
                   "(test_localization covers the library under them)";
 #endif
+  ASSERT_NO_FATAL_FAILURE(needOffice());
   auto r = runCli({"localize-index", path("office.yaml"), "-o", path("office.db"), "--step", "0.3"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   ASSERT_TRUE(fs::exists(path("office.db")));
@@ -95,6 +102,7 @@ TEST_F(CliLocalize, WithoutDatabaseBuildsItInMemoryAndSelectsScans) {
   GTEST_SKIP() << "building a database through the CLI takes minutes under the sanitizers; make test runs it "
                   "(test_localization covers the library under them)";
 #endif
+  ASSERT_NO_FATAL_FAILURE(needOffice());
   const auto r = runCli({"localize", path("office.yaml"), path("query.log"), "-o", path("odd.txt"), "--scans", "odd",
                          "--step", "0.3", "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -107,6 +115,7 @@ TEST_F(CliLocalize, SymmetricWorldDeclines) {
   GTEST_SKIP() << "localizing 100 scans through the CLI takes minutes under the sanitizers; make test runs it "
                   "(test_localization checks the symmetric world under them)";
 #endif
+  ASSERT_NO_FATAL_FAILURE(needSymmetric());
   const auto r = runCli(
       {"localize", path("sym.yaml"), path("sym.log"), "-o", path("sym.txt"), "--scans", "odd", "--step", "0.3", "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -118,6 +127,8 @@ TEST_F(CliLocalize, SymmetricWorldDeclines) {
 }
 
 TEST_F(CliLocalize, DatabaseOfAnotherMapIsRefused) {
+  ASSERT_NO_FATAL_FAILURE(needOffice());
+  ASSERT_NO_FATAL_FAILURE(needSymmetric());
   auto r = runCli({"localize-index", path("sym.yaml"), "-o", path("sym.db"), "--step", "0.3", "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = runCli({"localize", path("office.yaml"), path("query.log"), "--db", path("sym.db"), "-o", path("x.txt")});
@@ -128,6 +139,7 @@ TEST_F(CliLocalize, DatabaseOfAnotherMapIsRefused) {
 }
 
 TEST_F(CliLocalize, BadInputIsOneLineAndExitOne) {
+  ASSERT_NO_FATAL_FAILURE(needOffice());
   // YAML whose image is missing.
   test::writeFile(path("noimage.yaml"), "image: missing.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n");
   auto r = runCli({"localize-index", path("noimage.yaml"), "-o", path("n.db")});
