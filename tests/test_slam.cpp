@@ -88,6 +88,10 @@ TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
 // RMS here against under 5 cm; worse on the real logs too, BENCHMARK.md) but must still beat the
 // odometry (2 m RMS) by far and close loops.
 TEST(Slam, OfficeWithTheLikelihoodFieldFrontEnd) {
+#ifdef LIDAR2D_SANITIZED
+  GTEST_SKIP() << "a SLAM run takes two minutes under the sanitizers; make test runs it (the likelihood-field "
+                  "matcher's own tests run under them)";
+#endif
   const auto frames = simulateWorld("office");
   SlamOptions o;
   o.front_end_likelihood_field = true;
