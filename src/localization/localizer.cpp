@@ -36,6 +36,11 @@ double wrapTwoPi(double a) {
   return a;
 }
 
+// Range-profile sector of direction `angle`: sector k covers [-pi + k w, -pi + (k + 1) w), w = 2 pi / bins.
+std::size_t sectorOf(double angle, std::size_t bins) {
+  return std::min(bins - 1, static_cast<std::size_t>(wrapTwoPi(angle + kPi) / kTwoPi * static_cast<double>(bins)));
+}
+
 // One indexed pair: reference line `ref` and second line `other` of position `pos`.
 struct Pair {
   float key[3];
@@ -313,8 +318,7 @@ Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& o
           else
             pts.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0.0);
           if (B > 0 && std::isfinite(r)) {
-            const auto k = std::min(B - 1, static_cast<std::size_t>(wrapTwoPi(a_world + kPi) / kTwoPi * static_cast<double>(B)));
-            float& v = cand_profiles[i * B + k];
+            float& v = cand_profiles[i * B + sectorOf(a_world, B)];
             v = std::min(v, static_cast<float>(r * res));
           }
         }
@@ -612,14 +616,13 @@ struct Observed {
 };
 
 std::vector<Observed> observedSectors(const Points2& pts, const Eigen::Vector2d& sensor, std::size_t bins) {
-  const double w = kTwoPi / static_cast<double>(bins);
   std::vector<float> q(bins, std::numeric_limits<float>::infinity());
   for (const auto& p : pts) {
     const Eigen::Vector2d v = p - sensor;
     const double r = v.norm();
     if (!(r > 0) || !std::isfinite(r)) continue;
-    const auto bin = std::min(bins - 1, static_cast<std::size_t>(wrapTwoPi(std::atan2(v.y(), v.x()) + kPi) / w));
-    q[bin] = std::min(q[bin], static_cast<float>(r));
+    float& nearest = q[sectorOf(std::atan2(v.y(), v.x()), bins)];
+    nearest = std::min(nearest, static_cast<float>(r));
   }
   std::vector<Observed> seen;
   for (std::size_t b = 0; b < bins; ++b)
