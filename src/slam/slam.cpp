@@ -4,6 +4,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -235,6 +236,7 @@ struct Slam::Impl {
   SlamStats stats;
   std::vector<Submap> submaps;
   static constexpr std::size_t kMaxGrids = 8;
+  static constexpr std::size_t kVelocitySteps = 5;  // steps behind the constant-velocity prediction
   std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
 
   // Front-end state.
@@ -244,7 +246,9 @@ struct Slam::Impl {
   bool odometry_seen = false, odometry_missing = false;
   std::size_t odometry_missing_count = 0;
   double time_prev = 0.0;
-  SE2 last_delta;
+  // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
+  // constant-velocity prediction is their component-wise median (`velocityStep`).
+  std::deque<SE2> recent_steps;
   int consecutive_failures = 0;
   std::deque<std::size_t> local_nodes;
   std::unique_ptr<IcpTarget> local_target;
@@ -333,6 +337,29 @@ struct Slam::Impl {
       local_field = std::make_unique<registration::LikelihoodField>(
           registration::LikelihoodField::fromPoints(local_points, local_lf));
     local_grid.reset();
+  }
+
+  /// The constant-velocity step: the component-wise median (x, y, theta) of the last
+  /// `kVelocitySteps` steps, identity before the first. Not the last step alone: a scan stamped out
+  /// of order (the Intel bag has some) matches 0.1-0.2 m behind its neighbours, and repeating that
+  /// step along a corridor - where the scan cannot correct the prediction's translation along it
+  /// (degeneracy) - drove the estimate backwards by that much on every scan until the corridor
+  /// ended (metres of error without odometry).
+  SE2 velocityStep() const {
+    if (recent_steps.empty()) return SE2();
+    std::array<std::array<double, kVelocitySteps>, 3> v{};
+    const std::size_t n = recent_steps.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      v[0][i] = recent_steps[i].x();
+      v[1][i] = recent_steps[i].y();
+      v[2][i] = recent_steps[i].theta();
+    }
+    auto median = [n](std::array<double, kVelocitySteps>& a) {
+      const auto mid = a.begin() + static_cast<std::ptrdiff_t>(n / 2);
+      std::nth_element(a.begin(), mid, a.begin() + static_cast<std::ptrdiff_t>(n));
+      return *mid;
+    };
+    return SE2(median(v[0]), median(v[1]), median(v[2]));
   }
 
   /// Front-end match of `pts` against the local map from `T_pred`. Returns the pose, or nothing
@@ -922,7 +949,7 @@ struct Slam::Impl {
       odometry_missing = true;
       ++odometry_missing_count;
     }
-    if (have_prev && !odom_trusted) delta = time_ok ? last_delta : SE2();
+    if (have_prev && !odom_trusted) delta = time_ok ? velocityStep() : SE2();
 
     if (!have_prev) {
       // The first scan anchors everything (at its odometry pose, so the map lines up with it).
@@ -942,7 +969,7 @@ struct Slam::Impl {
       const SE2 pred_delta = T_local_prev.inverse() * T_pred;
       if (pred_delta.translation().norm() > opt.alternative_start_m || std::abs(pred_delta.theta()) > opt.alternative_start_rad) {
         alternatives.push_back(T_local_prev);
-        if (odom_trusted) alternatives.push_back(T_local_prev * last_delta);
+        if (odom_trusted) alternatives.push_back(T_local_prev * (recent_steps.empty() ? SE2() : recent_steps.back()));
       }
       std::optional<SE2> T_match = frontEndMatch(pts, T_pred, alternatives, degenerate, dir, used_fallback);
       if (used_fallback) ++stats.correlative_fallbacks;
@@ -982,8 +1009,9 @@ struct Slam::Impl {
         rec.T_node_scan = rel;
         scans.push_back(rec);
       }
-      last_delta = T_local_prev.inverse() * T_est;
-      if (!time_ok) last_delta = SE2();
+      if (!time_ok) recent_steps.clear();
+      recent_steps.push_back(time_ok ? T_local_prev.inverse() * T_est : SE2());
+      if (recent_steps.size() > kVelocitySteps) recent_steps.pop_front();
       T_local_prev = T_est;
     }
     have_prev = true;
