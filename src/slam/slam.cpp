@@ -237,6 +237,7 @@ struct Slam::Impl {
   std::vector<Submap> submaps;
   static constexpr std::size_t kMaxGrids = 8;
   static constexpr std::size_t kVelocitySteps = 5;  // steps behind the constant-velocity prediction
+  static constexpr double kConfirmExplained = 0.9;  // a match explaining this much confirms its start
   std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
 
   // Front-end state.
@@ -249,6 +250,7 @@ struct Slam::Impl {
   // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
   // constant-velocity prediction is their component-wise median (`velocityStep`).
   std::deque<SE2> recent_steps;
+  std::deque<SE2> recent_poses;  // the front end's poses of the last 16 scans, oldest first
   int consecutive_failures = 0;
   std::deque<std::size_t> local_nodes;
   std::unique_ptr<IcpTarget> local_target;
@@ -364,7 +366,10 @@ struct Slam::Impl {
 
   /// Front-end match of `pts` against the local map from `T_pred`. Returns the pose, or nothing
   /// when the scan could not be matched; sets `degenerate`/`dir` (local frame) and `used_fallback`.
+  /// `alternatives`: other starting points, tried when the prediction is not confirmed. `earlier`:
+  /// the poses of earlier scans, tried when the best match still explains under kConfirmExplained.
   std::optional<SE2> frontEndMatch(const Points2& pts, const SE2& T_pred, const std::vector<SE2>& alternatives,
+                                   const std::vector<SE2>& earlier,
                                    bool& degenerate, Eigen::Vector2d& dir, bool& used_fallback) {
     degenerate = false;
     used_fallback = false;
@@ -385,15 +390,23 @@ struct Slam::Impl {
     // with a clearly lower residual cost.
     // Only when the prediction was not confirmed: the match moved it or explains too little.
     const SE2 correction = T_pred.inverse() * res.T_target_source;
-    const bool confirmed = explained >= 0.9 && correction.translation().norm() <= 0.05 && std::abs(correction.theta()) <= 2.0 * kDeg;
-    for (const SE2& alt : confirmed ? std::vector<SE2>{} : alternatives) {
+    const bool confirmed = explained >= kConfirmExplained && correction.translation().norm() <= 0.05 && std::abs(correction.theta()) <= 2.0 * kDeg;
+    auto consider = [&](const SE2& start) {
       registration::Result r;
       double e = 0.0;
-      tryFrom(alt, r, e);
+      tryFrom(start, r, e);
       if (e > explained + 0.05 || (e > explained - 0.05 && r.final_cost < 0.8 * res.final_cost)) {
         res = r;
         explained = e;
       }
+    };
+    if (!confirmed) {
+      for (const SE2& alt : alternatives) consider(alt);
+      // Earlier scans' poses only while the match explains too little to confirm anything: where
+      // they won on Intel (scan-only) the prediction's match explained 15-45% of the scan. (The
+      // threshold is the confirmation's; scan-only Intel is sensitive to it, BENCHMARK.md.)
+      if (explained < kConfirmExplained)
+        for (const SE2& start : earlier) consider(start);
     }
     if (explained < opt.min_explained_fraction) {
       // Olson's correlative search over a window around the prediction, then ICP from its answer.
@@ -971,7 +984,20 @@ struct Slam::Impl {
         alternatives.push_back(T_local_prev);
         if (odom_trusted) alternatives.push_back(T_local_prev * (recent_steps.empty() ? SE2() : recent_steps.back()));
       }
-      std::optional<SE2> T_match = frontEndMatch(pts, T_pred, alternatives, degenerate, dir, used_fallback);
+      // Without odometry, also the poses of a few earlier scans: a scan logged late (the Intel bag
+      // has runs of them, up to a second old while the robot turns at 40 deg/s) was taken near one
+      // of them, tens of degrees from the constant-velocity prediction; and the scan after it
+      // continues from the scan before it, not from its pose.
+      std::vector<SE2> earlier;
+      if (!odom_trusted)
+        for (const std::size_t back : {2u, 4u, 8u, 16u}) {
+          if (recent_poses.size() < back) break;
+          const SE2& T = recent_poses[recent_poses.size() - back];
+          const SE2 d = T_pred.inverse() * T;
+          if (d.translation().norm() > opt.alternative_start_m || std::abs(d.theta()) > opt.alternative_start_rad)
+            earlier.push_back(T);
+        }
+      std::optional<SE2> T_match = frontEndMatch(pts, T_pred, alternatives, earlier, degenerate, dir, used_fallback);
       if (used_fallback) ++stats.correlative_fallbacks;
       SE2 T_est = T_pred;
       bool restart = false;
@@ -1012,6 +1038,8 @@ struct Slam::Impl {
       if (!time_ok) recent_steps.clear();
       recent_steps.push_back(time_ok ? T_local_prev.inverse() * T_est : SE2());
       if (recent_steps.size() > kVelocitySteps) recent_steps.pop_front();
+      recent_poses.push_back(T_est);
+      if (recent_poses.size() > 16) recent_poses.pop_front();
       T_local_prev = T_est;
     }
     have_prev = true;
