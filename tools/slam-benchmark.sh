@@ -46,8 +46,11 @@ echo "|---|---|---|---|---|---|---|---|---|"
 for d in intel fr079 mit-csail; do
   row "$d" "$DATA/raw/$d.orig.bag" "$DATA/raw/$d.relations"
 done
-# The Radish relation files measure laser poses; fr079's laser sits 4 cm ahead of base_link.
+# fr079's trajectory in the laser frame (its bag's tf_static puts the laser 4 cm ahead of base_link).
 row "fr079-laser-frame" "$DATA/raw/fr079.orig.bag" "$DATA/raw/fr079.relations" --pose-frame laser
+# The original CARMEN log has the laser 4 cm behind the robot's centre (robot_frontlaser_offset
+# -0.04), the bag's tf_static 4 cm ahead of base_link; the relations measure the centre.
+row "fr079-carmen-mount" "$DATA/raw/fr079.orig.bag" "$DATA/raw/fr079.relations" --laser-mount=-0.04,0,0
 for d in intel fr079 mit-csail; do
   row "$d-no-odometry" "$DATA/raw/$d.orig.bag" "$DATA/raw/$d.relations" --no-odometry
 done

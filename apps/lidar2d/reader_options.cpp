@@ -1,4 +1,9 @@
+#include <charconv>
+#include <cmath>
 #include <map>
+#include <numbers>
+#include <string>
+#include <vector>
 
 #include "commands.hpp"
 
@@ -17,6 +22,29 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
                   "CARMEN logs: meaning of the laser messages' poses: auto, truth or odometry")
       ->transform(CLI::CheckedTransformer(poses, CLI::ignore_case))
       ->default_str("auto");
+  sub->add_option_function<std::string>(
+         "--laser-mount",
+         [&options](const std::string& v) {
+           // Three comma-separated finite numbers: x and y [m], theta [deg].
+           std::vector<double> xs;
+           std::size_t start = 0;
+           while (start <= v.size()) {
+             const std::size_t end = std::min(v.find(',', start), v.size());
+             const std::string field = v.substr(start, end - start);
+             double x = 0.0;
+             const auto [ptr, ec] = std::from_chars(field.data(), field.data() + field.size(), x);
+             if (field.empty() || ec != std::errc() || ptr != field.data() + field.size() || !std::isfinite(x))
+               throw CLI::ValidationError("--laser-mount", "'" + field + "' is not a finite number (expected X,Y,THETA_DEG)");
+             xs.push_back(x);
+             start = end + 1;
+           }
+           if (xs.size() != 3)
+             throw CLI::ValidationError("--laser-mount", "expected 3 comma-separated values X,Y,THETA_DEG, got " +
+                                                             std::to_string(xs.size()));
+           options.laser_mount = SE2(xs[0], xs[1], xs[2] * std::numbers::pi / 180.0);
+         },
+         "the laser's pose on the robot, X,Y [m],THETA [deg], replacing the log's (tf, CARMEN offset)")
+      ->type_name("X,Y,THETA_DEG");
 }
 
 }  // namespace lidar2d::cli

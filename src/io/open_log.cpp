@@ -45,7 +45,32 @@ LogFormat detectFormat(const std::string& path) {
   return LogFormat::kCarmen;  // text; the CARMEN reader reports content it cannot parse
 }
 
-std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options) {
+namespace {
+
+// ReaderOptions::laser_mount: the same mounting pose on every frame.
+class MountOverride final : public FrameSource {
+ public:
+  MountOverride(std::unique_ptr<FrameSource> inner, const SE2& mount) : inner_(std::move(inner)), mount_(mount) {}
+  std::optional<Frame> next() override {
+    std::optional<Frame> f = inner_->next();
+    if (f) f->T_robot_laser = mount_;
+    return f;
+  }
+  LogFormat format() const override { return inner_->format(); }
+  const std::string& path() const override { return inner_->path(); }
+  SourceNotes notes() const override {
+    SourceNotes n = inner_->notes();
+    n.scan_source += " (laser mounting given by the options, not the log)";
+    return n;
+  }
+  std::optional<std::size_t> sizeHint() const override { return inner_->sizeHint(); }
+
+ private:
+  std::unique_ptr<FrameSource> inner_;
+  SE2 mount_;
+};
+
+std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOptions& options) {
   switch (detectFormat(path)) {
     case LogFormat::kCarmen:
       return internal::openCarmen(path, options);
@@ -55,6 +80,16 @@ std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOption
       return internal::openRosbag2(path, options);
   }
   throw badInput("unknown log format", {path});
+}
+
+}  // namespace
+
+std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options) {
+  if (options.laser_mount && !options.laser_mount->isFinite())
+    throw invalidArgument("laser mounting pose is not finite", {"ReaderOptions", 0, "laser_mount"});
+  std::unique_ptr<FrameSource> source = openFormat(path, options);
+  if (options.laser_mount) return std::make_unique<MountOverride>(std::move(source), *options.laser_mount);
+  return source;
 }
 
 }  // namespace lidar2d::io
