@@ -984,19 +984,18 @@ struct Slam::Impl {
         alternatives.push_back(T_local_prev);
         if (odom_trusted) alternatives.push_back(T_local_prev * (recent_steps.empty() ? SE2() : recent_steps.back()));
       }
-      // Without odometry, also the poses of a few earlier scans: a scan logged late (the Intel bag
-      // has runs of them, up to a second old while the robot turns at 40 deg/s) was taken near one
-      // of them, tens of degrees from the constant-velocity prediction; and the scan after it
-      // continues from the scan before it, not from its pose.
+      // Also the poses of a few earlier scans: a scan logged late (the Intel bag has runs of them,
+      // up to a second old while the robot turns at 40 deg/s) was taken near one of them, tens of
+      // degrees from the prediction (constant velocity, or odometry interpolated at its wrong
+      // stamp); and the scan after it continues from the scan before it, not from its pose.
       std::vector<SE2> earlier;
-      if (!odom_trusted)
-        for (const std::size_t back : {2u, 4u, 8u, 16u}) {
-          if (recent_poses.size() < back) break;
-          const SE2& T = recent_poses[recent_poses.size() - back];
-          const SE2 d = T_pred.inverse() * T;
-          if (d.translation().norm() > opt.alternative_start_m || std::abs(d.theta()) > opt.alternative_start_rad)
-            earlier.push_back(T);
-        }
+      for (const std::size_t back : {2u, 4u, 8u, 16u}) {
+        if (recent_poses.size() < back) break;
+        const SE2& T = recent_poses[recent_poses.size() - back];
+        const SE2 d = T_pred.inverse() * T;
+        if (d.translation().norm() > opt.alternative_start_m || std::abs(d.theta()) > opt.alternative_start_rad)
+          earlier.push_back(T);
+      }
       std::optional<SE2> T_match = frontEndMatch(pts, T_pred, alternatives, earlier, degenerate, dir, used_fallback);
       if (used_fallback) ++stats.correlative_fallbacks;
       SE2 T_est = T_pred;
