@@ -238,6 +238,7 @@ struct Slam::Impl {
   static constexpr std::size_t kMaxGrids = 8;
   static constexpr std::size_t kVelocitySteps = 5;  // steps behind the constant-velocity prediction
   static constexpr double kConfirmExplained = 0.9;  // a match explaining this much confirms its start
+  static constexpr double kEarlierWithOdometry = 0.8;  // see frontEndMatch's `earlier`
   std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
 
   // Front-end state.
@@ -367,9 +368,9 @@ struct Slam::Impl {
   /// Front-end match of `pts` against the local map from `T_pred`. Returns the pose, or nothing
   /// when the scan could not be matched; sets `degenerate`/`dir` (local frame) and `used_fallback`.
   /// `alternatives`: other starting points, tried when the prediction is not confirmed. `earlier`:
-  /// the poses of earlier scans, tried when the best match still explains under kConfirmExplained.
+  /// the poses of earlier scans, tried when the best match still explains under `earlier_below`.
   std::optional<SE2> frontEndMatch(const Points2& pts, const SE2& T_pred, const std::vector<SE2>& alternatives,
-                                   const std::vector<SE2>& earlier,
+                                   const std::vector<SE2>& earlier, double earlier_below,
                                    bool& degenerate, Eigen::Vector2d& dir, bool& used_fallback) {
     degenerate = false;
     used_fallback = false;
@@ -402,10 +403,9 @@ struct Slam::Impl {
     };
     if (!confirmed) {
       for (const SE2& alt : alternatives) consider(alt);
-      // Earlier scans' poses only while the match explains too little to confirm anything: where
-      // they won on Intel (scan-only) the prediction's match explained 15-45% of the scan. (The
-      // threshold is the confirmation's; scan-only Intel is sensitive to it, BENCHMARK.md.)
-      if (explained < kConfirmExplained)
+      // Earlier scans' poses only while the match explains too little: where they won on Intel
+      // (with odometry) the prediction's match explained a median 41% of the scan, a few up to 89%.
+      if (explained < earlier_below)
         for (const SE2& start : earlier) consider(start);
     }
     if (explained < opt.min_explained_fraction) {
@@ -996,7 +996,14 @@ struct Slam::Impl {
         if (d.translation().norm() > opt.alternative_start_m || std::abs(d.theta()) > opt.alternative_start_rad)
           earlier.push_back(T);
       }
-      std::optional<SE2> T_match = frontEndMatch(pts, T_pred, alternatives, earlier, degenerate, dir, used_fallback);
+      // Tried below 90% explained without odometry (the prediction is only a guess; scan-only
+      // Intel is sensitive to this threshold, BENCHMARK.md), below 80% with it: on freiburg-079
+      // the 80-90% band tried ICP 2900 times and never won (a quarter more time), while on Intel
+      // 0.8 and 0.7 held the result at 0.017-0.022 m under changes of other parameters (0.5 did
+      // not).
+      const double earlier_below = odom_trusted ? kEarlierWithOdometry : kConfirmExplained;
+      std::optional<SE2> T_match =
+          frontEndMatch(pts, T_pred, alternatives, earlier, earlier_below, degenerate, dir, used_fallback);
       if (used_fallback) ++stats.correlative_fallbacks;
       SE2 T_est = T_pred;
       bool restart = false;
