@@ -65,6 +65,44 @@ std::vector<SE2> odometryInTruthFrame(const std::vector<Frame>& frames) {
   return out;
 }
 
+/// ATE (after SE(2) alignment) of `est` against the frames' truth, leaving out the frames marked in
+/// `skip` (none when empty).
+eval::AteResult ateAgainstTruth(const std::vector<SE2>& est, const std::vector<Frame>& frames,
+                                const std::vector<bool>& skip = {}) {
+  io::Trajectory e, t;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    if (!skip.empty() && skip[i]) continue;
+    e.push_back({frames[i].time, est[i]});
+    t.push_back({frames[i].time, *frames[i].T_world_robot});
+  }
+  return eval::evaluateTrajectory(e, t).ate;
+}
+
+/// `frames` with bursts of scans logged late, as in the Intel bag: at a turn (20 degrees or more
+/// over `back` frames) every 150 frames after the first 30, three scans taken `back` frames earlier
+/// replace every other current one. Their truth becomes where they were taken; time and odometry
+/// stay the current frame's. `late` marks them.
+struct LateScans {
+  std::vector<Frame> frames;
+  std::vector<bool> late;
+  std::size_t bursts = 0;
+};
+LateScans withLateScanBursts(const std::vector<Frame>& frames, std::size_t back) {
+  LateScans out{frames, std::vector<bool>(frames.size(), false), 0};
+  for (std::size_t k = 30; k + 5 < frames.size(); ++k) {  // after the start, with a velocity
+    const double turn = std::abs(angleDiff(frames[k].T_world_robot->theta(), frames[k - back].T_world_robot->theta()));
+    if (turn < 20.0 * std::numbers::pi / 180.0) continue;
+    for (std::size_t j = k; j <= k + 4; j += 2) {
+      out.frames[j].scan = frames[k - back].scan;
+      out.frames[j].T_world_robot = frames[k - back].T_world_robot;  // where that scan was taken
+      out.late[j] = true;
+    }
+    ++out.bursts;
+    k += 150;
+  }
+  return out;
+}
+
 TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
   const auto frames = simulateWorld("office");
   Slam* slam = nullptr;
@@ -114,13 +152,7 @@ TEST(Slam, OfficeWithoutOdometry) {
   const auto est = runSlam(frames, o, &slam);
   // Without odometry the estimate lives in its own frame: ATE after an SE(2) alignment. (The route
   // starts in the corridor, where the first metres along it cannot be measured by the laser.)
-  io::Trajectory e, t;
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    e.push_back({frames[i].time, est[i]});
-    t.push_back({frames[i].time, *frames[i].T_world_robot});
-  }
-  const auto ate = eval::evaluateTrajectory(e, t).ate;
-  EXPECT_LT(ate.trans_m.rmse, 0.08);
+  EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.08);
   EXPECT_EQ(slam->stats().unmatched, 0u);
   EXPECT_GT(slam->stats().loop_accepted, 0u);
 }
@@ -155,18 +187,10 @@ TEST(Slam, CorridorWithoutOdometryKeepsItsSpeedThroughAScanOutOfOrder) {
   glitched[k].scan = frames[k - 4].scan;  // the scan of 4 frames (about 0.3 m) earlier
   SlamOptions o;
   o.use_odometry = false;
-  auto ate = [&frames](const std::vector<SE2>& est) {
-    io::Trajectory e, t;
-    for (std::size_t i = 0; i < frames.size(); ++i) {
-      e.push_back({frames[i].time, est[i]});
-      t.push_back({frames[i].time, *frames[i].T_world_robot});
-    }
-    return eval::evaluateTrajectory(e, t).ate.trans_m.rmse;
-  };
   Slam* slam = nullptr;
-  EXPECT_LT(ate(runSlam(frames, o, &slam)), 0.3);
+  EXPECT_LT(ateAgainstTruth(runSlam(frames, o, &slam), frames).trans_m.rmse, 0.3);
   EXPECT_GT(slam->stats().degenerate, 300u);  // most of the 60 m corridor
-  EXPECT_LT(ate(runSlam(glitched, o)), 0.3);
+  EXPECT_LT(ateAgainstTruth(runSlam(glitched, o), frames).trans_m.rmse, 0.3);
 }
 
 TEST(Slam, ScansLoggedLateInTurnsWithoutOdometry) {
@@ -180,33 +204,12 @@ TEST(Slam, ScansLoggedLateInTurnsWithoutOdometry) {
   // logged in place of every other current one. (Without the earlier scans' poses as starting
   // points the ATE was 1-8 m, however the bursts were spaced; with them 0.01-0.04 m at this spacing
   // or sparser, but a burst every 100 frames still lost the way: 2.6 m.)
-  const auto frames = simulateWorld("office", 2);
-  constexpr std::size_t kBack = 9;
-  auto glitched = frames;
-  std::vector<bool> late(frames.size(), false);
-  std::size_t bursts = 0;
-  for (std::size_t k = 30; k + 5 < frames.size(); ++k) {  // after the start, with a velocity
-    const double turn = std::abs(angleDiff(frames[k].T_world_robot->theta(), frames[k - kBack].T_world_robot->theta()));
-    if (turn < 20.0 * std::numbers::pi / 180.0) continue;
-    for (std::size_t j = k; j <= k + 4; j += 2) {
-      glitched[j].scan = frames[k - kBack].scan;
-      glitched[j].T_world_robot = frames[k - kBack].T_world_robot;  // where that scan was taken
-      late[j] = true;
-    }
-    ++bursts;
-    k += 150;
-  }
-  ASSERT_GE(bursts, 10u);
+  const LateScans g = withLateScanBursts(simulateWorld("office", 2), 9);
+  ASSERT_GE(g.bursts, 10u);
   SlamOptions o;
   o.use_odometry = false;
-  const auto est = runSlam(glitched, o);
-  io::Trajectory e, t;  // the scans taken when logged (a late scan's own pose is not the point)
-  for (std::size_t i = 0; i < glitched.size(); ++i) {
-    if (late[i]) continue;
-    e.push_back({glitched[i].time, est[i]});
-    t.push_back({glitched[i].time, *glitched[i].T_world_robot});
-  }
-  const auto ate = eval::evaluateTrajectory(e, t).ate;
+  // The scans taken when logged (a late scan's own pose is not the point).
+  const auto ate = ateAgainstTruth(runSlam(g.frames, o), g.frames, g.late);
   EXPECT_LT(ate.trans_m.rmse, 0.1);
   EXPECT_LT(ate.rot_rad.rmse, 3.0 * std::numbers::pi / 180.0);
 }
@@ -219,31 +222,9 @@ TEST(Slam, ScansLoggedLateInTurnsWithOdometry) {
   // prediction puts it where the robot is now, tens of degrees from where it was taken; and the
   // fresh scan after it is predicted from the late scan's pose. (Without the earlier scans' poses
   // as starting points: ATE 1.03 m and 22 degrees; with them 0.04 m and 1.6 degrees.)
-  const auto frames = simulateWorld("office", 7);
-  constexpr std::size_t kBack = 9;
-  auto glitched = frames;
-  std::vector<bool> late(frames.size(), false);
-  std::size_t bursts = 0;
-  for (std::size_t k = 30; k + 5 < frames.size(); ++k) {
-    const double turn = std::abs(angleDiff(frames[k].T_world_robot->theta(), frames[k - kBack].T_world_robot->theta()));
-    if (turn < 20.0 * std::numbers::pi / 180.0) continue;
-    for (std::size_t j = k; j <= k + 4; j += 2) {
-      glitched[j].scan = frames[k - kBack].scan;  // odometry and time stay the current frame's
-      glitched[j].T_world_robot = frames[k - kBack].T_world_robot;
-      late[j] = true;
-    }
-    ++bursts;
-    k += 150;
-  }
-  ASSERT_GE(bursts, 10u);
-  const auto est = runSlam(glitched, {});
-  io::Trajectory e, t;
-  for (std::size_t i = 0; i < glitched.size(); ++i) {
-    if (late[i]) continue;
-    e.push_back({glitched[i].time, est[i]});
-    t.push_back({glitched[i].time, *glitched[i].T_world_robot});
-  }
-  const auto ate = eval::evaluateTrajectory(e, t).ate;
+  const LateScans g = withLateScanBursts(simulateWorld("office", 7), 9);
+  ASSERT_GE(g.bursts, 10u);
+  const auto ate = ateAgainstTruth(runSlam(g.frames, {}), g.frames, g.late);
   EXPECT_LT(ate.trans_m.rmse, 0.1);
   EXPECT_LT(ate.rot_rad.rmse, 3.0 * std::numbers::pi / 180.0);
 }

@@ -239,6 +239,8 @@ struct Slam::Impl {
   static constexpr std::size_t kVelocitySteps = 5;  // steps behind the constant-velocity prediction
   static constexpr double kConfirmExplained = 0.9;  // a match explaining this much confirms its start
   static constexpr double kEarlierWithOdometry = 0.8;  // see frontEndMatch's `earlier`
+  // Which earlier scans' poses are starting points (scans back, ascending).
+  static constexpr std::array<std::size_t, 4> kEarlierBack{2, 4, 8, 16};
   std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
 
   // Front-end state.
@@ -251,7 +253,7 @@ struct Slam::Impl {
   // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
   // constant-velocity prediction is their component-wise median (`velocityStep`).
   std::deque<SE2> recent_steps;
-  std::deque<SE2> recent_poses;  // the front end's poses of the last 16 scans, oldest first
+  std::deque<SE2> recent_poses;  // the front end's poses of the last kEarlierBack.back() scans, oldest first
   int consecutive_failures = 0;
   std::deque<std::size_t> local_nodes;
   std::unique_ptr<IcpTarget> local_target;
@@ -989,7 +991,7 @@ struct Slam::Impl {
       // degrees from the prediction (constant velocity, or odometry interpolated at its wrong
       // stamp); and the scan after it continues from the scan before it, not from its pose.
       std::vector<SE2> earlier;
-      for (const std::size_t back : {2u, 4u, 8u, 16u}) {
+      for (const std::size_t back : kEarlierBack) {
         if (recent_poses.size() < back) break;
         const SE2& T = recent_poses[recent_poses.size() - back];
         const SE2 d = T_pred.inverse() * T;
@@ -1045,7 +1047,7 @@ struct Slam::Impl {
       recent_steps.push_back(time_ok ? T_local_prev.inverse() * T_est : SE2());
       if (recent_steps.size() > kVelocitySteps) recent_steps.pop_front();
       recent_poses.push_back(T_est);
-      if (recent_poses.size() > 16) recent_poses.pop_front();
+      if (recent_poses.size() > kEarlierBack.back()) recent_poses.pop_front();
       T_local_prev = T_est;
     }
     have_prev = true;
