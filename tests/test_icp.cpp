@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -309,6 +310,99 @@ TEST_P(NeighborSearches, NearestAgreesWithBruteForce) {
   EXPECT_EQ(empty.nearest({0, 0}, &d2), 0u);
   EXPECT_TRUE(std::isinf(d2));
   EXPECT_EQ(empty.nearestWithin({1, 1}, 4.0, &d2), 0u);
+}
+
+// The search hint changes nothing but the speed: a scan's points queried in order with one shared
+// hint (as ICP's first search does), each with its own hint as it moves (later searches), with
+// arbitrary and out-of-range hints, and queries behind the scanner where no point lies, against
+// brute force.
+TEST_P(NeighborSearches, SearchHintsDoNotChangeTheAnswer) {
+  const Points2 target_pts = office().pointsAt(office().routePoses(5)[2]);
+  IcpOptions o;
+  o.neighbor_search = GetParam();
+  const IcpTarget target(target_pts, o);
+  auto brute = [&](const Eigen::Vector2d& q, double max_d2) {
+    double best = std::numeric_limits<double>::infinity();
+    for (const auto& t : target.points())
+      if (const double d2 = (t - q).squaredNorm(); d2 <= max_d2) best = std::min(best, d2);
+    return best;
+  };
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> turn(-0.3, 0.3), shift(-0.5, 0.5);
+  std::uniform_int_distribution<std::uint32_t> any_hint(0, 2000);
+  const Points2 source = office().pointsAt(office().routePoses(5)[2] * SE2(0.2, -0.1, 0.1));
+  std::vector<std::uint32_t> hints(source.size(), std::numeric_limits<std::uint32_t>::max());
+  for (int round = 0; round < 6; ++round) {
+    const SE2 T(shift(rng), shift(rng), round == 5 ? std::numbers::pi : turn(rng));  // last: turned around
+    std::uint32_t shared = round % 2 == 0 ? std::numeric_limits<std::uint32_t>::max() : any_hint(rng);
+    for (std::size_t i = 0; i < source.size(); ++i) {
+      const Eigen::Vector2d q = T * source[i];
+      for (const double max_d2 : {0.01, 1.0, std::numeric_limits<double>::infinity()}) {
+        const double expected = brute(q, max_d2);
+        double d2 = 0.0;
+        std::uint32_t own = round == 3 ? any_hint(rng) : hints[i];
+        const std::size_t j = target.nearestWithin(q, max_d2, &d2, &own);
+        const std::size_t k = target.nearestWithin(q, max_d2, &d2, &shared);
+        if (std::isinf(expected)) {
+          EXPECT_EQ(j, target.size());
+          EXPECT_EQ(k, target.size());
+          continue;
+        }
+        ASSERT_LT(j, target.size());
+        ASSERT_LT(k, target.size());
+        EXPECT_DOUBLE_EQ((target.points()[j] - q).squaredNorm(), expected) << "round " << round << " point " << i;
+        EXPECT_DOUBLE_EQ((target.points()[k] - q).squaredNorm(), expected) << "round " << round << " point " << i;
+        if (max_d2 == 1.0) hints[i] = own;
+      }
+    }
+  }
+}
+
+// Points nearly in bearing order with the swap right after the wrap of the bearing (10 then 5
+// degrees, after 350): the nearest point of queries all around is still exact.
+TEST_P(NeighborSearches, NearestIsExactWithASwapAtTheWrap) {
+  Points2 pts;
+  for (const double deg : {300.0, 350.0, 10.0, 5.0, 90.0, 180.0, 200.0, 250.0, 270.0, 290.0})
+    pts.emplace_back(2.0 * std::cos(deg * kDeg), 2.0 * std::sin(deg * kDeg));
+  IcpOptions o;
+  o.neighbor_search = GetParam();
+  const IcpTarget target(pts, o);
+  for (int deg = 0; deg < 360; deg += 3) {
+    const Eigen::Vector2d q(1.9 * std::cos(deg * kDeg), 1.9 * std::sin(deg * kDeg));
+    double best = std::numeric_limits<double>::infinity();
+    for (const auto& t : pts) best = std::min(best, (t - q).squaredNorm());
+    double d2 = 0;
+    const std::size_t i = target.nearest(q, &d2);
+    ASSERT_LT(i, pts.size());
+    EXPECT_DOUBLE_EQ((pts[i] - q).squaredNorm(), best) << deg << " deg";
+  }
+}
+
+// Line fits from both searches on point sets the bearing index orders in different ways: a scan
+// seen from the robot's centre with the laser mounted off it (bearings from the centre swap
+// where the range jumps), the same scan reversed and rotated, and shuffled.
+TEST_P(NeighborSearches, LineFitsMatchTheKdTreeInAnyPointOrder) {
+  const Points2 scan = office().pointsAt(office().routePoses(4)[1]);
+  Points2 off_centre = scan;
+  for (auto& p : off_centre) p += Eigen::Vector2d(-0.3, 0.1);  // the laser 0.3 m behind, 0.1 m left
+  Points2 reversed(off_centre.rbegin(), off_centre.rend());
+  std::rotate(reversed.begin(), reversed.begin() + 100, reversed.end());
+  Points2 shuffled = off_centre;
+  std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937_64(3));
+  for (const Points2* pts : {&off_centre, &reversed, &shuffled}) {
+    IcpOptions o;
+    o.neighbor_search = NeighborSearch::kKdTree;
+    const IcpTarget reference(*pts, o);
+    o.neighbor_search = GetParam();
+    const IcpTarget target(*pts, o);
+    ASSERT_EQ(target.size(), reference.size());
+    std::size_t with_line = 0;
+    for (std::size_t i = 0; i < target.size(); ++i) {
+      EXPECT_LT((target.normals()[i] - reference.normals()[i]).norm(), 1e-9) << i;
+      with_line += target.normals()[i].squaredNorm() > 0 ? 1 : 0;
+    }
+    EXPECT_GT(with_line, target.size() / 2);
+  }
 }
 
 // The line fits take the same k nearest neighbours whichever search finds them.

@@ -140,10 +140,17 @@ class IcpTarget {
   std::size_t nearest(const Eigen::Vector2d& p, double* dist_sq) const;
   /// The nearest target point among those within sqrt(max_dist_sq) of `p` (index and squared
   /// distance), or size() and +inf when there is none; faster than `nearest` for a small radius.
-  std::size_t nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq) const;
+  /// `hint` (optional, in and out) speeds up a series of queries: pass the same variable for
+  /// queries at nearby bearings from the target's origin (successive points of a scan, or one
+  /// point as it moves); any starting value. The answer does not depend on it.
+  std::size_t nearestWithin(const Eigen::Vector2d& p, double max_dist_sq, double* dist_sq,
+                            std::uint32_t* hint = nullptr) const;
+
+  struct Impl;
+  /// Internal: the search structures, for the matcher in icp.cpp (an incomplete type elsewhere).
+  const Impl& impl() const { return *impl_; }
 
  private:
-  struct Impl;
   std::unique_ptr<Impl> impl_;
 };
 

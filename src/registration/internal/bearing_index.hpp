@@ -16,6 +16,7 @@
 // to build, only a sort. Bearings are compared as a cheap monotone pseudo-angle (no atan2).
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -35,6 +36,13 @@ inline double pseudoAngle(double x, double y) {
   return x < 0.0 ? 2.0 - y / s : 3.0 + x / s;
 }
 
+// The next double above x (x itself when +inf or NaN): std::nextafter without the library call.
+inline double nextUp(double x) {
+  if (x >= 0.0 && x < std::numeric_limits<double>::infinity())
+    return std::bit_cast<double>(std::bit_cast<std::uint64_t>(x) + 1);
+  return std::nextafter(x, std::numeric_limits<double>::infinity());
+}
+
 class BearingIndex {
  public:
   // `pts` must be finite; they are copied (sorted by bearing).
@@ -49,7 +57,30 @@ class BearingIndex {
     }
     std::vector<double> key(pts.size());
     for (const std::uint32_t i : order) key[i] = pseudoAngle(pts[i].x(), pts[i].y());
-    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+    // Sorted by (key, index). A scan's points come nearly in that order: in beam order the
+    // bearings from the laser increase, with one wrap of the pseudo-angle; from another origin (a
+    // laser mounted off the robot's centre) a few neighbours swap where the range jumps. So the
+    // order is first rotated at the wrap and insertion-sorted (a few moves), and sorted outright
+    // only when that takes too many moves.
+    const std::size_t m = order.size();
+    auto before = [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b] || (key[a] == key[b] && a < b); };
+    std::size_t rotate_at = 0;
+    double biggest_drop = 0.0;
+    for (std::size_t k = 0; k + 1 < m; ++k)
+      if (const double drop = key[order[k]] - key[order[k + 1]]; drop > biggest_drop) {
+        biggest_drop = drop;
+        rotate_at = k + 1;
+      }
+    std::rotate(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(rotate_at), order.end());
+    std::size_t moves = 0;
+    for (std::size_t k = 1; k < m && moves <= 8 * m; ++k) {
+      const std::uint32_t v = order[k];
+      std::size_t j = k;
+      for (; j > 0 && before(v, order[j - 1]); --j) order[j] = order[j - 1];
+      order[j] = v;
+      moves += k - j;
+    }
+    if (moves > 8 * m) std::sort(order.begin(), order.end(), before);
     nodes_.reserve(order.size());
     keys_.reserve(order.size());
     for (const std::uint32_t i : order) {
@@ -58,6 +89,7 @@ class BearingIndex {
       nodes_.push_back({p.x(), p.y(), p.x() / r, p.y() / r, i});
       keys_.push_back(key[i]);
     }
+    keys_.push_back(std::numeric_limits<double>::infinity());  // sentinel (startOf)
     total_ = pts.size();
     // Bucket table over the pseudo-angle: bucket b starts at the first point with key >= b * 4 / B.
     std::size_t buckets = 64;
@@ -76,22 +108,52 @@ class BearingIndex {
 
   // Index (into the constructor's `pts`) of the point nearest to q among those within
   // sqrt(max_dist_sq) of it, and its squared distance; size() and +inf when there is none.
-  std::size_t nearest(const Eigen::Vector2d& q, double max_dist_sq, double* dist_sq) const {
+  // `hint` (in and out): where q's bearing falls among the points' (a position in bearing order,
+  // as this call leaves it for a query at a nearby bearing; any value when unknown). With a good
+  // hint the search starts there instead of looking q's bearing up.
+  [[gnu::always_inline]] std::size_t nearest(const Eigen::Vector2d& q, double max_dist_sq, double* dist_sq,
+                                             std::uint32_t* hint = nullptr) const {
     std::size_t best = total_;
-    double best_d2 = max_dist_sq;
+    // A point is taken when strictly nearer than the best so far, or, before any, when within
+    // max_dist_sq (inclusive): the limit starts one step above max_dist_sq. Ties go to the point
+    // visited first (the walk's order), so the answer does not depend on which path below runs.
+    double best_d2 = nextUp(max_dist_sq);
     auto consider = [&](const Node& nd) {
       const double dx = nd.x - q.x(), dy = nd.y - q.y();
       const double d2 = dx * dx + dy * dy;
-      if (d2 < best_d2 || (best == total_ && d2 <= best_d2)) {
-        best_d2 = d2;
-        best = nd.index;
-      }
+      // (selects, not a branch: which point wins is data-dependent and mispredicts often)
+      // (GCC turns `take ? a : b` on these into a branch; the mask cannot become one.)
+      const std::size_t take = 0 - static_cast<std::size_t>(d2 < best_d2);  // all ones or zero
+      best ^= (best ^ nd.index) & take;  // = d2 < best_d2 ? nd.index : best
+      best_d2 = std::min(best_d2, d2);
     };
-    walk(
-        q, [&](const Node& nd) { consider(nd); }, [&] { return best_d2; });
+    const std::size_t n = nodes_.size();
+    if (n >= kWindow + 4 && q.allFinite()) {
+      // The walk's first four points (its start, then one down, one up, one down) are nearly
+      // always visited and hold the nearest point: take them without the per-point bound test
+      // and its unpredictable branches, then walk on from there. Extra points cannot change the
+      // answer: a point the walk would have stopped before lies farther than the best point.
+      const std::size_t s = hint ? startNear(q, *hint) : startOf(q);
+      if (hint) *hint = static_cast<std::uint32_t>(s);
+      auto at = [&](std::ptrdiff_t k) -> const Node& {
+        const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(s) + k;
+        const auto ni = static_cast<std::ptrdiff_t>(n);
+        return nodes_[static_cast<std::size_t>(i < 0 ? i + ni : (i >= ni ? i - ni : i))];
+      };
+      for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(kWindow / 2); ++k) {
+        consider(at(k));
+        consider(at(-k - 1));
+      }
+      constexpr std::size_t kHalf = kWindow / 2;
+      const std::size_t up = s + kHalf >= n ? s + kHalf - n : s + kHalf;
+      const std::size_t down = s >= kHalf + 1 ? s - kHalf - 1 : s + n - kHalf - 1;
+      walkFrom(q, up, down, kWindow, consider, [&] { return best_d2; });
+    } else {
+      walk(q, consider, [&] { return best_d2; });
+    }
     for (const std::uint32_t i : at_origin_) {
       const double d2 = q.squaredNorm();  // NaN for a non-finite query: never taken
-      if (d2 < best_d2 || (best == total_ && d2 <= best_d2)) {
+      if (d2 < best_d2) {
         best_d2 = d2;
         best = i;
       }
@@ -104,8 +166,62 @@ class BearingIndex {
   // constructor's `pts` and squared distances; returns the count.
   std::size_t knn(const Eigen::Vector2d& q, std::size_t k, double max_dist_sq, std::uint32_t* idx, double* d2s) const {
     if (k == 0) return 0;
+    Nearest best{k, max_dist_sq, idx, d2s};
+    walk(
+        q, [&](const Node& nd) { best.insert(nd, q); }, [&] { return best.limit(); });
+    for (const std::uint32_t i : at_origin_) best.insert(i, q.squaredNorm());
+    return best.n;
+  }
+
+  // `knn` of each point in turn, itself included (the query of `pts[i]` is `pts[i]`): calls
+  // f(i, idx, d2s, count) for every i, in bearing order (points at the origin last).
+  template <class F>
+  void knnOfEach(std::size_t k, double max_dist_sq, std::uint32_t* idx, double* d2s, F&& f) const {
+    const std::size_t n = nodes_.size();
+    if (k == 0) return;
+    for (std::size_t p = 0; p < n; ++p) {
+      const Node& self = nodes_[p];
+      const Eigen::Vector2d q(self.x, self.y);
+      Nearest best{k, max_dist_sq, idx, d2s};
+      if (n >= 2 * kKnnHalf + 2) {
+        // The walk may start at the point's own position (every point up from it has a bearing at
+        // least its own, every point down from it at most), and its nearest points are nearly
+        // always its neighbours in bearing order: those are taken without the bound test.
+        best.insert(self, q);
+        for (std::size_t j = 1; j <= kKnnHalf; ++j) {
+          best.insert(nodes_[p >= j ? p - j : p + n - j], q);
+          best.insert(nodes_[p + j < n ? p + j : p + j - n], q);
+        }
+        const std::size_t up = p + kKnnHalf + 1 < n ? p + kKnnHalf + 1 : p + kKnnHalf + 1 - n;
+        const std::size_t down = p >= kKnnHalf + 1 ? p - kKnnHalf - 1 : p + n - kKnnHalf - 1;
+        walkFrom(
+            q, up, down, 2 * kKnnHalf + 1, [&](const Node& nd) { best.insert(nd, q); }, [&] { return best.limit(); });
+      } else {
+        walk(
+            q, [&](const Node& nd) { best.insert(nd, q); }, [&] { return best.limit(); });
+      }
+      for (const std::uint32_t i : at_origin_) best.insert(i, q.squaredNorm());
+      f(self.index, idx, d2s, best.n);
+    }
+    for (const std::uint32_t i : at_origin_) f(i, idx, d2s, knn(Eigen::Vector2d::Zero(), k, max_dist_sq, idx, d2s));
+  }
+
+ private:
+  struct Node {
+    double x, y;          // the point
+    double ux, uy;        // its unit direction from the origin
+    std::uint32_t index;  // position in the constructor's input
+  };
+
+  // The k nearest so far, sorted by distance (ties in the order offered).
+  struct Nearest {
+    std::size_t k;
+    double max_dist_sq;
+    std::uint32_t* idx;
+    double* d2s;
     std::size_t n = 0;
-    auto insert = [&](std::uint32_t index, double d2) {
+
+    void insert(std::uint32_t index, double d2) {
       if (d2 > max_dist_sq) return;
       if (n == k && !(d2 < d2s[k - 1])) return;
       std::size_t pos = n < k ? n++ : k - 1;
@@ -116,24 +232,58 @@ class BearingIndex {
       }
       d2s[pos] = d2;
       idx[pos] = index;
-    };
-    walk(
-        q,
-        [&](const Node& nd) {
-          const double dx = nd.x - q.x(), dy = nd.y - q.y();
-          insert(nd.index, dx * dx + dy * dy);
-        },
-        [&] { return n == k ? d2s[k - 1] : max_dist_sq; });
-    for (const std::uint32_t i : at_origin_) insert(i, q.squaredNorm());
-    return n;
+    }
+    void insert(const Node& nd, const Eigen::Vector2d& q) {
+      const double dx = nd.x - q.x(), dy = nd.y - q.y();
+      insert(nd.index, dx * dx + dy * dy);
+    }
+    // The walk may stop beyond this squared distance.
+    double limit() const { return n == k ? d2s[k - 1] : max_dist_sq; }
+  };
+
+  // Neighbours in bearing order on each side that `knnOfEach` takes without the bound test.
+  static constexpr std::size_t kKnnHalf = 2;
+
+  // Points `nearest` visits before its first bound test (when there are at least kWindow + 4).
+  static constexpr std::size_t kWindow = 4;
+
+  // Position of the first point (in bearing order) whose key is >= q's (wrapping to 0).
+  std::size_t startOf(const Eigen::Vector2d& q) const {
+    const double kq = pseudoAngle(q.x(), q.y());
+    // From the start of q's bucket, a few steps at most.
+    const auto b = std::min(static_cast<std::size_t>(kq * bucket_scale_), bucket_start_.size() - 2);
+    std::size_t start = bucket_start_[b];
+    const std::size_t end = bucket_start_[b + 1];
+    // Buckets hold about half a point on average: two steps without branches (`keys_` ends with a
+    // sentinel, so reading one past the last point is safe), then a loop that rarely runs.
+    start += static_cast<std::size_t>((start < end) & (keys_[start] < kq));
+    start += static_cast<std::size_t>((start < end) & (keys_[start] < kq));
+    while (start < end && keys_[start] < kq) ++start;
+    return start == nodes_.size() ? 0 : start;
   }
 
- private:
-  struct Node {
-    double x, y;          // the point
-    double ux, uy;        // its unit direction from the origin
-    std::uint32_t index;  // position in the constructor's input
-  };
+  // startOf(q), found by stepping from position h (a few steps at most when h is a good guess; a
+  // load-compare the branch predictor runs ahead of, where the bucket lookup is a chain of
+  // dependent loads).
+  std::size_t startNear(const Eigen::Vector2d& q, std::size_t h) const {
+    constexpr int kMaxSteps = 8;
+    const std::size_t n = nodes_.size();
+    if (h >= n) return startOf(q);
+    const double kq = pseudoAngle(q.x(), q.y());
+    std::size_t s = h;
+    if (keys_[s] < kq) {
+      for (int i = 0; keys_[s] < kq; ++i) {  // keys_[n] is +inf: stops at n at the latest
+        if (i == kMaxSteps) return startOf(q);
+        ++s;
+      }
+    } else {
+      for (int i = 0; s > 0 && keys_[s - 1] >= kq; ++i) {
+        if (i == kMaxSteps) return startOf(q);
+        --s;
+      }
+    }
+    return s == n ? 0 : s;
+  }
 
   // Visits the points in bearing order outwards from q's bearing, both ways, each way until the
   // ray bound reaches limit() (strictly above it: ties are visited).
@@ -141,22 +291,22 @@ class BearingIndex {
   void walk(const Eigen::Vector2d& q, Visit&& visit, Limit&& limit) const {
     const std::size_t n = nodes_.size();
     if (n == 0 || !q.allFinite()) return;  // a non-finite query has no neighbour
+    const std::size_t start = startOf(q);
+    walkFrom(q, start, start == 0 ? n - 1 : start - 1, 0, visit, limit);
+  }
+
+  // The walk from positions `up` and `down` on, `visited` points already visited.
+  template <class Visit, class Limit>
+  void walkFrom(const Eigen::Vector2d& q, std::size_t up, std::size_t down, std::size_t visited, Visit&& visit,
+                Limit&& limit) const {
+    const std::size_t n = nodes_.size();
     const double qn2 = q.squaredNorm();
-    const double kq = pseudoAngle(q.x(), q.y());
-    // First point with key >= kq: from its bucket's start, a few steps at most.
-    const auto b = std::min(static_cast<std::size_t>(kq * bucket_scale_), bucket_start_.size() - 2);
-    std::size_t start = bucket_start_[b];
-    const std::size_t end = bucket_start_[b + 1];
-    while (start < end && keys_[start] < kq) ++start;
-    if (start == n) start = 0;
     auto bound2 = [&](const Node& nd) {
       const double dot = q.x() * nd.ux + q.y() * nd.uy;
       if (dot <= 0.0) return qn2;
       const double cross = q.x() * nd.uy - q.y() * nd.ux;
       return cross * cross;
     };
-    std::size_t visited = 0;
-    std::size_t up = start, down = start == 0 ? n - 1 : start - 1;
     bool up_open = true, down_open = true;
     while ((up_open || down_open) && visited < n) {
       if (up_open) {
