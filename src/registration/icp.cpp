@@ -293,12 +293,13 @@ class Icp {
     // Order-independent fingerprint of the kept (source, target) pairs.
     set_hash_ = 0;
     for (const Pair& pr : pairs_) set_hash_ += mix((static_cast<std::uint64_t>(pr.src) << 32) | pr.tgt);
-    if (p2l_) {  // each pair's terms of the point-to-line residual, read by every linearisation
+    if (p2l_) {  // the pairs' data in order, read by every linearisation
       lines_.clear();
       for (const Pair& pr : pairs_) {
         const Eigen::Vector2d& p = src_[pr.src];
         const Eigen::Vector2d& n = tn[pr.tgt];
-        lines_.push_back({n.x() * p.x() + n.y() * p.y(), n.y() * p.x() - n.x() * p.y(), n.x(), n.y(), n.dot(tp[pr.tgt])});
+        const Eigen::Vector2d& m = tp[pr.tgt];
+        lines_.push_back({p.x(), p.y(), m.x(), m.y(), n.x(), n.y()});
       }
     }
   }
@@ -323,11 +324,15 @@ class Icp {
     const double c = std::cos(T.theta()), s = std::sin(T.theta());
     double h00 = 0, h01 = 0, h02 = 0, h11 = 0, h12 = 0, h22 = 0, g0 = 0, g1 = 0, g2 = 0;
     if (p2l_) {
-      // Censi 2008, eq. (3): r = n^T (R p + t - m); J = n^T d(T p)/d(x, y, theta), from the
-      // per-pair terms of `lines_`: n^T R p = c a + s b and n^T dR/dtheta p = c b - s a.
+      // Censi 2008, eq. (3): r = n^T (R p + t - m); J = n^T d(T p)/d(x, y, theta), with
+      // d(T p)/d(x, y, theta) = [1 0 -s px - c py; 0 1 c px - s py] (SE2::pointJacobian).
       for (const LineTerm& l : lines_) {
-        const double r = c * l.a + s * l.b + l.nx * T.x() + l.ny * T.y() - l.nm;
-        const double j2 = c * l.b - s * l.a;
+        const double jx = -s * l.px - c * l.py;
+        const double jy = c * l.px - s * l.py;
+        const double qx = c * l.px - s * l.py + T.x() - l.mx;
+        const double qy = s * l.px + c * l.py + T.y() - l.my;
+        const double r = l.nx * qx + l.ny * qy;
+        const double j2 = l.nx * jx + l.ny * jy;
         const double w = weight(r);
         const double wnx = w * l.nx, wny = w * l.ny, wj2 = w * j2;
         h00 += wnx * l.nx;
@@ -390,11 +395,10 @@ class Icp {
   const IcpOptions& o_;
   const bool p2l_;
   std::vector<Pair> pairs_;
-  // Point-to-line terms of a pair, source point p and target line (n, m): r(T) = n^T (R p + t - m).
+  // A pair's point-to-line data, gathered once per search for the linearisations that follow:
+  // source point p, target point m and the normal n of its line; r(T) = n^T (T p - m).
   struct LineTerm {
-    double a, b;    // n^T p and n x p (= ny px - nx py)
-    double nx, ny;  // n
-    double nm;      // n^T m
+    double px, py, mx, my, nx, ny;
   };
   std::vector<LineTerm> lines_;  // per kept pair, in the order of pairs_
   std::vector<std::size_t> last_match_;  // per source point: its nearest target point last time, or size()
@@ -474,14 +478,11 @@ void finish(Result& r, const Linearisation& L, std::size_t inliers) {
   }
 }
 
-// The final linearisation, at the final estimate, so that H, the covariance, the cost and the
-// inlier count describe the returned pose (and do not depend on the solver's path to it): with
-// the correspondences searched again there, unless `search_again` is false because the last search
-// was within the convergence thresholds of it (a new search would find the same pairs but for
-// points within a tenth of a millimetre of the bisector of two target points; it is one search in
-// eight, on average, of a Gauss-Newton match).
-void finishAt(Result& r, Icp& icp, const IcpOptions& o, bool search_again = true) {
-  if (search_again) icp.findPairs(r.T_target_source);
+// The final linearisation: correspondences searched again at the final estimate, so that H, the
+// covariance, the cost and the inlier count describe the returned pose (and do not depend on the
+// solver's path to it).
+void finishAt(Result& r, Icp& icp, const IcpOptions& o) {
+  icp.findPairs(r.T_target_source);
   if (icp.pairs().size() < o.min_inliers) {
     r.num_inliers = icp.pairs().size();
     return;  // keeps the infinite covariance and zero information
@@ -498,7 +499,6 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
   Eigen::Vector3d x = init.vector();
   int it = 0;
   bool converged = false;
-  bool settled = false;  // the last search was within the thresholds of the final estimate
   PairSetHistory history;
   while (it < o.max_iterations) {
     ++it;
@@ -522,8 +522,7 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
       if (smallStep(dx, o)) break;
     }
     const Eigen::Vector3d dx(x.x() - x_outer.x(), x.y() - x_outer.y(), angleDiff(x.z(), x_outer.z()));
-    settled = smallStep(dx, o);
-    if (settled || repeated) {
+    if (smallStep(dx, o) || repeated) {
       converged = true;
       break;
     }
@@ -533,7 +532,7 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
   res.converged = converged;
   res.status = converged ? Status::kConverged : Status::kMaxIterations;
   if (!converged) res.message = fmt::format("no convergence within {} iterations", o.max_iterations);
-  finishAt(res, icp, o, /*search_again=*/!settled);
+  finishAt(res, icp, o);
   return res;
 }
 
