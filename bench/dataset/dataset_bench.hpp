@@ -32,6 +32,12 @@ struct MatchBenchOptions {
   /// (Gauss-Newton) and count the pairs where all three fail the bar yet agree with each other.
   bool truth_check = false;
   std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
+  /// Instead of consecutive pairs of the corrected logs: the scan pairs of the Kuemmerle relations
+  /// of the raw bags (their hand-checked relative poses as the truth), those at most
+  /// `relation_max_m` and `relation_max_deg` apart.
+  bool relations = false;
+  double relation_max_m = 1.0;
+  double relation_max_deg = 45.0;
 };
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);
 

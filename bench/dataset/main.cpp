@@ -3,6 +3,7 @@
 //   lidar2d_dataset_bench degeneracy [--data DIR] [--beams N] [--fov DEG] [-v]
 //   lidar2d_dataset_bench localize [--data DIR] [--stride N] [--baseline-stride N]
 //   lidar2d_dataset_bench match [--data DIR] [--sigma-xy M] [--sigma-theta DEG] [--seed N] [--methods p2p p2l ...]
+//   lidar2d_dataset_bench match --relations [--truth-check]   (the raw bags' Kuemmerle relations as pairs)
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
@@ -43,6 +44,12 @@ int main(int argc, char** argv) {
                   "match each pair from the truth with p2p, p2l and lf: pairs where all three fail but agree");
   match->add_option("--corr-window-m", match_options.corr.linear_window_m, "correlative linear half-window [m]")->capture_default_str();
   match->add_option("--corr-window-rad", match_options.corr.angular_window_rad, "correlative angular half-window [rad]")->capture_default_str();
+  match->add_flag("--relations", match_options.relations,
+                  "the scan pairs of the raw bags' Kuemmerle relations instead of consecutive corrected pairs");
+  match->add_option("--relation-max-m", match_options.relation_max_m, "--relations: largest translation of a pair [m]")
+      ->capture_default_str();
+  match->add_option("--relation-max-deg", match_options.relation_max_deg, "--relations: largest rotation of a pair [deg]")
+      ->capture_default_str();
   match->callback([&] { lidar2d::bench::runMatchBenchmark(data, match_options); });
   lidar2d::bench::DegeneracyBenchOptions deg_options;
   auto* deg = app.add_subcommand(
