@@ -6,6 +6,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <thread>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
@@ -198,6 +199,39 @@ TEST_P(ModelTest, TwoThreadsGiveTheSingleThreadedMapExactly) {
     EXPECT_GT(two->parallelScans(), scans.size());  // most scans (of both passes) were split
     expectIdentical(*one, *two);
   }
+}
+
+// prepare() on another thread, a few scans ahead, then insert(PreparedScan&): the same map as
+// insert(scan, pose); a prepared scan is inserted once, and only into the map that prepared it.
+TEST_P(ModelTest, PreparedAheadOnAnotherThreadGivesTheSameMap) {
+  MapOptions o;
+  o.resolution_m = 0.05;
+  auto direct = makeMap(GetParam(), o), piped = makeMap(GetParam(), o), other = makeMap(GetParam(), o);
+  std::mt19937 rng(11);
+  std::vector<std::pair<LaserScan, SE2>> scans;
+  for (const SE2& T : kPoses) scans.emplace_back(roomScan(T), T);
+  for (int i = 0; i < 20; ++i) scans.emplace_back(randomScan(rng, 360), SE2(0.3 * i, -0.2 * i, 0.4 * i));
+  for (const auto& [scan, T] : scans) direct->insert(scan, T);
+  std::vector<OccupancyMap::PreparedScan> prepared(scans.size());
+  std::thread preparer([&] {
+    for (std::size_t i = 0; i < scans.size(); ++i) piped->prepare(scans[i].first, scans[i].second, prepared[i]);
+  });
+  preparer.join();
+  for (auto& p : prepared) piped->insert(p);
+  expectIdentical(*direct, *piped);
+  EXPECT_EQ(direct->cellUpdates(), piped->cellUpdates());
+  // Reusing a slot: prepared again, inserted again - still the same as inserting twice directly.
+  piped->prepare(scans[0].first, scans[0].second, prepared[0]);
+  piped->insert(prepared[0]);
+  direct->insert(scans[0].first, scans[0].second);
+  expectIdentical(*direct, *piped);
+  // Inserted already, or prepared by another map: an error, and the map is unchanged.
+  EXPECT_THROW(piped->insert(prepared[0]), Error);
+  other->prepare(scans[1].first, scans[1].second, prepared[1]);
+  EXPECT_THROW(piped->insert(prepared[1]), Error);
+  expectIdentical(*direct, *piped);
+  OccupancyMap::PreparedScan never;
+  EXPECT_THROW(piped->insert(never), Error);
 }
 
 TEST_P(ModelTest, ManyMapsWithWorkersComeAndGo) {

@@ -675,6 +675,14 @@ std::uint64_t OccupancyMap::insertParallel(const Eigen::Vector2d& origin, const 
 }
 
 void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
+  if (!prepared_) prepared_ = std::make_unique<PreparedScan>();
+  prepare(scan, T_world_laser, *prepared_);
+  insert(*prepared_);
+}
+
+void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, PreparedScan& out) const {
+  out.ready_ = false;
+  out.model_ = this;
   if (!T_world_laser.isFinite()) throw badInput("laser pose is not finite", ErrorLocation("", 0, "pose"));
   const double inv_res = geometry_.inverseResolution();
   // Cell coordinates must stay far inside int32 for the traversal; ranges are capped by the options
@@ -682,6 +690,7 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   if (std::abs(T_world_laser.x()) * inv_res > 1e9 || std::abs(T_world_laser.y()) * inv_res > 1e9)
     throw badInput("laser pose is absurdly far from the map origin", ErrorLocation("", 0, "pose"));
   const Eigen::Vector2d origin = geometry_.toCellCoords(T_world_laser.translation());
+  out.origin_ = origin;
   const double max_range = options_.insert.max_range_m;
   const double clear = options_.insert.no_return_clear_m;
   // The TSDF traces past each return so that the cells just behind the surface get their negative
@@ -690,9 +699,10 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   // cancel its zero crossing when the two are averaged.
   const double beyond =
       model() == MapModel::kTsdf ? std::min(options_.tsdf.truncation_m, options_.tsdf.behind_surface_m) : 0.0;
-  beams_.clear();
-  clear_stretches_.clear();
-  CellBox box{geometry_.cellOf(T_world_laser.translation()), geometry_.cellOf(T_world_laser.translation())};
+  out.beams_.clear();
+  out.clear_stretches_.clear();
+  CellBox& box = out.box_;
+  box = CellBox{geometry_.cellOf(T_world_laser.translation()), geometry_.cellOf(T_world_laser.translation())};
   auto grow = [&box](const Eigen::Vector2d& p) {
     const auto x = static_cast<std::int32_t>(std::floor(p.x())), y = static_cast<std::int32_t>(std::floor(p.y()));
     box.min.x = std::min(box.min.x, x);
@@ -707,30 +717,30 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   // surface_guard_max_m) each return's point and the unit direction of its surface: towards the
   // nearer neighbouring return within surface_neighbor_max_m (the farther one is more likely across
   // a depth jump), or else facing the beam.
-  units_.resize(n);
-  hits_.assign(n, 0);
+  out.units_.resize(n);
+  out.hits_.assign(n, 0);
   for (std::size_t i = 0; i < n; ++i) {
     const double a = scan.angle(i);
-    units_[i] = Eigen::Vector2d(std::cos(a), std::sin(a));
-    hits_[i] = scan.isValid(i) && scan.ranges()[i] <= max_range;
+    out.units_[i] = Eigen::Vector2d(std::cos(a), std::sin(a));
+    out.hits_[i] = scan.isValid(i) && scan.ranges()[i] <= max_range;
   }
   if (guard_max > 0) {
-    points_.resize(n);
-    tangents_.resize(n);
+    out.points_.resize(n);
+    out.tangents_.resize(n);
     for (std::size_t i = 0; i < n; ++i)
-      if (hits_[i]) points_[i] = scan.ranges()[i] * units_[i];
+      if (out.hits_[i]) out.points_[i] = scan.ranges()[i] * out.units_[i];
     const double neighbor_max_sq = options_.insert.surface_neighbor_max_m * options_.insert.surface_neighbor_max_m;
     for (std::size_t i = 0; i < n; ++i) {
-      if (!hits_[i]) continue;
+      if (!out.hits_[i]) continue;
       double best = neighbor_max_sq;
-      tangents_[i] = Eigen::Vector2d(-units_[i].y(), units_[i].x());  // facing the beam
+      out.tangents_[i] = Eigen::Vector2d(-out.units_[i].y(), out.units_[i].x());  // facing the beam
       for (const std::size_t j : {i - 1, i + 1}) {
-        if (j >= n || !hits_[j]) continue;  // (i - 1 wraps to a huge index for i = 0)
-        const Eigen::Vector2d t = points_[j] - points_[i];
+        if (j >= n || !out.hits_[j]) continue;  // (i - 1 wraps to a huge index for i = 0)
+        const Eigen::Vector2d t = out.points_[j] - out.points_[i];
         const double sq = t.squaredNorm();
         if (sq > 0 && sq <= best) {
           best = sq;
-          tangents_[i] = t / std::sqrt(sq);
+          out.tangents_[i] = t / std::sqrt(sq);
         }
       }
     }
@@ -748,26 +758,26 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   // nearest edge on each side. Along a continuous surface nothing is needed: a beam's own guarded
   // stretch covers its neighbours' surface.
   if (guard_max > 0) {
-    side_guards_.assign(2 * n, SideGuard{});  // [2 i + slot]; none when to < from
+    out.side_guards_.assign(2 * n, PreparedScan::SideGuard{});  // [2 i + slot]; none when to < from
     for (std::size_t j = 0; j < n; ++j) {
-      if (!hits_[j]) continue;
+      if (!out.hits_[j]) continue;
       const double rj = scan.ranges()[j];
-      const Eigen::Vector2d& p = points_[j];
-      const Eigen::Vector2d& t = tangents_[j];
+      const Eigen::Vector2d& p = out.points_[j];
+      const Eigen::Vector2d& t = out.tangents_[j];
       for (const int side : {-1, 1}) {
         const std::size_t m = side < 0 ? j - 1 : j + 1;
         if (m >= n) continue;  // (wraps below 0)
         const double rm = scan.ranges()[m];
-        if (hits_[m] && !(rm > rj + 2 * d)) continue;  // not an edge towards this side
+        if (out.hits_[m] && !(rm > rj + 2 * d)) continue;  // not an edge towards this side
         for (std::size_t k = 1; k <= kGuardNeighbors; ++k) {
           const std::size_t i = side < 0 ? j - k : j + k;
           if (i >= n) break;
           const double ri = scan.ranges()[i];
           if (std::isnan(ri) || ri <= scan.rangeMin()) continue;
-          const Eigen::Vector2d& u = units_[i];
+          const Eigen::Vector2d& u = out.units_[i];
           const double along = p.dot(u), lateral = std::abs(cross(u, p));
           if (lateral >= 2 * d) break;  // farther beams pass farther from the edge
-          if (hits_[i] && ri <= along) continue;  // ends before it passes the edge
+          if (out.hits_[i] && ri <= along) continue;  // ends before it passes the edge
           const double sin_angle = std::abs(cross(u, t));
           double centre = along;
           if (sin_angle * guard_max > d) {
@@ -777,8 +787,8 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
             continue;  // (nearly) parallel to it and never within d
           }
           const double h = halfWidth(sin_angle);
-          SideGuard& g = side_guards_[2 * i + (side > 0 ? 0 : 1)];  // seen from beam i, the edge is on the other side
-          if (g.to < g.from || k < g.beams_away) g = SideGuard{centre - h, centre + h, j, k};
+          PreparedScan::SideGuard& g = out.side_guards_[2 * i + (side > 0 ? 0 : 1)];  // seen from beam i, the edge is on the other side
+          if (g.to < g.from || k < g.beams_away) g = PreparedScan::SideGuard{centre - h, centre + h, j, k};
         }
       }
     }
@@ -786,10 +796,10 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
   for (std::size_t i = 0; i < n; ++i) {
     const double r = scan.ranges()[i];
     if (std::isnan(r) || r <= scan.rangeMin()) continue;
-    const bool hit = hits_[i];
+    const bool hit = out.hits_[i];
     const double len = hit ? r + beyond : std::min(clear, std::isfinite(r) ? r : clear);
     if (len <= 0) continue;
-    const double ca = units_[i].x(), sa = units_[i].y();
+    const double ca = out.units_[i].x(), sa = out.units_[i].y();
     const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
     const Eigen::Vector2d end = origin + dir * (len * inv_res);
     grow(end);
@@ -803,9 +813,9 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
       std::array<std::array<double, 2>, 3> spans{};
       std::uint8_t lines = 0;
       auto setLine = [&](int k, std::size_t j, double from, double to) {
-        const Eigen::Vector2d& t = tangents_[j];  // laser frame
+        const Eigen::Vector2d& t = out.tangents_[j];  // laser frame
         const Eigen::Vector2d point =
-            origin + inv_res * Eigen::Vector2d(c0 * points_[j].x() - s0 * points_[j].y(), s0 * points_[j].x() + c0 * points_[j].y());
+            origin + inv_res * Eigen::Vector2d(c0 * out.points_[j].x() - s0 * out.points_[j].y(), s0 * out.points_[j].x() + c0 * out.points_[j].y());
         const Eigen::Vector2d normal(-(s0 * t.x() + c0 * t.y()), c0 * t.x() - s0 * t.y());  // world, unit
         beam.guards[static_cast<std::size_t>(k)] =
             GuardLine{normal.x(), normal.y(), -normal.dot(point), std::min(normal.x(), 0.0) + std::min(normal.y(), 0.0),
@@ -814,11 +824,11 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
         if (spans[static_cast<std::size_t>(k)][1] > spans[static_cast<std::size_t>(k)][0]) lines |= std::uint8_t(1u << k);
       };
       if (hit) {
-        const double sin_incidence = std::abs(cross(tangents_[i], u));
+        const double sin_incidence = std::abs(cross(out.tangents_[i], u));
         setLine(0, i, r - halfWidth(sin_incidence), r);
       }
       for (int k = 0; k < 2; ++k) {
-        const SideGuard& g = side_guards_[2 * i + static_cast<std::size_t>(k)];
+        const PreparedScan::SideGuard& g = out.side_guards_[2 * i + static_cast<std::size_t>(k)];
         if (g.from <= g.to) setLine(1 + k, g.edge, g.from, g.to);
       }
       if (lines == 1) {  // only its own surface (no edge nearby): one walk, see forEachCleared
@@ -848,17 +858,30 @@ void OccupancyMap::insert(const LaserScan& scan, const SE2& T_world_laser) {
           std::uint8_t mask = 0;
           for (std::size_t k = 0; k < 3; ++k)
             if ((lines & (1u << k)) && spans[k][0] <= mid && mid <= spans[k][1]) mask |= std::uint8_t(1u << k);
-          if (beam.num_clear > 0 && clear_stretches_.back().lines == mask) {
-            clear_stretches_.back().to = to * inv_res;  // continues the previous stretch
+          if (beam.num_clear > 0 && out.clear_stretches_.back().lines == mask) {
+            out.clear_stretches_.back().to = to * inv_res;  // continues the previous stretch
             continue;
           }
-          if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(clear_stretches_.size());
-          clear_stretches_.push_back({from * inv_res, to * inv_res, mask});
+          if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(out.clear_stretches_.size());
+          out.clear_stretches_.push_back({from * inv_res, to * inv_res, mask});
         }
       }
     }
-    beams_.push_back(beam);
+    out.beams_.push_back(beam);
   }
+  out.ready_ = true;
+}
+
+void OccupancyMap::insert(PreparedScan& prepared) {
+  if (!prepared.ready_ || prepared.model_ != this)
+    throw invalidArgument("scan not prepared by this map", ErrorLocation("", 0, "prepared"));
+  prepared.ready_ = false;
+  // The prepared beams become the current scan's (swapped, not copied: the caller gets the old
+  // buffers back to prepare the next scan into).
+  std::swap(beams_, prepared.beams_);
+  std::swap(clear_stretches_, prepared.clear_stretches_);
+  const Eigen::Vector2d origin = prepared.origin_;
+  const CellBox box = prepared.box_;
   if (beams_.empty()) return;
   beginScan(box);
   std::optional<std::pair<Slab, Slab>> split;

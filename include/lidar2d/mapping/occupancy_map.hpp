@@ -127,6 +127,17 @@ class OccupancyMap {
   /// finite; the map is unchanged in that case.
   void insert(const LaserScan& scan, const SE2& T_world_laser);
 
+  class PreparedScan;
+  /// The first half of `insert`: turns the scan into beams (and, for the surface guard, the lines
+  /// they spare) in `out`, reading no map state, so that it may run on another thread while the
+  /// map inserts an earlier scan (`lidar2d map` does). Throws as `insert` does for a bad pose.
+  /// `out` keeps its buffers from scan to scan.
+  void prepare(const LaserScan& scan, const SE2& T_world_laser, PreparedScan& out) const;
+  /// The second half: inserts a scan `prepare` made for this map, exactly as `insert` would have;
+  /// `prepared` is consumed (prepare into it again to reuse it). Throws `lidar2d::Error` for a scan
+  /// not prepared by this map, or as `insert` does (the map is unchanged then).
+  void insert(PreparedScan& prepared);
+
   /// Occupancy probability in [0, 1], or std::nullopt for a never-observed cell. (TSDF: 1 for
   /// surface cells, 0 for observed free cells, 0.5 otherwise.)
   virtual std::optional<double> probability(CellIndex c) const = 0;
@@ -215,9 +226,29 @@ class OccupancyMap {
   std::uint64_t cell_visits_ = 0;
   std::uint64_t parallel_scans_ = 0;
   CellBox bounds_;
-  std::vector<Beam> beams_;  // scratch buffer reused between scans
-  // Scratch reused between scans: beam directions, returns and surface directions (laser frame;
-  // the last two for the surface guard), and which beams have a return.
+  std::vector<Beam> beams_;  // the current scan's beams (swapped in from a PreparedScan)
+  std::unique_ptr<PreparedScan> prepared_;  // scratch of insert(scan, pose)
+  std::vector<double> split_sums_;  // scratch of chooseSplit
+  std::unique_ptr<Worker> worker_;  // started on the first scan inserted by two threads
+  std::uint32_t backoff_ = 0;      // scans to insert single-threaded after a split that did not pay
+  std::uint32_t single_left_ = 0;  // scans still to insert single-threaded
+};
+
+/// A scan made ready for insertion by `OccupancyMap::prepare` (opaque; keeps its buffers).
+class OccupancyMap::PreparedScan {
+ public:
+  PreparedScan() = default;
+
+ private:
+  friend class OccupancyMap;
+  const OccupancyMap* model_ = nullptr;  // the map that prepared it
+  bool ready_ = false;                   // prepared and not yet inserted
+  Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();  // the laser [cells]
+  CellBox box_;                                       // every cell the beams touch
+  std::vector<Beam> beams_;
+  std::vector<ClearStretch> clear_stretches_;
+  // Scratch: beam directions, returns and surface directions (laser frame; the last two for the
+  // surface guard), and which beams have a return.
   std::vector<Eigen::Vector2d> units_, points_, tangents_;
   std::vector<std::uint8_t> hits_;
   // Surface guard: per beam and side, the nearest occluding edge it passes (a guarded interval
@@ -227,10 +258,6 @@ class OccupancyMap {
     std::size_t edge = 0, beams_away = 0;
   };
   std::vector<SideGuard> side_guards_;
-  std::vector<double> split_sums_;  // scratch of chooseSplit
-  std::unique_ptr<Worker> worker_;  // started on the first scan inserted by two threads
-  std::uint32_t backoff_ = 0;      // scans to insert single-threaded after a split that did not pay
-  std::uint32_t single_left_ = 0;  // scans still to insert single-threaded
 };
 
 /// Creates a map of the given model. Throws `lidar2d::Error` (kInvalidArgument, naming the field)
