@@ -4,11 +4,11 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <optional>
 #include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <optional>
 
 #include "commands.hpp"
 #include "map_output.hpp"

@@ -95,6 +95,38 @@ Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, 
   return row;
 }
 
+// The success bar of the protocol: under 10 cm and 2 degrees.
+bool withinBar(const SE2& error) { return error.translation().norm() < 0.1 && std::abs(error.theta()) < 2.0 * kDeg; }
+
+// One pair matched from its true relative pose by three matchers with different costs (p2p, p2l,
+// lf): how many miss the bar, whether they land within 3 cm and 0.5 deg of each other, and p2l's
+// error.
+struct FromTruth {
+  std::size_t fails = 0;
+  bool agree = false;
+  SE2 p2l_error;
+};
+FromTruth matchFromTruth(const Points2& target, const Points2& source, const SE2& truth) {
+  FromTruth out;
+  std::vector<SE2> est;
+  for (auto m : {registration::Method::kP2P, registration::Method::kP2L, registration::Method::kLikelihoodField}) {
+    registration::MatcherOptions o;
+    o.method = m;
+    est.push_back(registration::matchScans(target, source, truth, o).T_target_source);
+    out.fails += !withinBar(truth.inverse() * est.back());
+  }
+  double spread_m = 0.0, spread_rad = 0.0;
+  for (std::size_t i = 0; i < est.size(); ++i)
+    for (std::size_t j = i + 1; j < est.size(); ++j) {
+      const SE2 d = est[i].inverse() * est[j];
+      spread_m = std::max(spread_m, d.translation().norm());
+      spread_rad = std::max(spread_rad, std::abs(d.theta()));
+    }
+  out.agree = spread_m < 0.03 && spread_rad < 0.5 * kDeg;
+  out.p2l_error = truth.inverse() * est[1];
+  return out;
+}
+
 // Checks the truth itself: each pair matched from its true relative pose by three matchers with
 // different costs (p2p, p2l, lf). Where all three miss the bar (10 cm, 2 deg) yet agree with each
 // other (within 3 cm and 0.5 deg), the scans themselves support a relative pose the corrected poses
@@ -103,30 +135,14 @@ void runTruthCheck(const std::string& name, const std::vector<Points2>& points, 
   std::size_t any_fail = 0, all_fail = 0, all_fail_agree = 0;
   std::vector<std::string> listed;
   for (std::size_t k = 1; k < points.size(); ++k) {
-    const SE2 rel = truth[k - 1].pose.inverse() * truth[k].pose;
-    std::vector<SE2> est;
-    std::size_t fails = 0;
-    for (auto m : {registration::Method::kP2P, registration::Method::kP2L, registration::Method::kLikelihoodField}) {
-      registration::MatcherOptions o;
-      o.method = m;
-      est.push_back(registration::matchScans(points[k - 1], points[k], rel, o).T_target_source);
-      const SE2 e = rel.inverse() * est.back();
-      fails += !(e.translation().norm() < 0.1 && std::abs(e.theta()) < 2.0 * kDeg);
-    }
-    any_fail += fails > 0;
-    if (fails < 3) continue;
+    const FromTruth r = matchFromTruth(points[k - 1], points[k], truth[k - 1].pose.inverse() * truth[k].pose);
+    any_fail += r.fails > 0;
+    if (r.fails < 3) continue;
     ++all_fail;
-    double spread_m = 0.0, spread_rad = 0.0;
-    for (std::size_t i = 0; i < est.size(); ++i)
-      for (std::size_t j = i + 1; j < est.size(); ++j) {
-        const SE2 d = est[i].inverse() * est[j];
-        spread_m = std::max(spread_m, d.translation().norm());
-        spread_rad = std::max(spread_rad, std::abs(d.theta()));
-      }
-    if (spread_m < 0.03 && spread_rad < 0.5 * kDeg) {
+    if (r.agree) {
       ++all_fail_agree;
-      const SE2 e = rel.inverse() * est[1];
-      listed.push_back(fmt::format("{} ({:.3f} m, {:+.2f} deg)", k - 1, e.translation().norm(), e.theta() / kDeg));
+      listed.push_back(fmt::format("{} ({:.3f} m, {:+.2f} deg)", k - 1, r.p2l_error.translation().norm(),
+                                   r.p2l_error.theta() / kDeg));
     }
   }
   std::cout << fmt::format("| {} | {} | {} | {} | {} ({:.1f}%) |\n", name, points.size() - 1, any_fail, all_fail,
@@ -197,26 +213,10 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
     if (bo.truth_check) {  // as runTruthCheck, on the relations' pairs
       std::size_t any_fail = 0, all_fail = 0, all_fail_agree = 0;
       for (const Case& c : cases) {
-        std::vector<SE2> est;
-        std::size_t fails = 0;
-        for (auto m : {registration::Method::kP2P, registration::Method::kP2L, registration::Method::kLikelihoodField}) {
-          registration::MatcherOptions o;
-          o.method = m;
-          est.push_back(registration::matchScans(points[c.target], points[c.source], c.truth, o).T_target_source);
-          const SE2 e = c.truth.inverse() * est.back();
-          fails += !(e.translation().norm() < 0.1 && std::abs(e.theta()) < 2.0 * kDeg);
-        }
-        any_fail += fails > 0;
-        if (fails < 3) continue;
-        ++all_fail;
-        double spread_m = 0.0, spread_rad = 0.0;
-        for (std::size_t i = 0; i < est.size(); ++i)
-          for (std::size_t j = i + 1; j < est.size(); ++j) {
-            const SE2 d = est[i].inverse() * est[j];
-            spread_m = std::max(spread_m, d.translation().norm());
-            spread_rad = std::max(spread_rad, std::abs(d.theta()));
-          }
-        all_fail_agree += spread_m < 0.03 && spread_rad < 0.5 * kDeg;
+        const FromTruth r = matchFromTruth(points[c.target], points[c.source], c.truth);
+        any_fail += r.fails > 0;
+        all_fail += r.fails == 3;
+        all_fail_agree += r.fails == 3 && r.agree;
       }
       std::cout << fmt::format("| truth check | {} | from the relation | {} | some of p2p/p2l/lf fail: {}, all three: {}, "
                                "all three and agree (3 cm, 0.5 deg): {} ({:.1f}%) | | | |\n",
@@ -254,8 +254,8 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
           const SE2 e = c.truth.inverse() * r.T_target_source;
           et.push_back(e.translation().norm());
           er.push_back(std::abs(e.theta()));
-          ok += et.back() < 0.1 && er.back() < 2.0 * kDeg;
-          if (std::getenv("LIDAR2D_BENCH_DUMP") && !(et.back() < 0.1 && er.back() < 2.0 * kDeg))
+          ok += withinBar(e);
+          if (std::getenv("LIDAR2D_BENCH_DUMP") && !withinBar(e))
             std::cerr << fmt::format("{} {} fail: scans {} {} err {:.3f} m {:.2f} deg\n", name, method_name, c.target,
                                      c.source, et.back(), e.theta() / kDeg);
         }

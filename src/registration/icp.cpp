@@ -241,7 +241,7 @@ struct Linearisation {
 class Icp {
  public:
   Icp(const IcpTarget& target, const Points2& source, const IcpOptions& o)
-      : tgt_(target), target_(target.impl()), src_(source), o_(o), p2l_(o.metric == IcpMetric::kPointToLine) {
+      : tgt_(target.impl()), src_(source), o_(o), p2l_(o.metric == IcpMetric::kPointToLine) {
     pairs_.reserve(src_.size());
     if (p2l_) lines_.reserve(src_.size());
   }
@@ -251,8 +251,8 @@ class Icp {
   void findPairs(const SE2& T) {
     pairs_.clear();
     const double gate2 = o_.max_correspondence_dist_m * o_.max_correspondence_dist_m;
-    const Points2& tp = tgt_.points();
-    const Points2& tn = tgt_.normals();
+    const Points2& tp = tgt_.points;
+    const Points2& tn = tgt_.normals;
     if (last_match_.size() != src_.size()) {
       last_match_.assign(src_.size(), tp.size());
       hints_.assign(src_.size(), kNoHint);
@@ -269,7 +269,7 @@ class Icp {
       double d2 = 0.0;
       std::uint32_t& hint = hints_[i];
       if (hint == kNoHint) hint = running_hint;
-      const std::size_t j = target_.nearestWithin(q, bound2, &d2, &hint);  // (inlined: no call per query)
+      const std::size_t j = tgt_.nearestWithin(q, bound2, &d2, &hint);  // (inlined: no call per query)
       running_hint = hint;
       last_match_[i] = j;
       if (j == tp.size()) continue;
@@ -351,7 +351,7 @@ class Icp {
       }
       L.residuals = lines_.size();
     } else {
-      const Points2& tp = tgt_.points();
+      const Points2& tp = tgt_.points;
       for (const Pair& pr : pairs_) {
         const Eigen::Vector2d& p = src_[pr.src];
         const Eigen::Vector2d& m = tp[pr.tgt];
@@ -386,11 +386,10 @@ class Icp {
 
   const std::vector<Pair>& pairs() const { return pairs_; }
   const Points2& source() const { return src_; }
-  const IcpTarget& target() const { return tgt_; }
+  const IcpTarget::Impl& target() const { return tgt_; }
 
  private:
-  const IcpTarget& tgt_;
-  const IcpTarget::Impl& target_;
+  const IcpTarget::Impl& tgt_;  // (the search structures themselves: the search inlines)
   const Points2& src_;
   const IcpOptions& o_;
   const bool p2l_;
@@ -536,7 +535,6 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
   return res;
 }
 
-// Analytic Ceres cost functions over the parameter block (x, y, theta) of T_target_source.
 // cos and sin of theta, remembered for the last angle asked: Ceres evaluates every residual block
 // at the same pose one after another, so one evaluation pass computes them once instead of once
 // per block (they were a tenth of a point-to-point Ceres match).
@@ -551,7 +549,8 @@ inline void cosSin(double theta, double& c, double& s) {
   s = last_s;
 }
 
-// One pair's residual; `set` gives it the pair (the objects are reused from search to search).
+// Analytic Ceres cost functions over the parameter block (x, y, theta) of T_target_source, one
+// pair's residual each; `set` gives it the pair (the objects are reused from search to search).
 class PointToLineCost final : public ceres::SizedCostFunction<1, 3> {
  public:
   void set(const Eigen::Vector2d& p, const Eigen::Vector2d& m, const Eigen::Vector2d& n) {
@@ -632,8 +631,8 @@ class CeresPairs {
     po.enable_fast_removal = false;
     po.disable_all_safety_checks = true;
     auto problem = std::make_unique<ceres::Problem>(po);
-    const Points2& tp = icp.target().points();
-    const Points2& tn = icp.target().normals();
+    const Points2& tp = icp.target().points;
+    const Points2& tn = icp.target().normals;
     for (const Pair& pr : icp.pairs()) {
       Cost& c = costs_[pr.src];
       c.set(icp.source()[pr.src], tp[pr.tgt], tn[pr.tgt]);

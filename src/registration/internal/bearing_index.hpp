@@ -135,19 +135,12 @@ class BearingIndex {
       // answer: a point the walk would have stopped before lies farther than the best point.
       const std::size_t s = hint ? startNear(q, *hint) : startOf(q);
       if (hint) *hint = static_cast<std::uint32_t>(s);
-      auto at = [&](std::ptrdiff_t k) -> const Node& {
-        const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(s) + k;
-        const auto ni = static_cast<std::ptrdiff_t>(n);
-        return nodes_[static_cast<std::size_t>(i < 0 ? i + ni : (i >= ni ? i - ni : i))];
-      };
-      for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(kWindow / 2); ++k) {
-        consider(at(k));
-        consider(at(-k - 1));
+      constexpr std::ptrdiff_t kHalf = kWindow / 2;
+      for (std::ptrdiff_t k = 0; k < kHalf; ++k) {
+        consider(nodes_[offset(s, k)]);
+        consider(nodes_[offset(s, -k - 1)]);
       }
-      constexpr std::size_t kHalf = kWindow / 2;
-      const std::size_t up = s + kHalf >= n ? s + kHalf - n : s + kHalf;
-      const std::size_t down = s >= kHalf + 1 ? s - kHalf - 1 : s + n - kHalf - 1;
-      walkFrom(q, up, down, kWindow, consider, [&] { return best_d2; });
+      walkFrom(q, offset(s, kHalf), offset(s, -kHalf - 1), kWindow, consider, [&] { return best_d2; });
     } else {
       walk(q, consider, [&] { return best_d2; });
     }
@@ -183,19 +176,18 @@ class BearingIndex {
       const Node& self = nodes_[p];
       const Eigen::Vector2d q(self.x, self.y);
       Nearest best{k, max_dist_sq, idx, d2s};
-      if (n >= 2 * kKnnHalf + 2) {
+      if (n >= 2 * static_cast<std::size_t>(kKnnHalf) + 2) {
         // The walk may start at the point's own position (every point up from it has a bearing at
         // least its own, every point down from it at most), and its nearest points are nearly
         // always its neighbours in bearing order: those are taken without the bound test.
         best.insert(self, q);
-        for (std::size_t j = 1; j <= kKnnHalf; ++j) {
-          best.insert(nodes_[p >= j ? p - j : p + n - j], q);
-          best.insert(nodes_[p + j < n ? p + j : p + j - n], q);
+        for (std::ptrdiff_t j = 1; j <= kKnnHalf; ++j) {
+          best.insert(nodes_[offset(p, -j)], q);
+          best.insert(nodes_[offset(p, j)], q);
         }
-        const std::size_t up = p + kKnnHalf + 1 < n ? p + kKnnHalf + 1 : p + kKnnHalf + 1 - n;
-        const std::size_t down = p >= kKnnHalf + 1 ? p - kKnnHalf - 1 : p + n - kKnnHalf - 1;
         walkFrom(
-            q, up, down, 2 * kKnnHalf + 1, [&](const Node& nd) { best.insert(nd, q); }, [&] { return best.limit(); });
+            q, offset(p, kKnnHalf + 1), offset(p, -kKnnHalf - 1), 2 * kKnnHalf + 1,
+            [&](const Node& nd) { best.insert(nd, q); }, [&] { return best.limit(); });
       } else {
         walk(
             q, [&](const Node& nd) { best.insert(nd, q); }, [&] { return best.limit(); });
@@ -242,10 +234,17 @@ class BearingIndex {
   };
 
   // Neighbours in bearing order on each side that `knnOfEach` takes without the bound test.
-  static constexpr std::size_t kKnnHalf = 2;
+  static constexpr std::ptrdiff_t kKnnHalf = 2;
 
   // Points `nearest` visits before its first bound test (when there are at least kWindow + 4).
   static constexpr std::size_t kWindow = 4;
+
+  // Position `k` places from position `p` in bearing order, around the circle (|k| < size).
+  std::size_t offset(std::size_t p, std::ptrdiff_t k) const {
+    const auto n = static_cast<std::ptrdiff_t>(nodes_.size());
+    const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(p) + k;
+    return static_cast<std::size_t>(i < 0 ? i + n : (i >= n ? i - n : i));
+  }
 
   // Position of the first point (in bearing order) whose key is >= q's (wrapping to 0).
   std::size_t startOf(const Eigen::Vector2d& q) const {
