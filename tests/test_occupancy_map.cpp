@@ -5,11 +5,15 @@
 
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <random>
+#include <set>
 #include <thread>
+#include <utility>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
+#include "lidar2d/mapping/ray_trace.hpp"
 
 namespace lidar2d::mapping {
 
@@ -280,6 +284,61 @@ TEST(LogOdds, CartographerDefaultsAndCellUpdatedOncePerBeam) {
   EXPECT_NEAR(*map->probability(g.cellOf({0.5, 0.025})), 0.49, 1e-6);
   EXPECT_NEAR(*map->probability(g.cellOf({1.03, 0.025})), 0.55, 1e-6);
   EXPECT_EQ(map->cellUpdates(), 21u);  // cells 0..20 along the beam, each once
+}
+
+// Every cell a beam passes gets one miss and its return's cell one hit, and no other cell is
+// touched: the traversal reaches each cell's storage through its tile (entered as the walk crosses
+// tile borders, in every direction, at negative coordinates too). Beams from near tile corners,
+// guard off; the expected cells come from traceRay on the segments insertion computes.
+TEST(Insertion, UpdatesExactlyTheTracedCellsAcrossTileBorders) {
+  const double tile_m = 64 * 0.05;
+  const std::vector<Eigen::Vector2d> origins = {
+      {-tile_m + 0.0123, -tile_m + 0.0371}, {tile_m - 0.011, -0.013}, {0.013, tile_m - 0.002}, {-2 * tile_m + 0.07, 0.5}};
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> range(0.3, 9.0), heading(-std::numbers::pi, std::numbers::pi);
+  for (const MapModel model : {MapModel::kLogOdds, MapModel::kCount}) {
+    for (const Eigen::Vector2d& o : origins) {
+      MapOptions opt;
+      opt.resolution_m = 0.05;
+      opt.insert.surface_guard_max_m = 0.0;
+      auto map = makeMap(model, opt);
+      LaserScanFields f;
+      f.angle_min = -std::numbers::pi;
+      f.angle_increment = 2 * std::numbers::pi / 360;
+      f.range_max = 30;
+      for (int i = 0; i < 360; ++i) f.ranges.push_back(range(rng));
+      const LaserScan scan = LaserScan::create(f);
+      const SE2 T(o.x(), o.y(), heading(rng));
+      map->insert(scan, T);
+      // The segments as insertion computes them (OccupancyMap::prepare).
+      const double inv_res = 1.0 / opt.resolution_m;
+      const Eigen::Vector2d origin = T.translation() * inv_res;
+      const double c0 = std::cos(T.theta()), s0 = std::sin(T.theta());
+      std::set<std::pair<int, int>> passed, ends;
+      for (std::size_t i = 0; i < scan.size(); ++i) {
+        const double a = scan.angle(i), ca = std::cos(a), sa = std::sin(a);
+        const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
+        const CellIndex end = traceRay(origin, origin + dir * (scan.ranges()[i] * inv_res),
+                                       [&](CellIndex c) { passed.insert({c.x, c.y}); });
+        ends.insert({end.x, end.y});
+      }
+      const double hit = model == MapModel::kLogOdds ? 0.55 : 1.0, miss = model == MapModel::kLogOdds ? 0.49 : 0.0;
+      std::size_t checked = 0, mismatches = 0;
+      for (int y = static_cast<int>(std::floor(origin.y())) - 200; y <= static_cast<int>(std::floor(origin.y())) + 200; ++y)
+        for (int x = static_cast<int>(std::floor(origin.x())) - 200; x <= static_cast<int>(std::floor(origin.x())) + 200; ++x) {
+          const auto p = map->probability(CellIndex{x, y});
+          std::optional<double> expected;
+          if (ends.count({x, y}))
+            expected = hit;  // hits first: a passed cell holding a return keeps its hit
+          else if (passed.count({x, y}))
+            expected = miss;
+          ++checked;
+          if (p.has_value() != expected.has_value() || (p && std::abs(*p - *expected) > 1e-6)) ++mismatches;
+        }
+      EXPECT_EQ(mismatches, 0u) << toString(model) << " from (" << o.x() << ", " << o.y() << "), " << checked << " cells";
+      EXPECT_GT(passed.size(), 5000u);
+    }
+  }
 }
 
 TEST(Count, HitsOverHitsPlusMisses) {

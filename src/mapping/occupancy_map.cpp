@@ -30,25 +30,85 @@ constexpr std::size_t kGuardNeighbors = 8;
   return {static_cast<std::int32_t>(std::floor(p.x())), static_cast<std::int32_t>(std::floor(p.y()))};
 }
 
-// `traceRay` restricted to the cells of `slab`: calls on_pass for the passed cells (all but the end
-// cell) that lie in the slab, in order. It is the same RayWalk, so the cells and their order are
-// exactly traceRay's; a segment is monotone along each axis, so it is inside the slab for one run
-// of steps: the steps before it are only walked (no cell access), the walk stops at the exit.
+// A RayWalk over a TiledGrid that keeps the current cell's place in its tile, so that reaching the
+// cell is an offset from the tile's first cell rather than a tile lookup per cell. The tile is
+// looked up when the walk enters it, and then only when one of its cells is accessed (`ref`): a
+// walk restricted to a slab never touches, or allocates, a tile outside the slab.
+// The callbacks of the traversals below take a walk, or a `CellAt` for a single cell, and call
+// `cell()`, `ref()` and `stepsLeft()` on it.
+template <typename Cell>
+class GridWalk {
+ public:
+  using Grid = TiledGrid<Cell>;
+  [[gnu::always_inline]] GridWalk(Grid& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end)
+      : walk_(start, end),
+        grid_(grid),
+        index_(indexOf(walk_.cell())),
+        step_x_(walk_.stepX()),
+        step_y_(walk_.stepY() * Grid::kTileSize),
+        edge_x_(walk_.stepX() > 0 ? 0 : Grid::kTileMask),
+        edge_y_(walk_.stepY() > 0 ? 0 : Grid::kTileMask) {}
+  bool done() const { return walk_.done(); }
+  std::int32_t stepsLeft() const { return walk_.stepsLeft(); }
+  CellIndex cell() const { return walk_.cell(); }
+  std::int32_t x() const { return walk_.x(); }
+  std::int32_t y() const { return walk_.y(); }
+  // The current cell (allocating its tile on first touch; the grid's `reserve` covers it).
+  [[gnu::always_inline]] Cell& ref() {
+    if (!tile_) tile_ = &grid_.cellUnchecked(CellIndex{walk_.x() & ~Grid::kTileMask, walk_.y() & ~Grid::kTileMask});
+    return tile_[index_];
+  }
+  [[gnu::always_inline]] void step() {
+    // Entering another tile: its first coordinate along the step's axis is the entry edge.
+    if (walk_.step()) {
+      index_ += step_x_;
+      if ((walk_.x() & Grid::kTileMask) == edge_x_) enterTile();
+    } else {
+      index_ += step_y_;
+      if ((walk_.y() & Grid::kTileMask) == edge_y_) enterTile();
+    }
+  }
+
+ private:
+  static std::ptrdiff_t indexOf(CellIndex c) {
+    return ((c.y & Grid::kTileMask) << Grid::kTileBits) | (c.x & Grid::kTileMask);
+  }
+  void enterTile() {
+    tile_ = nullptr;
+    index_ = indexOf(walk_.cell());
+  }
+  RayWalk walk_;
+  Grid& grid_;
+  Cell* tile_ = nullptr;  // first cell of the current cell's tile; null until accessed
+  std::ptrdiff_t index_;  // the current cell's index in its tile
+  const std::ptrdiff_t step_x_, step_y_, edge_x_, edge_y_;
+};
+
+// One cell, with the interface of a GridWalk (the end cells of the traversals).
+template <typename Cell>
+class CellAt {
+ public:
+  CellAt(TiledGrid<Cell>& grid, CellIndex c) : grid_(grid), c_(c) {}
+  std::int32_t stepsLeft() const { return 0; }
+  CellIndex cell() const { return c_; }
+  Cell& ref() { return grid_.cellUnchecked(c_); }
+
+ private:
+  TiledGrid<Cell>& grid_;
+  CellIndex c_;
+};
+
+// `traceRay` restricted to the cells of `slab`: calls on_pass(walk) for the passed cells (all but
+// the end cell) that lie in the slab, in order. It is the same RayWalk, so the cells and their
+// order are exactly traceRay's; a segment is monotone along each axis, so it is inside the slab for
+// one run of steps: the steps before it are only walked (no cell access), the walk stops at the exit.
 // (Jumping straight to the entry would recompute t_max differently from the walk's running sums and
 // could pick the other cell at a near-corner crossing.)
-// `on_pass(cell)`, or `on_pass(cell, steps)` with the walk's steps left to the end cell.
-template <typename F>
-[[gnu::always_inline]] inline void pass(F& on_pass, const RayWalk& walk) {
-  if constexpr (std::is_invocable_v<F&, CellIndex, std::int32_t>)
-    on_pass(walk.cell(), walk.stepsLeft());
-  else
-    on_pass(walk.cell());
-}
-
-template <int kAxis, typename F>
-[[gnu::always_inline]] inline void traceInSlabAlong(const Eigen::Vector2d& start, const Eigen::Vector2d& end, std::int32_t lo,
-                                                    std::int32_t hi, F&& on_pass) {
-  RayWalk walk(start, end);
+template <int kAxis, typename Cell, typename Far, typename Near>
+[[gnu::always_inline]] inline void traceInSlabAlong(TiledGrid<Cell>& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end,
+                                                    std::int32_t lo, std::int32_t hi, std::int32_t near_steps, Far&& on_far,
+                                                    Near&& on_near) {
+  GridWalk<Cell> walk(grid, start, end);
   // (kAxis a template parameter: the slab test then reads one coordinate without a branch.)
   auto inside = [&] {
     const std::int32_t v = kAxis == 0 ? walk.x() : walk.y();
@@ -56,39 +116,61 @@ template <int kAxis, typename F>
   };
   while (!walk.done() && !inside()) walk.step();
   while (!walk.done() && inside()) {
-    pass(on_pass, walk);
+    if (walk.stepsLeft() > near_steps)
+      on_far(walk);
+    else
+      on_near(walk);
     walk.step();
   }
 }
 
-template <typename F>
-[[gnu::always_inline]] inline void traceInSlab(const Eigen::Vector2d& start, const Eigen::Vector2d& end, int axis,
-                                               std::int32_t lo, std::int32_t hi, F&& on_pass) {
+// As above; the cells at most `near_steps` (>= 0) steps before the end cell go to on_near, the
+// others to on_far (so that a test only the last cells need is not made for every cell).
+template <typename Cell, typename Far, typename Near>
+[[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end,
+                                               int axis, std::int32_t lo, std::int32_t hi, std::int32_t near_steps,
+                                               Far&& on_far, Near&& on_near) {
   if (axis < 0) {
-    RayWalk walk(start, end);  // traceRay, with the steps left available to on_pass
+    GridWalk<Cell> walk(grid, start, end);  // traceRay
+    while (walk.stepsLeft() > near_steps) {  // (near_steps >= 0: not done)
+      on_far(walk);
+      walk.step();
+    }
     while (!walk.done()) {
-      pass(on_pass, walk);
+      on_near(walk);
       walk.step();
     }
   } else if (axis == 0) {
-    traceInSlabAlong<0>(start, end, lo, hi, on_pass);
+    traceInSlabAlong<0>(grid, start, end, lo, hi, near_steps, on_far, on_near);
   } else {
-    traceInSlabAlong<1>(start, end, lo, hi, on_pass);
+    traceInSlabAlong<1>(grid, start, end, lo, hi, near_steps, on_far, on_near);
   }
+}
+
+template <typename Cell, typename F>
+[[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end,
+                                               int axis, std::int32_t lo, std::int32_t hi, F&& on_pass) {
+  traceInSlab(grid, start, end, axis, lo, hi, 0, on_pass, on_pass);
 }
 
 // The cells a beam clears (log-odds, count), restricted to `slab`: each clearing stretch's cells
 // from its start to its end cell inclusive (the stretch ends lie sqrt(2) cells from any guarded
 // surface, so their cells hold none). A beam clearing up to its return (guard off) passes the cells
-// before the return's cell, as `traceRay` does; the return's cell is a hit.
+// before the return's cell, as `traceRay` does; the return's cell is a hit. `on_clear(at)` gets a
+// GridWalk or a CellAt (see GridWalk).
 // (Templated on the map's protected Beam and Slab types, which it cannot name.)
-template <typename BeamT, typename StretchT, typename SlabT, typename F>
-[[gnu::always_inline]] inline void forEachCleared(const Eigen::Vector2d& origin, const BeamT& b, const std::vector<StretchT>& stretches,
-                    const SlabT& slab, F&& on_clear) {
+template <typename Cell, typename BeamT, typename StretchT, typename SlabT, typename F>
+[[gnu::always_inline]] inline void forEachCleared(TiledGrid<Cell>& grid, const Eigen::Vector2d& origin, const BeamT& b,
+                                                  const std::vector<StretchT>& stretches, const SlabT& slab, F&& on_clear) {
   constexpr double kMargin = 1e-6;  // see below
-  auto crosses = [](const auto& g, CellIndex c) {
+  auto crosses = [](const auto& g, CellIndex c) __attribute__((always_inline)) {
     const double v = g.nx * c.x + g.ny * c.y + g.offset;
     return v + g.corner_min < -kMargin && v + g.corner_max > kMargin;
+  };
+  auto single = [&](CellIndex c, auto&& visit) __attribute__((always_inline)) {
+    if (!slab.contains(c)) return;
+    CellAt<Cell> at(grid, c);
+    visit(at);
   };
   if (b.clear_to_end) {
     if (b.own_guard) {
@@ -96,18 +178,19 @@ template <typename BeamT, typename StretchT, typename SlabT, typename F>
       // that the line passes through all lie near the return; `guard_reach_sq` caps how near.
       // Only the last `guard_steps` cells of the walk can be near the return.
       const auto& g = b.guards[0];
-      auto guarded = [&](CellIndex c, std::int32_t steps_left) {
-        if (steps_left <= b.guard_steps && crosses(g, c)) {
+      auto guarded = [&](auto& at) __attribute__((always_inline)) {
+        const CellIndex c = at.cell();
+        if (crosses(g, c)) {
           const double dx = c.x + 0.5 - b.guard_return.x(), dy = c.y + 0.5 - b.guard_return.y();
           if (dx * dx + dy * dy <= b.guard_reach_sq) return;
         }
-        on_clear(c);
+        on_clear(at);
       };
-      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, guarded);
+      traceInSlab(grid, origin, b.end, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
     } else {
-      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, on_clear);
+      traceInSlab(grid, origin, b.end, slab.axis, slab.lo, slab.hi, on_clear);
     }
-    if (slab.contains(cellOfCoords(b.end))) on_clear(cellOfCoords(b.end));  // a hit's cell keeps its hit (stamp)
+    single(cellOfCoords(b.end), on_clear);  // a hit's cell keeps its hit (stamp)
     return;
   }
   // A guarded stretch spares the cells whose open square one of its surface lines passes through:
@@ -121,23 +204,24 @@ template <typename BeamT, typename StretchT, typename SlabT, typename F>
     if (s.lines != 0) {
       if (s.lines == 1) {  // the common case: only the beam's own surface
         const auto& g = b.guards[0];
-        auto guarded = [&](CellIndex c) {
-          if (!crosses(g, c)) on_clear(c);
+        auto guarded = [&](auto& at) __attribute__((always_inline)) {
+          if (!crosses(g, at.cell())) on_clear(at);
         };
-        traceInSlab(from, to, slab.axis, slab.lo, slab.hi, guarded);
-        if (slab.contains(cellOfCoords(to))) guarded(cellOfCoords(to));
+        traceInSlab(grid, from, to, slab.axis, slab.lo, slab.hi, guarded);
+        single(cellOfCoords(to), guarded);
         continue;
       }
-      auto guarded = [&](CellIndex c) {
+      auto guarded = [&](auto& at) __attribute__((always_inline)) {
+        const CellIndex c = at.cell();
         for (std::size_t l = 0; l < 3; ++l)
           if ((s.lines & (1u << l)) && crosses(b.guards[l], c)) return;
-        on_clear(c);
+        on_clear(at);
       };
-      traceInSlab(from, to, slab.axis, slab.lo, slab.hi, guarded);
-      if (slab.contains(cellOfCoords(to))) guarded(cellOfCoords(to));
+      traceInSlab(grid, from, to, slab.axis, slab.lo, slab.hi, guarded);
+      single(cellOfCoords(to), guarded);
     } else {
-      traceInSlab(from, to, slab.axis, slab.lo, slab.hi, on_clear);
-      if (slab.contains(cellOfCoords(to))) on_clear(cellOfCoords(to));
+      traceInSlab(grid, from, to, slab.axis, slab.lo, slab.hi, on_clear);
+      single(cellOfCoords(to), on_clear);
     }
   }
 }
@@ -207,17 +291,21 @@ class LogOddsMap final : public OccupancyMap {
     // not dozens. A per-cell scan stamp says whether the cell was updated in this scan.
     std::uint64_t updates = 0;
     TiledGrid<LogOddsCell>::Cursor cursor;
-    auto update = [this, &updates](LogOddsCell& cell, float delta) {
-      if (cell.stamp == scan_) return;
-      cell.stamp = scan_;
-      const float base = std::isnan(cell.value) ? start_ : cell.value;  // NaN = never observed
-      cell.value = std::clamp(base + delta, lo_, hi_);
+    // (Copies of the members: as far as the compiler knows, a cell's stamp and value may alias them,
+    // which would reload them after every cell written.)
+    const std::uint32_t scan = scan_;
+    const float start = start_, lo = lo_, hi = hi_;
+    auto update = [scan, start, lo, hi, &updates](LogOddsCell& cell, float delta) __attribute__((always_inline)) {
+      if (cell.stamp == scan) return;
+      cell.stamp = scan;
+      const float base = std::isnan(cell.value) ? start : cell.value;  // NaN = never observed
+      cell.value = std::clamp(base + delta, lo, hi);
       ++updates;
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), hit_);
     for (const Beam& b : beams)
-      forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellCached(c, cursor), miss_); });
+      forEachCleared(grid_, origin, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss_); });
     return updates;
   }
 
@@ -262,7 +350,7 @@ class CountMap final : public OccupancyMap {
     std::vector<HitMiss*>& touched = touched_[static_cast<std::size_t>(part)].cells;
     TiledGrid<HitMiss>::Cursor cursor;
     touched.clear();
-    auto update = [&touched](HitMiss& h, bool hit) {
+    auto update = [&touched](HitMiss& h, bool hit) __attribute__((always_inline)) {
       if (h.misses & kMarker) return;
       std::uint32_t& v = hit ? h.hits : h.misses;
       v += (v < kMarker - 1) ? 1u : 0u;
@@ -271,7 +359,8 @@ class CountMap final : public OccupancyMap {
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), true);
-    for (const Beam& b : beams) forEachCleared(origin, b, clear_stretches_, slab, [&](CellIndex c) { update(grid_.cellCached(c, cursor), false); });
+    for (const Beam& b : beams)
+      forEachCleared(grid_, origin, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), false); });
     for (HitMiss* h : touched) h->misses &= ~kMarker;
     return touched.size();
   }
@@ -417,7 +506,6 @@ class TsdfMap final : public OccupancyMap {
     // slab holds it, in that order, so a split scan averages exactly as an unsplit one.
     std::uint64_t updates = 0;
     const float t = trunc_cells_;
-    TiledGrid<TsdfCell>::Cursor cursor;
     for (const Beam& b : beams) {
       const Eigen::Vector2d d = b.end - origin;
       const double len = d.norm();
@@ -426,10 +514,11 @@ class TsdfMap final : public OccupancyMap {
       // the projection is affine in the cell index, so it costs two multiply-adds per cell.
       const float dir_x = static_cast<float>(d.x() / len), dir_y = static_cast<float>(d.y() / len);
       const float offset = static_cast<float>(b.range_cells - ((0.5 - origin.x()) * d.x() + (0.5 - origin.y()) * d.y()) / len);
-      auto update = [&](CellIndex c) {
+      auto update = [&](auto& at) __attribute__((always_inline)) {
+        const CellIndex c = at.cell();
         const float sdf =
             b.hit ? std::clamp(offset - (dir_x * static_cast<float>(c.x) + dir_y * static_cast<float>(c.y)), -t, t) : t;
-        TsdfCell& v = grid_.cellCached(c, cursor);
+        TsdfCell& v = at.ref();
         // Free-space carving (sdf at the truncation) leaves cells near a surface (|sdf| < t) alone:
         // beams grazing a wall clip the corners of the cells the wall passes through, and averaging
         // +t into them would move the zero crossing off the wall.
@@ -449,8 +538,11 @@ class TsdfMap final : public OccupancyMap {
         ++updates;
       };
       // For a return, b.end already lies `truncation` behind the surface (see insert()).
-      traceInSlab(origin, b.end, slab.axis, slab.lo, slab.hi, update);
-      if (slab.contains(cellOfCoords(b.end))) update(cellOfCoords(b.end));
+      traceInSlab(grid_, origin, b.end, slab.axis, slab.lo, slab.hi, update);
+      if (slab.contains(cellOfCoords(b.end))) {
+        CellAt<TsdfCell> at(grid_, cellOfCoords(b.end));
+        update(at);
+      }
     }
     return updates;
   }

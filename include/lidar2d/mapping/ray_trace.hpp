@@ -4,6 +4,7 @@
 /// ray tracing"): every cell the segment passes through is visited exactly once, in order.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -40,6 +41,12 @@ class RayWalk {
     t_max_y_ = dy > 0 ? (y_ + 1 - start.y()) * t_delta_y_ : (dy < 0 ? (start.y() - y_) * t_delta_y_ : kInf);
     left_x_ = std::abs(ex - x_);
     left_y_ = std::abs(ey - y_);
+    // An axis with no step left never steps again: its next crossing is put at infinity, so that
+    // `step` needs one comparison. A crossing still to come stays finite (a denormal extent
+    // overflows t_delta to infinity; the largest finite value keeps the comparison's outcome).
+    constexpr double kMax = std::numeric_limits<double>::max();
+    t_max_x_ = left_x_ == 0 ? kInf : std::min(t_max_x_, kMax);
+    t_max_y_ = left_y_ == 0 ? kInf : std::min(t_max_y_, kMax);
   }
   bool done() const { return left_x_ + left_y_ == 0; }
   /// Steps left to the end cell.
@@ -47,17 +54,22 @@ class RayWalk {
   std::int32_t x() const { return x_; }
   std::int32_t y() const { return y_; }
   CellIndex cell() const { return CellIndex{x_, y_}; }
-  /// Moves to the next cell. Precondition: !done().
-  [[gnu::always_inline]] void step() {
-    if (left_y_ == 0 || (left_x_ > 0 && t_max_x_ < t_max_y_)) {
+  /// Direction of the walk's x and y steps (+1 or -1).
+  std::int32_t stepX() const { return step_x_; }
+  std::int32_t stepY() const { return step_y_; }
+  /// Moves to the next cell; returns true when the step was along x. Precondition: !done().
+  [[gnu::always_inline]] bool step() {
+    // x when its crossing comes first, or y has arrived (its crossing is at infinity); ties go to
+    // y. Once x has arrived (its crossing at infinity) y is forced.
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    if (t_max_x_ < t_max_y_) {
       x_ += step_x_;
-      t_max_x_ += t_delta_x_;
-      --left_x_;
-    } else {
-      y_ += step_y_;
-      t_max_y_ += t_delta_y_;
-      --left_y_;
+      t_max_x_ = --left_x_ == 0 ? kInf : t_max_x_ + t_delta_x_;
+      return true;
     }
+    y_ += step_y_;
+    t_max_y_ = --left_y_ == 0 ? kInf : t_max_y_ + t_delta_y_;
+    return false;
   }
 
  private:
