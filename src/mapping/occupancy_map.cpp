@@ -238,34 +238,35 @@ CellBox unite(CellBox a, const CellBox& b) {
 
 // ---------------------------------------------------------------------------------------------
 // Log-odds: one float per cell holding the (clamped) log-odds, or the classic integer score.
+// A cell never observed holds the start value (so that an update needs no test for it) and stamp 0.
 struct LogOddsCell {
-  float value = std::numeric_limits<float>::quiet_NaN();  // NaN: never observed
-  std::uint32_t stamp = 0;                                 // last scan that updated the cell
+  float value = 0.0f;
+  std::uint32_t stamp = 0;  // last scan that updated the cell; 0: never observed
 };
 
 class LogOddsMap final : public OccupancyMap {
  public:
-  explicit LogOddsMap(const MapOptions& o) : OccupancyMap(o), grid_(LogOddsCell{}, o.insert.cell_budget) {
+  explicit LogOddsMap(const MapOptions& o)
+      : OccupancyMap(o), grid_(LogOddsCell{o.logodds.classic_integer ? 50.0f : 0.0f, 0}, o.insert.cell_budget) {
     const auto& l = o.logodds;
     if (l.classic_integer) {
       hit_ = 2.0f;
       miss_ = -1.0f;
       lo_ = 1.0f;
       hi_ = 100.0f;
-      start_ = 50.0f;
     } else {
       hit_ = static_cast<float>(logit(l.hit_probability));
       miss_ = static_cast<float>(logit(l.miss_probability));
       lo_ = static_cast<float>(logit(l.min_probability));
       hi_ = static_cast<float>(logit(l.max_probability));
-      start_ = 0.0f;
     }
   }
   MapModel model() const override { return MapModel::kLogOdds; }
 
   std::optional<double> probability(CellIndex c) const override {
-    const float v = grid_.get(c).value;
-    if (std::isnan(v)) return std::nullopt;
+    const LogOddsCell& cell = grid_.get(c);
+    if (cell.stamp == 0) return std::nullopt;
+    const float v = cell.value;
     if (options_.logodds.classic_integer) return v / 100.0;
     return 1.0 / (1.0 + std::exp(-static_cast<double>(v)));
   }
@@ -281,7 +282,7 @@ class LogOddsMap final : public OccupancyMap {
  protected:
   void beginScan(const CellBox& box) override {
     grid_.reserve(box);
-    ++scan_;
+    if (++scan_ == 0) scan_ = 1;  // (stamp 0 means never observed)
   }
   std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams, const Slab& slab,
                             int /*part*/) override {
@@ -294,25 +295,24 @@ class LogOddsMap final : public OccupancyMap {
     // (Copies of the members: as far as the compiler knows, a cell's stamp and value may alias them,
     // which would reload them after every cell written.)
     const std::uint32_t scan = scan_;
-    const float start = start_, lo = lo_, hi = hi_;
-    auto update = [scan, start, lo, hi, &updates](LogOddsCell& cell, float delta) __attribute__((always_inline)) {
+    const float lo = lo_, hi = hi_, hit = hit_, miss = miss_;
+    auto update = [scan, lo, hi, &updates](LogOddsCell& cell, float delta) __attribute__((always_inline)) {
       if (cell.stamp == scan) return;
       cell.stamp = scan;
-      const float base = std::isnan(cell.value) ? start : cell.value;  // NaN = never observed
-      cell.value = std::clamp(base + delta, lo, hi);
+      cell.value = std::clamp(cell.value + delta, lo, hi);
       ++updates;
     };
     for (const Beam& b : beams)
-      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), hit_);
+      if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), hit);
     for (const Beam& b : beams)
-      forEachCleared(grid_, origin, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss_); });
+      forEachCleared(grid_, origin, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss); });
     return updates;
   }
 
  private:
   TiledGrid<LogOddsCell> grid_;
   std::uint32_t scan_ = 0;  // number of the scan being inserted (stamps start at 0 = none)
-  float hit_, miss_, lo_, hi_, start_;
+  float hit_, miss_, lo_, hi_;
 };
 
 // ---------------------------------------------------------------------------------------------
