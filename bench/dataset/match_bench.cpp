@@ -185,11 +185,11 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
       times.push_back(f->time);
       points.push_back(f->scan.toPoints(f->T_robot_laser));
     }
-    auto frameAt = [&](double t) -> std::optional<std::size_t> {
-      const auto it = std::lower_bound(times.begin(), times.end(), t - 1e-3);
-      if (it == times.end() || std::abs(*it - t) > 1e-3) return std::nullopt;
-      return static_cast<std::size_t>(it - times.begin());
-    };
+    // The scan nearest in time, within 1 ms. (The intel bag has bursts of scans logged under 1 ms
+    // apart while the robot turns about 5 deg per scan: the first scan within the tolerance, as
+    // this once took, is then the wrong one.)
+    const eval::TimeIndex time_index(times);
+    auto frameAt = [&](double t) { return time_index.nearest(t, 1e-3); };
     struct Case {
       std::size_t target, source;
       SE2 truth;
