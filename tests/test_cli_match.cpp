@@ -118,6 +118,20 @@ TEST(CliMatch, CorrelativeThenIcpFromIdentity) {
   EXPECT_NE(header.find("method=corr then p2l"), std::string::npos) << header;
 }
 
+TEST(CliMatch, PointPairsOptionMatchesAndIsRecorded) {
+  TempDir tmp;
+  const std::string log = (tmp / "sim.log").string();
+  ASSERT_EQ(runCli({"simulate", "--world", "office", "-o", log, "--scans", "20", "--beams", "181", "--seed", "3"}).exit_code, 0);
+  const std::string out = (tmp / "m.txt").string();
+  const auto r = runCli({"match", log, "--method", "p2l", "--point-pairs", "0.5", "-o", out, "--eval"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_GE(valueAfter(r.out, "success rate: "), 95.0) << r.out;
+  std::ifstream in(out);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_NE(header.find("point_pairs=0.5"), std::string::npos) << header;
+}
+
 TEST(CliMatch, IntelLogWithItsRawOdometry) {
   LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
   TempDir tmp;
@@ -159,8 +173,15 @@ TEST(CliMatch, BadInputExitsOneWithoutOutput) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("at least 2"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out));
-  // Unwritable output.
+  // An out-of-domain matcher option.
   test::writeFile(notruth, roomLog(3));
+  for (const char* w : {"-1", "nan"}) {
+    r = runCli({"match", notruth, "--point-pairs", w, "-o", out});
+    EXPECT_EQ(r.exit_code, 1) << w;
+    EXPECT_NE(r.err.find("point_pair_weight"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out));
+  }
+  // Unwritable output.
   r = runCli({"match", notruth, "-o", (tmp / "no" / "such" / "dir.txt").string()});
   EXPECT_EQ(r.exit_code, 1);
 }

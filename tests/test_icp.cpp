@@ -262,6 +262,74 @@ TEST_P(IcpSolvers, CorridorFreeDirectionIsTheSmallestEigenvalueOfH) {
   EXPECT_FALSE(std::isfinite(r.covariance(0, 0)));
 }
 
+// A corridor 6 m wide (walls at y = +-3, points every 5 cm) with four isolated posts inside it: the
+// walls give line pairs, which leave x free; the posts have no line. Point-to-line drops them and
+// keeps x where the guess put it; with point pairs (IcpOptions::point_pair_weight) the posts pin x.
+TEST_P(IcpSolvers, PointPairsPinTheCorridorWithPosts) {
+  Points2 target;
+  for (double x = -10.0; x <= 10.0; x += 0.05) {
+    target.emplace_back(x, 3.0);
+    target.emplace_back(x, -3.0);
+  }
+  for (const Eigen::Vector2d& post : {Eigen::Vector2d(2.0, 0.5), Eigen::Vector2d(-3.0, -0.4),
+                                      Eigen::Vector2d(5.2, 0.2), Eigen::Vector2d(-6.5, 1.1)})
+    target.push_back(post);
+  const SE2 delta(0.3, 0.02, 1 * kDeg);
+  Points2 source;
+  for (const auto& p : target) source.push_back(delta.inverse() * p);
+  MatcherOptions o;
+  o.method = Method::kP2L;
+  o.solver = GetParam();
+  o.icp.trim_keep_fraction = 1.0;  // (the posts' pairs start as the farthest: trimming would drop them)
+  const Result plain = matchScans(target, source, SE2(), o);
+  ASSERT_TRUE(plain.T_target_source.isFinite()) << plain.message;
+  EXPECT_GT(std::abs(plain.T_target_source.x() - delta.x()), 0.2) << "point-to-line alone should not pin x";
+  o.icp.point_pair_weight = 0.5;
+  const Result pinned = matchScans(target, source, SE2(), o);
+  ASSERT_TRUE(pinned.converged) << toString(pinned.status) << " " << pinned.message;
+  EXPECT_TRUE(IsNearPose(pinned.T_target_source, delta, 1e-4, 0.001)) << pinned.T_target_source.vector().transpose();
+  // Four posts, two residuals each, on top of the wall pairs.
+  EXPECT_EQ(pinned.num_inliers, plain.num_inliers + 4);
+  EXPECT_TRUE(std::isfinite(pinned.covariance(0, 0)));
+}
+
+TEST(PointPairs, OutOfDomainWeightIsInvalidInput) {
+  const Points2 pts = office().pointsAt(office().routePoses(1).front());
+  MatcherOptions o;
+  o.method = Method::kP2L;
+  for (const double w : {-0.5, kNaN, std::numeric_limits<double>::infinity()}) {
+    o.icp.point_pair_weight = w;
+    const Result r = matchScans(pts, pts, SE2(), o);
+    EXPECT_EQ(r.status, Status::kInvalidInput) << w;
+    EXPECT_FALSE(r.converged);
+    EXPECT_NE(r.message.find("point_pair_weight"), std::string::npos) << r.message;
+  }
+}
+
+// Point pairs on: both solvers minimise the same cost (two residuals per point pair).
+TEST(PointPairs, GaussNewtonAndCeresAgree) {
+  for (const SE2& A : office().routePoses(4)) {
+    const SE2 delta(0.15, -0.1, 4 * kDeg);
+    const Points2 target = office().pointsAt(A);
+    const Points2 source = office().pointsAt(A * delta);
+    MatcherOptions o;
+    o.method = Method::kP2L;
+    o.icp.trim_keep_fraction = 1.0;  // (see IcpMethods.GaussNewtonAndCeresAgree)
+    o.icp.point_pair_weight = 0.5;
+    o.solver = Solver::kGaussNewton;
+    const Result gn = matchScans(target, source, SE2(), o);
+    o.solver = Solver::kCeres;
+    const Result ceres = matchScans(target, source, SE2(), o);
+    ASSERT_TRUE(gn.converged && ceres.converged);
+    EXPECT_TRUE(IsNearPose(gn.T_target_source, ceres.T_target_source, 1e-4, 0.005));
+    // (A point pair joins two scans' samples of a corner or clutter, which differ by up to the beam
+    // spacing: the pose moves by a millimetre or so, as point-to-point's does.)
+    EXPECT_TRUE(IsNearPose(gn.T_target_source, delta, 5e-3, 0.1)) << gn.T_target_source.vector().transpose();
+    EXPECT_NEAR(gn.final_cost, ceres.final_cost, 1e-3 * gn.final_cost + 1e-9);
+    EXPECT_EQ(gn.num_inliers, ceres.num_inliers);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Solvers, IcpSolvers, ::testing::Values(Solver::kGaussNewton, Solver::kCeres),
                          [](const auto& info) { return std::string(toString(info.param)); });
 

@@ -93,9 +93,12 @@ void run(const MatchArgs& a) {
   if (a.then && a.options.method == registration::Method::kCorrelative) first_options.corr.refine = false;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   io::AtomicFile out(a.output);
-  out.stream() << fmt::format("# lidar2d match: method={}{} solver={} init={}\n", registration::toString(a.options.method),
+  out.stream() << fmt::format("# lidar2d match: method={}{} solver={} init={}{}\n", registration::toString(a.options.method),
                               a.then ? std::string(" then ") + registration::toString(*a.then) : std::string(),
-                              registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity");
+                              registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity",
+                              a.options.icp.point_pair_weight > 0
+                                  ? fmt::format(" point_pairs={}", a.options.icp.point_pair_weight)
+                                  : std::string());
   out.stream() << "# t_prev t_cur dx dy dtheta converged iterations\n";
 
   // Pairs are independent, so they are matched in chunks of frames, each chunk's targets prepared
@@ -236,6 +239,10 @@ void addMatchCommand(CLI::App& app) {
   sub->add_option("--max-dist", a->options.icp.max_correspondence_dist_m, "ICP: max correspondence distance [m]")
       ->capture_default_str();
   sub->add_option("--max-iterations", a->options.icp.max_iterations, "ICP: max iterations")->capture_default_str();
+  sub->add_option("--point-pairs", a->options.icp.point_pair_weight,
+                  "p2l: pair target points with no line (corners, clutter) point to point, with this weight; "
+                  "pins corridors, costs time (BENCHMARK.md); 0: none, as Censi's PL-ICP")
+      ->capture_default_str();
   sub->add_flag("--eval", a->eval,
                 "compare with the log's truth: success rate (< 10 cm and < 2 deg), median errors, ms per pair");
   sub->add_option("--threads", a->threads, "threads matching pairs (default: all cores)")->capture_default_str();

@@ -32,6 +32,9 @@ int main(int argc, char** argv) {
   match->add_option("--max-dist", match_options.icp.max_correspondence_dist_m, "ICP max correspondence distance [m]")->capture_default_str();
   match->add_option("--trim", match_options.icp.trim_keep_fraction, "ICP trim keep fraction")->capture_default_str();
   match->add_option("--loss-scale", match_options.icp.loss.scale_m, "robust loss scale [m]")->capture_default_str();
+  match->add_option("--point-pairs", match_options.icp.point_pair_weight,
+                    "point-to-line: weight of point pairs for target points with no line (0: none)")
+      ->capture_default_str();
   match->add_option("--loss", match_options.icp.loss.kind, "robust loss: 0 none, 1 huber, 2 cauchy")->capture_default_str();
   match->add_option("--normal-k", match_options.icp.normal_neighbors, "points per line fit")->capture_default_str();
   match->add_option("--flatness", match_options.icp.max_line_flatness, "max line flatness")->capture_default_str();

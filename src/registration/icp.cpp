@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 #include "internal/bearing_index.hpp"
@@ -92,6 +93,7 @@ std::string IcpOptions::check() const {
   if (!(max_line_flatness >= 0.0 && max_line_flatness <= 1.0)) return "max_line_flatness must be in [0, 1]";
   if (ceres_max_inner_iterations < 1) return "ceres_max_inner_iterations must be >= 1";
   if (gn_inner_iterations < 1) return "gn_inner_iterations must be >= 1";
+  if (!(std::isfinite(point_pair_weight) && point_pair_weight >= 0.0)) return "point_pair_weight must be finite and >= 0";
   return {};
 }
 
@@ -241,9 +243,13 @@ struct Linearisation {
 class Icp {
  public:
   Icp(const IcpTarget& target, const Points2& source, const IcpOptions& o)
-      : tgt_(target.impl()), src_(source), o_(o), p2l_(o.metric == IcpMetric::kPointToLine) {
+      : tgt_(target.impl()),
+        src_(source),
+        o_(o),
+        p2l_(o.metric == IcpMetric::kPointToLine),
+        point_w_(p2l_ ? o.point_pair_weight : 0.0) {
     pairs_.reserve(src_.size());
-    if (p2l_) lines_.reserve(src_.size());
+    if (p2l_) lines_.reserve(2 * src_.size());
   }
 
   // Pairs each transformed source point with its nearest target point; rejects by distance (and,
@@ -276,9 +282,13 @@ class Icp {
       double key = d2;
       if (p2l_) {
         const Eigen::Vector2d& n = tn[j];
-        if (n.x() == 0.0 && n.y() == 0.0) continue;
-        const double r = n.dot(q - tp[j]);
-        key = r * r;
+        if (n.x() == 0.0 && n.y() == 0.0) {
+          if (point_w_ == 0.0) continue;
+          key = point_w_ * point_w_ * d2;  // (the pair's two residuals, squared and summed)
+        } else {
+          const double r = n.dot(q - tp[j]);
+          key = r * r;
+        }
       }
       pairs_.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j), key});
     }
@@ -299,6 +309,11 @@ class Icp {
         const Eigen::Vector2d& p = src_[pr.src];
         const Eigen::Vector2d& n = tn[pr.tgt];
         const Eigen::Vector2d& m = tp[pr.tgt];
+        if (n.x() == 0.0 && n.y() == 0.0) {  // a point pair: its x and y offsets, weighted
+          lines_.push_back({p.x(), p.y(), m.x(), m.y(), point_w_, 0.0});
+          lines_.push_back({p.x(), p.y(), m.x(), m.y(), 0.0, point_w_});
+          continue;
+        }
         lines_.push_back({p.x(), p.y(), m.x(), m.y(), n.x(), n.y()});
       }
     }
@@ -387,12 +402,14 @@ class Icp {
   const std::vector<Pair>& pairs() const { return pairs_; }
   const Points2& source() const { return src_; }
   const IcpTarget::Impl& target() const { return tgt_; }
+  const IcpOptions& options() const { return o_; }
 
  private:
   const IcpTarget::Impl& tgt_;  // (the search structures themselves: the search inlines)
   const Points2& src_;
   const IcpOptions& o_;
   const bool p2l_;
+  const double point_w_;  // point-to-line: weight of the point pairs (0: none)
   std::vector<Pair> pairs_;
   // A pair's point-to-line data, gathered once per search for the linearisations that follow:
   // source point p, target point m and the normal n of its line; r(T) = n^T (T p - m).
@@ -622,7 +639,8 @@ std::unique_ptr<ceres::LossFunction> makeLoss(const RobustLoss& loss) {
 template <class Cost>
 class CeresPairs {
  public:
-  explicit CeresPairs(std::size_t n) : costs_(n) {}
+  CeresPairs(std::size_t n, const IcpOptions& o)
+      : costs_(n), costs_y_(std::is_same_v<Cost, PointToLineCost> && o.point_pair_weight > 0.0 ? n : 0) {}
   // The problem of the current pairs of `icp`, over the pose block x.
   std::unique_ptr<ceres::Problem> problem(const Icp& icp, ceres::LossFunction* loss, double* x) {
     ceres::Problem::Options po;
@@ -635,7 +653,19 @@ class CeresPairs {
     const Points2& tn = icp.target().normals;
     for (const Pair& pr : icp.pairs()) {
       Cost& c = costs_[pr.src];
-      c.set(icp.source()[pr.src], tp[pr.tgt], tn[pr.tgt]);
+      const Eigen::Vector2d& n = tn[pr.tgt];
+      if constexpr (std::is_same_v<Cost, PointToLineCost>) {
+        if (n.x() == 0.0 && n.y() == 0.0) {  // a point pair (IcpOptions::point_pair_weight)
+          const double w = icp.options().point_pair_weight;
+          c.set(icp.source()[pr.src], tp[pr.tgt], Eigen::Vector2d(w, 0.0));
+          problem->AddResidualBlock(&c, loss, x);
+          Cost& cy = costs_y_[pr.src];
+          cy.set(icp.source()[pr.src], tp[pr.tgt], Eigen::Vector2d(0.0, w));
+          problem->AddResidualBlock(&cy, loss, x);
+          continue;
+        }
+      }
+      c.set(icp.source()[pr.src], tp[pr.tgt], n);
       problem->AddResidualBlock(&c, loss, x);
     }
     return problem;
@@ -643,6 +673,7 @@ class CeresPairs {
 
  private:
   std::vector<Cost> costs_;  // (never resized while a problem holds pointers into it)
+  std::vector<Cost> costs_y_;  // point-to-line's point pairs: their y residuals (allocated when used)
 };
 
 // Outer loop of correspondence searches; for each set of pairs Ceres minimises the robust cost
@@ -652,7 +683,7 @@ Result runCeresWith(Icp& icp, const SE2& init, const IcpOptions& o) {
   const std::unique_ptr<ceres::LossFunction> loss = makeLoss(o.loss);
   const ceres::Solver::Options so = internal::poseSolverOptions(o.ceres_max_inner_iterations, 1e-12, 1e-10);
   double x[3] = {init.x(), init.y(), init.theta()};
-  CeresPairs<Cost> pairs(icp.source().size());
+  CeresPairs<Cost> pairs(icp.source().size(), o);
   int it = 0;
   bool converged = false;
   PairSetHistory history;

@@ -13,7 +13,10 @@
 ///   point-to-point: sum_i rho(|T p_i - q_i|^2)
 ///   point-to-line:  sum_i rho((n_i . (T p_i - q_i))^2)
 /// with q_i the nearest target point, n_i the unit normal of the line fitted to q_i's neighbours
-/// (precomputed per target point) and rho the robust loss. It stops when the increment of the pose
+/// (precomputed per target point) and rho the robust loss. Point-to-line drops the pairs whose
+/// target point has no line (a corner, clutter), as Censi's does, unless `point_pair_weight` > 0:
+/// then such a pair adds w (x, y) of T p_i - q_i as two residuals (each with the robust loss), which
+/// pins the direction along a corridor's walls that the line pairs leave free (BENCHMARK.md). It stops when the increment of the pose
 /// falls below both `translation_eps_m` and `rotation_eps_rad`, or when a search returns a set of
 /// pairs already solved in one of the last 8 iterations (a fixed point of the correspondences, or a
 /// cycle through a few sets, where searching on cannot settle further); both count as converged.
@@ -102,6 +105,10 @@ struct IcpOptions {
                                     ///< and is not used by point-to-line, in [0, 1]
   NeighborSearch neighbor_search = NeighborSearch::kBearingWalk;  ///< nearest-neighbour structure of the target
                                                                   ///< (read by IcpTarget)
+  /// Point-to-line: weight w of the point-to-point pairs of target points with no line (see the
+  /// file comment), >= 0; 0 drops those pairs (Censi's point-to-line). The residuals are w times
+  /// the x and y offsets [m], so the robust loss takes effect at scale_m / w of offset.
+  double point_pair_weight = 0.0;
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
 
