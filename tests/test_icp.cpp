@@ -231,8 +231,9 @@ TEST_P(IcpMethods, GaussNewtonAndCeresAgree) {
     // Point-to-line lands on the transform (point pairs join two scans' samples of a corner or
     // clutter, which differ by up to the beam spacing: the pose moves by a millimetre or so;
     // untrimmed point-to-point moves by more, so it is not checked here).
-    if (o.method == Method::kP2L)
+    if (o.method == Method::kP2L) {
       EXPECT_TRUE(IsNearPose(gn.T_target_source, delta, 5e-3, 0.1)) << gn.T_target_source.vector().transpose();
+    }
     EXPECT_NEAR(gn.final_cost, ceres.final_cost, 1e-3 * gn.final_cost + 1e-9);
     EXPECT_LT((gn.information - ceres.information).norm(), 0.02 * gn.information.norm())
         << gn.information << "\n\n" << ceres.information;
