@@ -40,8 +40,8 @@ template <typename Cell>
 class GridWalk {
  public:
   using Grid = TiledGrid<Cell>;
-  [[gnu::always_inline]] GridWalk(Grid& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end)
-      : walk_(start, end),
+  [[gnu::always_inline]] GridWalk(Grid& grid, const RayWalk& walk)
+      : walk_(walk),
         grid_(grid),
         index_(indexOf(walk_.cell())),
         step_x_(walk_.stepX()),
@@ -105,10 +105,9 @@ class CellAt {
 // (Jumping straight to the entry would recompute t_max differently from the walk's running sums and
 // could pick the other cell at a near-corner crossing.)
 template <int kAxis, typename Cell, typename Far, typename Near>
-[[gnu::always_inline]] inline void traceInSlabAlong(TiledGrid<Cell>& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end,
-                                                    std::int32_t lo, std::int32_t hi, std::int32_t near_steps, Far&& on_far,
-                                                    Near&& on_near) {
-  GridWalk<Cell> walk(grid, start, end);
+[[gnu::always_inline]] inline void traceInSlabAlong(TiledGrid<Cell>& grid, const RayWalk& ray, std::int32_t lo,
+                                                    std::int32_t hi, std::int32_t near_steps, Far&& on_far, Near&& on_near) {
+  GridWalk<Cell> walk(grid, ray);
   // (kAxis a template parameter: the slab test then reads one coordinate without a branch.)
   auto inside = [&] {
     const std::int32_t v = kAxis == 0 ? walk.x() : walk.y();
@@ -127,11 +126,10 @@ template <int kAxis, typename Cell, typename Far, typename Near>
 // As above; the cells at most `near_steps` (>= 0) steps before the end cell go to on_near, the
 // others to on_far (so that a test only the last cells need is not made for every cell).
 template <typename Cell, typename Far, typename Near>
-[[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end,
-                                               int axis, std::int32_t lo, std::int32_t hi, std::int32_t near_steps,
-                                               Far&& on_far, Near&& on_near) {
+[[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const RayWalk& ray, int axis, std::int32_t lo,
+                                               std::int32_t hi, std::int32_t near_steps, Far&& on_far, Near&& on_near) {
   if (axis < 0) {
-    GridWalk<Cell> walk(grid, start, end);  // traceRay
+    GridWalk<Cell> walk(grid, ray);  // traceRay
     while (walk.stepsLeft() > near_steps) {  // (near_steps >= 0: not done)
       on_far(walk);
       walk.step();
@@ -141,16 +139,16 @@ template <typename Cell, typename Far, typename Near>
       walk.step();
     }
   } else if (axis == 0) {
-    traceInSlabAlong<0>(grid, start, end, lo, hi, near_steps, on_far, on_near);
+    traceInSlabAlong<0>(grid, ray, lo, hi, near_steps, on_far, on_near);
   } else {
-    traceInSlabAlong<1>(grid, start, end, lo, hi, near_steps, on_far, on_near);
+    traceInSlabAlong<1>(grid, ray, lo, hi, near_steps, on_far, on_near);
   }
 }
 
 template <typename Cell, typename F>
-[[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const Eigen::Vector2d& start, const Eigen::Vector2d& end,
-                                               int axis, std::int32_t lo, std::int32_t hi, F&& on_pass) {
-  traceInSlab(grid, start, end, axis, lo, hi, 0, on_pass, on_pass);
+[[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const RayWalk& ray, int axis, std::int32_t lo,
+                                               std::int32_t hi, F&& on_pass) {
+  traceInSlab(grid, ray, axis, lo, hi, 0, on_pass, on_pass);
 }
 
 // The cells a beam clears (log-odds, count), restricted to `slab`: each clearing stretch's cells
@@ -160,7 +158,7 @@ template <typename Cell, typename F>
 // GridWalk or a CellAt (see GridWalk).
 // (Templated on the map's protected Beam and Slab types, which it cannot name.)
 template <typename Cell, typename BeamT, typename StretchT, typename SlabT, typename F>
-[[gnu::always_inline]] inline void forEachCleared(TiledGrid<Cell>& grid, const Eigen::Vector2d& origin, const BeamT& b,
+[[gnu::always_inline]] inline void forEachCleared(TiledGrid<Cell>& grid, const BeamT& b,
                                                   const std::vector<StretchT>& stretches, const SlabT& slab, F&& on_clear) {
   constexpr double kMargin = 1e-6;  // see below
   auto crosses = [](const auto& g, CellIndex c) __attribute__((always_inline)) {
@@ -186,9 +184,9 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
         }
         on_clear(at);
       };
-      traceInSlab(grid, origin, b.end, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
+      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
     } else {
-      traceInSlab(grid, origin, b.end, slab.axis, slab.lo, slab.hi, on_clear);
+      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, on_clear);
     }
     single(cellOfCoords(b.end), on_clear);  // a hit's cell keeps its hit (stamp)
     return;
@@ -199,16 +197,14 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
   // the cells on both sides through rounding [cells].
   for (std::size_t k = b.first_clear; k < b.first_clear + b.num_clear; ++k) {
     const auto& s = stretches[k];
-    const Eigen::Vector2d from = origin + b.dir * s.from;
-    const Eigen::Vector2d to = origin + b.dir * s.to;
     if (s.lines != 0) {
       if (s.lines == 1) {  // the common case: only the beam's own surface
         const auto& g = b.guards[0];
         auto guarded = [&](auto& at) __attribute__((always_inline)) {
           if (!crosses(g, at.cell())) on_clear(at);
         };
-        traceInSlab(grid, from, to, slab.axis, slab.lo, slab.hi, guarded);
-        single(cellOfCoords(to), guarded);
+        traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, guarded);
+        single(s.to_cell, guarded);
         continue;
       }
       auto guarded = [&](auto& at) __attribute__((always_inline)) {
@@ -217,11 +213,11 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
           if ((s.lines & (1u << l)) && crosses(b.guards[l], c)) return;
         on_clear(at);
       };
-      traceInSlab(grid, from, to, slab.axis, slab.lo, slab.hi, guarded);
-      single(cellOfCoords(to), guarded);
+      traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, guarded);
+      single(s.to_cell, guarded);
     } else {
-      traceInSlab(grid, from, to, slab.axis, slab.lo, slab.hi, on_clear);
-      single(cellOfCoords(to), on_clear);
+      traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, on_clear);
+      single(s.to_cell, on_clear);
     }
   }
 }
@@ -284,7 +280,7 @@ class LogOddsMap final : public OccupancyMap {
     grid_.reserve(box);
     if (++scan_ == 0) scan_ = 1;  // (stamp 0 means never observed)
   }
-  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams, const Slab& slab,
+  std::uint64_t insertBeams(const Eigen::Vector2d& /*origin*/, const std::vector<Beam>& beams, const Slab& slab,
                             int /*part*/) override {
     // Each cell is updated at most once per scan, hits first (as Cartographer's update marker,
     // Hess et al. 2016, section IV-B): a wall cell hit by one beam is not cleared by another beam of
@@ -305,7 +301,7 @@ class LogOddsMap final : public OccupancyMap {
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), hit);
     for (const Beam& b : beams)
-      forEachCleared(grid_, origin, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss); });
+      forEachCleared(grid_, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss); });
     return updates;
   }
 
@@ -342,7 +338,7 @@ class CountMap final : public OccupancyMap {
 
  protected:
   void beginScan(const CellBox& box) override { grid_.reserve(box); }
-  std::uint64_t insertBeams(const Eigen::Vector2d& origin, const std::vector<Beam>& beams, const Slab& slab,
+  std::uint64_t insertBeams(const Eigen::Vector2d& /*origin*/, const std::vector<Beam>& beams, const Slab& slab,
                             int part) override {
     // At most one update per cell per scan, hits first, as for log-odds; the top bit of `misses`
     // marks the cells updated in this scan. Counts saturate below that bit. Each part clears the
@@ -360,7 +356,7 @@ class CountMap final : public OccupancyMap {
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), true);
     for (const Beam& b : beams)
-      forEachCleared(grid_, origin, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), false); });
+      forEachCleared(grid_, b, clear_stretches_, slab, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), false); });
     for (HitMiss* h : touched) h->misses &= ~kMarker;
     return touched.size();
   }
@@ -538,7 +534,7 @@ class TsdfMap final : public OccupancyMap {
         ++updates;
       };
       // For a return, b.end already lies `truncation` behind the surface (see insert()).
-      traceInSlab(grid_, origin, b.end, slab.axis, slab.lo, slab.hi, update);
+      traceInSlab(grid_, b.walk, slab.axis, slab.lo, slab.hi, update);
       if (slab.contains(cellOfCoords(b.end))) {
         CellAt<TsdfCell> at(grid_, cellOfCoords(b.end));
         update(at);
@@ -895,7 +891,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
     const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
     const Eigen::Vector2d end = origin + dir * (len * inv_res);
     grow(end);
-    Beam beam{end, dir, 0, 0, true, false, 0.0, 0, Eigen::Vector2d::Zero(), {}, r * inv_res, hit};
+    Beam beam{end, RayWalk(origin, end), dir, 0, 0, true, false, 0.0, 0, Eigen::Vector2d::Zero(), {}, r * inv_res, hit};
     if (guard_max > 0) {
       const Eigen::Vector2d u(ca, sa);
       const double clear_len = hit ? r : len;
@@ -955,7 +951,16 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
             continue;
           }
           if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(out.clear_stretches_.size());
-          out.clear_stretches_.push_back({from * inv_res, to * inv_res, mask});
+          out.clear_stretches_.push_back({from * inv_res, to * inv_res, mask, RayWalk(), CellIndex{}});
+        }
+        // The stretches' walks (set up here, on the preparing thread, rather than by the inserting
+        // one; the segments are computed as they always were, so the cells are the same).
+        for (std::size_t k = beam.first_clear; k < beam.first_clear + beam.num_clear; ++k) {
+          ClearStretch& st = out.clear_stretches_[k];
+          const Eigen::Vector2d from = origin + dir * st.from;
+          const Eigen::Vector2d to = origin + dir * st.to;
+          st.walk = RayWalk(from, to);
+          st.to_cell = cellOfCoords(to);
         }
       }
     }

@@ -14,6 +14,7 @@
 
 #include "lidar2d/core/laser_scan.hpp"
 #include "lidar2d/core/se2.hpp"
+#include "lidar2d/mapping/ray_trace.hpp"
 #include "lidar2d/mapping/tiled_grid.hpp"
 
 namespace lidar2d::mapping {
@@ -168,6 +169,7 @@ class OccupancyMap {
   };
   struct Beam {
     Eigen::Vector2d end;  ///< end of the traced segment [cells]
+    RayWalk walk;         ///< the traversal from the origin to `end`, set up by `prepare`
     Eigen::Vector2d dir;  ///< unit direction from the origin [cells]
     /// Stretches of the beam that clear free space (log-odds, count): `clear_stretches_`
     /// [first_clear, first_clear + num_clear), in order. Unused when `clear_to_end`.
@@ -213,6 +215,8 @@ class OccupancyMap {
   struct ClearStretch {
     double from, to;     ///< distances from the origin along the beam [cells]
     std::uint8_t lines;  ///< bit k: spares the cells that Beam::guards[k] passes through (0: clears all)
+    RayWalk walk;        ///< the traversal from `from` to `to`, set up by `prepare`
+    CellIndex to_cell;   ///< the cell of `to` (the walk's end cell)
   };
   std::vector<ClearStretch> clear_stretches_;
 

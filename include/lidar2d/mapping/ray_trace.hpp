@@ -24,6 +24,8 @@ namespace lidar2d::mapping {
 /// visit the same cells in the same order.
 class RayWalk {
  public:
+  /// An empty walk (done, in cell (0, 0)); assign a real one before use.
+  RayWalk() = default;
   // (Forced inline: the walk is the innermost loop of map insertion, and GCC stops inlining it into
   // the large insertion functions otherwise - 10-20% slower, measured with perf.)
   [[gnu::always_inline]] RayWalk(const Eigen::Vector2d& start, const Eigen::Vector2d& end)
@@ -73,10 +75,10 @@ class RayWalk {
   }
 
  private:
-  std::int32_t x_, y_;
-  std::int32_t step_x_, step_y_;
-  double t_delta_x_, t_delta_y_, t_max_x_, t_max_y_;
-  std::int32_t left_x_, left_y_;
+  std::int32_t x_ = 0, y_ = 0;
+  std::int32_t step_x_ = 1, step_y_ = 1;
+  double t_delta_x_ = 0.0, t_delta_y_ = 0.0, t_max_x_ = 0.0, t_max_y_ = 0.0;
+  std::int32_t left_x_ = 0, left_y_ = 0;
 };
 
 /// Visits the cells crossed by the segment from `start` to `end` (see `RayWalk`): `on_pass(CellIndex)`
