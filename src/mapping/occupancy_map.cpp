@@ -98,6 +98,15 @@ class CellAt {
   CellIndex c_;
 };
 
+// Calls visit(CellAt) for cell c when `slab` holds it (the end cells of the traversals).
+// (Templated on the map's protected Slab type, which it cannot name.)
+template <typename Cell, typename SlabT, typename F>
+[[gnu::always_inline]] inline void visitCell(TiledGrid<Cell>& grid, const SlabT& slab, CellIndex c, F&& visit) {
+  if (!slab.contains(c)) return;
+  CellAt<Cell> at(grid, c);
+  visit(at);
+}
+
 // `traceRay` restricted to the cells of `slab`: calls on_pass(walk) for the passed cells (all but
 // the end cell) that lie in the slab, in order. It is the same RayWalk, so the cells and their
 // order are exactly traceRay's; a segment is monotone along each axis, so it is inside the slab for
@@ -165,11 +174,6 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
     const double v = g.nx * c.x + g.ny * c.y + g.offset;
     return v + g.corner_min < -kMargin && v + g.corner_max > kMargin;
   };
-  auto single = [&](CellIndex c, auto&& visit) __attribute__((always_inline)) {
-    if (!slab.contains(c)) return;
-    CellAt<Cell> at(grid, c);
-    visit(at);
-  };
   if (b.clear_to_end) {
     if (b.own_guard) {
       // One walk: a beam meets its own surface line only at its return, so the cells of the beam
@@ -188,7 +192,7 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
     } else {
       traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, on_clear);
     }
-    single(cellOfCoords(b.end), on_clear);  // a hit's cell keeps its hit (stamp)
+    visitCell(grid, slab, cellOfCoords(b.end), on_clear);  // a hit's cell keeps its hit (stamp)
     return;
   }
   // A guarded stretch spares the cells whose open square one of its surface lines passes through:
@@ -204,7 +208,7 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
           if (!crosses(g, at.cell())) on_clear(at);
         };
         traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, guarded);
-        single(s.to_cell, guarded);
+        visitCell(grid, slab, s.to_cell, guarded);
         continue;
       }
       auto guarded = [&](auto& at) __attribute__((always_inline)) {
@@ -214,10 +218,10 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
         on_clear(at);
       };
       traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, guarded);
-      single(s.to_cell, guarded);
+      visitCell(grid, slab, s.to_cell, guarded);
     } else {
       traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, on_clear);
-      single(s.to_cell, on_clear);
+      visitCell(grid, slab, s.to_cell, on_clear);
     }
   }
 }
@@ -535,10 +539,7 @@ class TsdfMap final : public OccupancyMap {
       };
       // For a return, b.end already lies `truncation` behind the surface (see insert()).
       traceInSlab(grid_, b.walk, slab.axis, slab.lo, slab.hi, update);
-      if (slab.contains(cellOfCoords(b.end))) {
-        CellAt<TsdfCell> at(grid_, cellOfCoords(b.end));
-        update(at);
-      }
+      visitCell(grid_, slab, cellOfCoords(b.end), update);
     }
     return updates;
   }
@@ -891,7 +892,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
     const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
     const Eigen::Vector2d end = origin + dir * (len * inv_res);
     grow(end);
-    Beam beam{end, RayWalk(origin, end), dir, 0, 0, true, false, 0.0, 0, Eigen::Vector2d::Zero(), {}, r * inv_res, hit};
+    Beam beam{end, RayWalk(origin, end), 0, 0, true, false, 0.0, 0, Eigen::Vector2d::Zero(), {}, r * inv_res, hit};
     if (guard_max > 0) {
       const Eigen::Vector2d u(ca, sa);
       const double clear_len = hit ? r : len;

@@ -240,6 +240,9 @@ struct Linearisation {
   std::size_t residuals = 0;
 };
 
+// True when a target point has no line (its normal is (0, 0): see IcpTarget::normals).
+bool hasNoLine(const Eigen::Vector2d& n) { return n.x() == 0.0 && n.y() == 0.0; }
+
 class Icp {
  public:
   Icp(const IcpTarget& target, const Points2& source, const IcpOptions& o)
@@ -282,7 +285,7 @@ class Icp {
       double key = d2;
       if (p2l_) {
         const Eigen::Vector2d& n = tn[j];
-        if (n.x() == 0.0 && n.y() == 0.0) {
+        if (hasNoLine(n)) {
           if (point_w_ == 0.0) continue;
           key = point_w_ * point_w_ * d2;  // (the pair's two residuals, squared and summed)
         } else {
@@ -309,7 +312,7 @@ class Icp {
         const Eigen::Vector2d& p = src_[pr.src];
         const Eigen::Vector2d& n = tn[pr.tgt];
         const Eigen::Vector2d& m = tp[pr.tgt];
-        if (n.x() == 0.0 && n.y() == 0.0) {  // a point pair: its x and y offsets, weighted
+        if (hasNoLine(n)) {  // a point pair: its x and y offsets, weighted
           lines_.push_back({p.x(), p.y(), m.x(), m.y(), point_w_, 0.0});
           lines_.push_back({p.x(), p.y(), m.x(), m.y(), 0.0, point_w_});
           continue;
@@ -402,7 +405,7 @@ class Icp {
   const std::vector<Pair>& pairs() const { return pairs_; }
   const Points2& source() const { return src_; }
   const IcpTarget::Impl& target() const { return tgt_; }
-  const IcpOptions& options() const { return o_; }
+  double pointPairWeight() const { return point_w_; }
 
  private:
   const IcpTarget::Impl& tgt_;  // (the search structures themselves: the search inlines)
@@ -655,8 +658,8 @@ class CeresPairs {
       Cost& c = costs_[pr.src];
       const Eigen::Vector2d& n = tn[pr.tgt];
       if constexpr (std::is_same_v<Cost, PointToLineCost>) {
-        if (n.x() == 0.0 && n.y() == 0.0) {  // a point pair (IcpOptions::point_pair_weight)
-          const double w = icp.options().point_pair_weight;
+        if (hasNoLine(n)) {  // a point pair (IcpOptions::point_pair_weight)
+          const double w = icp.pointPairWeight();
           c.set(icp.source()[pr.src], tp[pr.tgt], Eigen::Vector2d(w, 0.0));
           problem->AddResidualBlock(&c, loss, x);
           Cost& cy = costs_y_[pr.src];

@@ -170,7 +170,6 @@ class OccupancyMap {
   struct Beam {
     Eigen::Vector2d end;  ///< end of the traced segment [cells]
     RayWalk walk;         ///< the traversal from the origin to `end`, set up by `prepare`
-    Eigen::Vector2d dir;  ///< unit direction from the origin [cells]
     /// Stretches of the beam that clear free space (log-odds, count): `clear_stretches_`
     /// [first_clear, first_clear + num_clear), in order. Unused when `clear_to_end`.
     std::uint32_t first_clear = 0;
