@@ -286,6 +286,29 @@ TEST(LogOdds, CartographerDefaultsAndCellUpdatedOncePerBeam) {
   EXPECT_EQ(map->cellUpdates(), 21u);  // cells 0..20 along the beam, each once
 }
 
+// The cells the beams of `scan` pass (all but their end cells) and their end cells, from segments
+// computed as insertion computes them (OccupancyMap::prepare), and the returns [cells].
+struct TracedScan {
+  std::set<std::pair<int, int>> passed, ends;
+  std::vector<Eigen::Vector2d> returns;
+  Eigen::Vector2d origin;
+};
+TracedScan traceScan(const LaserScan& scan, const SE2& T, double resolution_m) {
+  TracedScan t;
+  const double inv_res = 1.0 / resolution_m;
+  t.origin = T.translation() * inv_res;
+  const double c0 = std::cos(T.theta()), s0 = std::sin(T.theta());
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    const double a = scan.angle(i), ca = std::cos(a), sa = std::sin(a);
+    const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
+    const Eigen::Vector2d end = t.origin + dir * (scan.ranges()[i] * inv_res);
+    const CellIndex e = traceRay(t.origin, end, [&](CellIndex c) { t.passed.insert({c.x, c.y}); });
+    t.ends.insert({e.x, e.y});
+    t.returns.push_back(end);
+  }
+  return t;
+}
+
 // Every cell a beam passes gets one miss and its return's cell one hit, and no other cell is
 // touched: the traversal reaches each cell's storage through its tile (entered as the walk crosses
 // tile borders, in every direction, at negative coordinates too). Beams from near tile corners,
@@ -310,18 +333,7 @@ TEST(Insertion, UpdatesExactlyTheTracedCellsAcrossTileBorders) {
       const LaserScan scan = LaserScan::create(f);
       const SE2 T(o.x(), o.y(), heading(rng));
       map->insert(scan, T);
-      // The segments as insertion computes them (OccupancyMap::prepare).
-      const double inv_res = 1.0 / opt.resolution_m;
-      const Eigen::Vector2d origin = T.translation() * inv_res;
-      const double c0 = std::cos(T.theta()), s0 = std::sin(T.theta());
-      std::set<std::pair<int, int>> passed, ends;
-      for (std::size_t i = 0; i < scan.size(); ++i) {
-        const double a = scan.angle(i), ca = std::cos(a), sa = std::sin(a);
-        const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
-        const CellIndex end = traceRay(origin, origin + dir * (scan.ranges()[i] * inv_res),
-                                       [&](CellIndex c) { passed.insert({c.x, c.y}); });
-        ends.insert({end.x, end.y});
-      }
+      const auto [passed, ends, returns, origin] = traceScan(scan, T, opt.resolution_m);
       const double hit = model == MapModel::kLogOdds ? 0.55 : 1.0, miss = model == MapModel::kLogOdds ? 0.49 : 0.0;
       std::size_t checked = 0, mismatches = 0;
       for (int y = static_cast<int>(std::floor(origin.y())) - 200; y <= static_cast<int>(std::floor(origin.y())) + 200; ++y)
@@ -339,6 +351,75 @@ TEST(Insertion, UpdatesExactlyTheTracedCellsAcrossTileBorders) {
       EXPECT_GT(passed.size(), 5000u);
     }
   }
+}
+
+// The same with the surface guard on (the default), in a scene full of occluding edges: posts a
+// few beams wide in front of a far wall, so that the beams beside each post clear in stretches
+// guarded by the post's edge line as well as by their own surface's. Whatever the stretches, a
+// beam touches only the cells it passes (and its return's), and spares cells only near a surface
+// (the guarded stretches lie within surface_guard_max_m of a return or an edge); every passed
+// cell farther than that from every return is cleared - in particular the cells where one
+// stretch of the beam's walk ends and the next begins.
+TEST(Insertion, GuardedStretchesClearEveryPassedCellAwayFromSurfaces) {
+  const std::vector<Eigen::Vector2d> origins = {{0.0123, 0.0371}, {-3.2 + 0.011, 1.613}, {2.3, -3.19}};
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> heading(-std::numbers::pi, std::numbers::pi), post(1.2, 4.0);
+  std::size_t stretched_scenes = 0;
+  for (const MapModel model : {MapModel::kLogOdds, MapModel::kCount}) {
+    for (const Eigen::Vector2d& o : origins) {
+      MapOptions opt;
+      opt.resolution_m = 0.05;
+      ASSERT_GT(opt.insert.surface_guard_max_m, 0.0);
+      auto map = makeMap(model, opt);
+      LaserScanFields f;
+      f.angle_min = -std::numbers::pi;
+      f.angle_increment = 2 * std::numbers::pi / 360;
+      f.range_max = 30;
+      f.ranges.assign(360, 8.0);
+      for (int k = 0; k < 24; ++k) {  // posts 3 to 5 beams wide
+        const int first = 15 * k + static_cast<int>(rng() % 5), width = 3 + static_cast<int>(rng() % 3);
+        const double r = post(rng);
+        for (int i = first; i < first + width && i < 360; ++i) f.ranges[static_cast<std::size_t>(i)] = r;
+      }
+      const LaserScan scan = LaserScan::create(f);
+      const SE2 T(o.x(), o.y(), heading(rng));
+      map->insert(scan, T);
+      const auto [passed, ends, returns, origin] = traceScan(scan, T, opt.resolution_m);
+      const double inv_res = 1.0 / opt.resolution_m;
+      // A guarded stretch lies within surface_guard_max_m of its return or edge along the beam,
+      // and a cell it spares within a cell diagonal of it.
+      const double near_cells = (opt.insert.surface_guard_max_m + 0.15) * inv_res;
+      auto nearSurface = [&](int x, int y) {
+        for (const Eigen::Vector2d& r : returns)
+          if ((Eigen::Vector2d(x + 0.5, y + 0.5) - r).norm() <= near_cells) return true;
+        return false;
+      };
+      const double hit = model == MapModel::kLogOdds ? 0.55 : 1.0, miss = model == MapModel::kLogOdds ? 0.49 : 0.0;
+      std::size_t stray = 0, spared_far = 0, spared_near = 0, cleared_far = 0;
+      const int ox = static_cast<int>(std::floor(origin.x())), oy = static_cast<int>(std::floor(origin.y()));
+      for (int y = oy - 200; y <= oy + 200; ++y)
+        for (int x = ox - 200; x <= ox + 200; ++x) {
+          const auto p = map->probability(CellIndex{x, y});
+          if (ends.count({x, y})) {
+            if (!p || std::abs(*p - hit) > 1e-6) ++stray;
+          } else if (!passed.count({x, y})) {
+            if (p) ++stray;
+          } else if (!p) {
+            (nearSurface(x, y) ? spared_near : spared_far) += 1;
+          } else if (std::abs(*p - miss) > 1e-6) {
+            ++stray;
+          } else if (!nearSurface(x, y)) {
+            ++cleared_far;
+          }
+        }
+      const std::string where = std::string(toString(model)) + " from (" + std::to_string(o.x()) + ", " + std::to_string(o.y()) + ")";
+      EXPECT_EQ(stray, 0u) << where;
+      EXPECT_EQ(spared_far, 0u) << where;
+      EXPECT_GT(cleared_far, 5000u) << where;
+      if (spared_near > 0) ++stretched_scenes;
+    }
+  }
+  EXPECT_EQ(stretched_scenes, 6u);  // the guard spared cells in every scene
 }
 
 TEST(Count, HitsOverHitsPlusMisses) {

@@ -27,7 +27,7 @@ Error badOption(const std::string& field, const std::string& msg) {
 constexpr std::size_t kGuardNeighbors = 8;
 
 [[gnu::always_inline]] inline CellIndex cellOfCoords(const Eigen::Vector2d& p) {
-  return {static_cast<std::int32_t>(std::floor(p.x())), static_cast<std::int32_t>(std::floor(p.y()))};
+  return {floorToInt32(p.x()), floorToInt32(p.y())};
 }
 
 // A RayWalk over a TiledGrid that keeps the current cell's place in its tile, so that reaching the
@@ -199,30 +199,58 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
   // the cell's corners lie on both sides of the line (n . (corner - p) takes both signs). The
   // margin keeps a line along a cell border (a wall at a multiple of the cell size) from catching
   // the cells on both sides through rounding [cells].
-  for (std::size_t k = b.first_clear; k < b.first_clear + b.num_clear; ++k) {
-    const auto& s = stretches[k];
-    if (s.lines != 0) {
-      if (s.lines == 1) {  // the common case: only the beam's own surface
-        const auto& g = b.guards[0];
-        auto guarded = [&](auto& at) __attribute__((always_inline)) {
-          if (!crosses(g, at.cell())) on_clear(at);
-        };
-        traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, guarded);
-        visitCell(grid, slab, s.to_cell, guarded);
-        continue;
+  // The stretches are runs of one walk over the beam (ClearStretch), so the beam is walked once.
+  auto spares = [&b, &crosses](std::uint8_t lines, CellIndex c) __attribute__((always_inline)) {
+    if (lines == 1) return crosses(b.guards[0], c);  // the common case: only the beam's own surface
+    for (std::size_t l = 0; l < 3; ++l)
+      if ((lines & (1u << l)) && crosses(b.guards[l], c)) return true;
+    return false;
+  };
+  const StretchT* const st = stretches.data() + b.first_clear;
+  const std::size_t n = b.num_clear;
+  auto walkStretches = [&](auto inside) __attribute__((always_inline)) {
+    GridWalk<Cell> walk(grid, b.walk);
+    std::size_t k = 0;
+    while (true) {
+      // The cells of stretch k before its last one.
+      const std::int32_t until = st[k].until;
+      const std::uint8_t lines = st[k].lines;
+      if (lines == 0) {
+        while (walk.stepsLeft() > until) {
+          if (inside(walk)) on_clear(walk);
+          walk.step();
+        }
+      } else {
+        while (walk.stepsLeft() > until) {
+          if (inside(walk) && !spares(lines, walk.cell())) on_clear(walk);
+          walk.step();
+        }
       }
-      auto guarded = [&](auto& at) __attribute__((always_inline)) {
-        const CellIndex c = at.cell();
-        for (std::size_t l = 0; l < 3; ++l)
-          if ((s.lines & (1u << l)) && crosses(b.guards[l], c)) return;
-        on_clear(at);
-      };
-      traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, guarded);
-      visitCell(grid, slab, s.to_cell, guarded);
-    } else {
-      traceInSlab(grid, s.walk, slab.axis, slab.lo, slab.hi, on_clear);
-      visitCell(grid, slab, s.to_cell, on_clear);
+      // Its last cell, which the next stretch starts from (and the ones after it that end there).
+      const bool in = inside(walk);
+      bool spared = in && lines != 0 && spares(lines, walk.cell());
+      std::size_t j = k + 1;
+      for (; j < n; ++j) {
+        if (spared) spared = st[j].lines != 0 && spares(st[j].lines, walk.cell());
+        if (st[j].until < until) break;
+      }
+      if (in && !spared) on_clear(walk);
+      if (j == n || walk.done()) return;
+      walk.step();
+      k = j;
     }
+  };
+  if (slab.axis < 0) {
+    walkStretches([](const auto&) __attribute__((always_inline)) { return true; });
+  } else {
+    // (Only the slab's cells are accessed; the walk is monotone along each axis, so it could stop
+    // at the slab's far side, but a beam rarely runs on far beyond it.)
+    const int axis = slab.axis;
+    const std::int32_t lo = slab.lo, hi = slab.hi;
+    walkStretches([axis, lo, hi](const auto& w) __attribute__((always_inline)) {
+      const std::int32_t v = axis == 0 ? w.x() : w.y();
+      return v >= lo && v < hi;
+    });
   }
 }
 
@@ -688,14 +716,14 @@ std::optional<std::pair<OccupancyMap::Slab, OccupancyMap::Slab>> OccupancyMap::c
     const double o = origin[axis];
     const std::int32_t lo_tile = (axis == 0 ? box.min.x : box.min.y) >> kBits;
     const std::int32_t hi_tile = (axis == 0 ? box.max.x : box.max.y) >> kBits;
-    const std::int32_t o_tile = static_cast<std::int32_t>(std::floor(o)) >> kBits;
+    const std::int32_t o_tile = floorToInt32(o) >> kBits;
     const auto n = static_cast<std::size_t>(hi_tile - lo_tile + 1);
     split_sums_.assign(2 * n, 0.0);
     for (const Beam& b : beams_) {
       const double d = std::abs(b.end[axis] - o);
       if (d == 0) continue;
       const double a = (std::abs(b.end.x() - origin.x()) + std::abs(b.end.y() - origin.y())) / d;
-      const auto k = static_cast<std::size_t>((static_cast<std::int32_t>(std::floor(b.end[axis])) >> kBits) - lo_tile);
+      const auto k = static_cast<std::size_t>((floorToInt32(b.end[axis]) >> kBits) - lo_tile);
       split_sums_[2 * k] += a;
       split_sums_[2 * k + 1] += a * b.end[axis];
     }
@@ -793,7 +821,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   CellBox& box = out.box_;
   box = CellBox{geometry_.cellOf(T_world_laser.translation()), geometry_.cellOf(T_world_laser.translation())};
   auto grow = [&box](const Eigen::Vector2d& p) {
-    const auto x = static_cast<std::int32_t>(std::floor(p.x())), y = static_cast<std::int32_t>(std::floor(p.y()));
+    const std::int32_t x = floorToInt32(p.x()), y = floorToInt32(p.y());
     box.min.x = std::min(box.min.x, x);
     box.min.y = std::min(box.min.y, y);
     box.max.x = std::max(box.max.x, x);
@@ -952,16 +980,19 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
             continue;
           }
           if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(out.clear_stretches_.size());
-          out.clear_stretches_.push_back({from * inv_res, to * inv_res, mask, RayWalk(), CellIndex{}});
+          out.clear_stretches_.push_back({to * inv_res, 0, mask});
         }
-        // The stretches' walks (set up here, on the preparing thread, rather than by the inserting
-        // one; the segments are computed as they always were, so the cells are the same).
+        // Where each stretch ends on the beam's walk: the walk is monotone along each axis, so it
+        // reaches a cell after as many steps as the cell lies from its first one, |dx| + |dy|.
+        const CellIndex first = beam.walk.cell();
+        const std::int32_t total = beam.walk.stepsLeft();
+        std::int32_t last = total;
         for (std::size_t k = beam.first_clear; k < beam.first_clear + beam.num_clear; ++k) {
           ClearStretch& st = out.clear_stretches_[k];
-          const Eigen::Vector2d from = origin + dir * st.from;
-          const Eigen::Vector2d to = origin + dir * st.to;
-          st.walk = RayWalk(from, to);
-          st.to_cell = cellOfCoords(to);
+          const CellIndex c = cellOfCoords(origin + dir * st.to);
+          const std::int64_t steps = std::abs(std::int64_t{c.x} - first.x) + std::abs(std::int64_t{c.y} - first.y);
+          st.until = static_cast<std::int32_t>(std::clamp<std::int64_t>(total - steps, 0, last));
+          last = st.until;
         }
       }
     }
@@ -990,10 +1021,10 @@ void OccupancyMap::insert(PreparedScan& prepared) {
       split = chooseSplit(origin, box);
   }
   cell_updates_ += split ? insertParallel(origin, split->first, split->second) : insertBeams(origin, beams_, Slab{}, 0);
-  const auto ox = static_cast<std::int64_t>(std::floor(origin.x())), oy = static_cast<std::int64_t>(std::floor(origin.y()));
+  const std::int64_t ox = floorToInt32(origin.x()), oy = floorToInt32(origin.y());
   for (const Beam& b : beams_)
-    cell_visits_ += static_cast<std::uint64_t>(std::abs(static_cast<std::int64_t>(std::floor(b.end.x())) - ox) +
-                                               std::abs(static_cast<std::int64_t>(std::floor(b.end.y())) - oy) + 1);
+    cell_visits_ += static_cast<std::uint64_t>(std::abs(std::int64_t{floorToInt32(b.end.x())} - ox) +
+                                               std::abs(std::int64_t{floorToInt32(b.end.y())} - oy) + 1);
   bounds_ = unite(bounds_, box);
 }
 

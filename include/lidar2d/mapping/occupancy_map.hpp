@@ -210,12 +210,14 @@ class OccupancyMap {
 
   const MapOptions options_;
   const GridGeometry geometry_;
-  /// The clearing stretches of the current scan's beams (see Beam).
+  /// The clearing stretches of the current scan's beams (see Beam), in order along the beam, each
+  /// a run of the cells of the beam's walk: from the previous stretch's last cell (the first
+  /// stretch: from the walk's first cell) to its own last cell, the cell of its far end, both
+  /// inclusive. A cell where stretches meet is cleared unless each of them spares it.
   struct ClearStretch {
-    double from, to;     ///< distances from the origin along the beam [cells]
-    std::uint8_t lines;  ///< bit k: spares the cells that Beam::guards[k] passes through (0: clears all)
-    RayWalk walk;        ///< the traversal from `from` to `to`, set up by `prepare`
-    CellIndex to_cell;   ///< the cell of `to` (the walk's end cell)
+    double to;            ///< distance of the far end from the origin along the beam [cells]
+    std::int32_t until;   ///< the walk's steps left in the last cell (set up by `prepare`)
+    std::uint8_t lines;   ///< bit k: spares the cells that Beam::guards[k] passes through (0: clears all)
   };
   std::vector<ClearStretch> clear_stretches_;
 
