@@ -208,7 +208,8 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
   };
   const StretchT* const st = stretches.data() + b.first_clear;
   const std::size_t n = b.num_clear;
-  auto walkStretches = [&](auto inside) __attribute__((always_inline)) {
+  // inside(walk): the walk's cell is in the slab; past(walk): the walk has left it for good.
+  auto walkStretches = [&](auto inside, auto past) __attribute__((always_inline)) {
     GridWalk<Cell> walk(grid, b.walk);
     std::size_t k = 0;
     while (true) {
@@ -217,11 +218,13 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
       const std::uint8_t lines = st[k].lines;
       if (lines == 0) {
         while (walk.stepsLeft() > until) {
+          if (past(walk)) return;
           if (inside(walk)) on_clear(walk);
           walk.step();
         }
       } else {
         while (walk.stepsLeft() > until) {
+          if (past(walk)) return;
           if (inside(walk) && !spares(lines, walk.cell())) on_clear(walk);
           walk.step();
         }
@@ -241,16 +244,23 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
     }
   };
   if (slab.axis < 0) {
-    walkStretches([](const auto&) __attribute__((always_inline)) { return true; });
+    walkStretches([](const auto&) __attribute__((always_inline)) { return true; },
+                  [](const auto&) __attribute__((always_inline)) { return false; });
   } else {
-    // (Only the slab's cells are accessed; the walk is monotone along each axis, so it could stop
-    // at the slab's far side, but a beam rarely runs on far beyond it.)
+    // Only the slab's cells are accessed; the walk is monotone along each axis, so once beyond the
+    // slab's far side it stays outside.
     const int axis = slab.axis;
     const std::int32_t lo = slab.lo, hi = slab.hi;
-    walkStretches([axis, lo, hi](const auto& w) __attribute__((always_inline)) {
-      const std::int32_t v = axis == 0 ? w.x() : w.y();
-      return v >= lo && v < hi;
-    });
+    const bool ascending = (axis == 0 ? b.walk.stepX() : b.walk.stepY()) > 0;
+    walkStretches(
+        [axis, lo, hi](const auto& w) __attribute__((always_inline)) {
+          const std::int32_t v = axis == 0 ? w.x() : w.y();
+          return v >= lo && v < hi;
+        },
+        [axis, lo, hi, ascending](const auto& w) __attribute__((always_inline)) {
+          const std::int32_t v = axis == 0 ? w.x() : w.y();
+          return ascending ? v >= hi : v < lo;
+        });
   }
 }
 
