@@ -208,6 +208,7 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
   };
   const StretchT* const st = stretches.data() + b.first_clear;
   const std::size_t n = b.num_clear;
+  if (n == 0) return;  // (prepare gives every beam with clear_len > 0 a stretch; kept safe regardless)
   // inside(walk): the walk's cell is in the slab; past(walk): the walk has left it for good.
   auto walkStretches = [&](auto inside, auto past) __attribute__((always_inline)) {
     GridWalk<Cell> walk(grid, b.walk);
