@@ -80,5 +80,20 @@ TEST(TraceRay, AxisAlignedAndDegenerateSegments) {
   EXPECT_EQ(v.size(), 4u);
 }
 
+// floorToInt32 (the walk's and insertion's floor) equals std::floor over the int32 range: at and
+// just beside integers, at signed zeros, near the limits and on random values.
+TEST(FloorToInt32, EqualsStdFloor) {
+  std::vector<double> values = {0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2147483646.5, -2147483647.5, -2147483648.0,
+                                2147483647.0, 1e-300, -1e-300, 4.9e-324, -4.9e-324};
+  for (int k = -1000; k <= 1000; ++k) {
+    const double v = k;
+    values.insert(values.end(), {v, std::nextafter(v, -1e300), std::nextafter(v, 1e300), v + 0.5});
+  }
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> wide(-2.1e9, 2.1e9), narrow(-3000.0, 3000.0);
+  for (int i = 0; i < 100000; ++i) values.insert(values.end(), {wide(rng), narrow(rng)});
+  for (const double v : values) ASSERT_EQ(floorToInt32(v), static_cast<std::int32_t>(std::floor(v))) << v;
+}
+
 }  // namespace
 }  // namespace lidar2d::mapping
