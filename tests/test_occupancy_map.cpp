@@ -389,16 +389,24 @@ TEST(Insertion, GuardedStretchesClearEveryPassedCellAwayFromSurfaces) {
       // A guarded stretch lies within surface_guard_max_m of its return or edge along the beam,
       // and a cell it spares within a cell diagonal of it.
       const double near_cells = (opt.insert.surface_guard_max_m + 0.15) * inv_res;
-      auto nearSurface = [&](int x, int y) {
-        for (const Eigen::Vector2d& r : returns)
-          if ((Eigen::Vector2d(x + 0.5, y + 0.5) - r).norm() <= near_cells) return true;
-        return false;
-      };
+      const int ox = static_cast<int>(std::floor(origin.x())), oy = static_cast<int>(std::floor(origin.y()));
+      // Cells whose centre lies within near_cells of a return, over the checked square.
+      constexpr int kHalf = 200, kSide = 2 * kHalf + 1;
+      std::vector<std::uint8_t> near(kSide * kSide, 0);
+      const int reach = static_cast<int>(std::ceil(near_cells));
+      for (const Eigen::Vector2d& r : returns) {
+        const int rx = static_cast<int>(std::floor(r.x())), ry = static_cast<int>(std::floor(r.y()));
+        for (int y = std::max(ry - reach, oy - kHalf); y <= std::min(ry + reach, oy + kHalf); ++y)
+          for (int x = std::max(rx - reach, ox - kHalf); x <= std::min(rx + reach, ox + kHalf); ++x) {
+            const double dx = x + 0.5 - r.x(), dy = y + 0.5 - r.y();
+            if (dx * dx + dy * dy <= near_cells * near_cells) near[(y - oy + kHalf) * kSide + (x - ox + kHalf)] = 1;
+          }
+      }
+      auto nearSurface = [&](int x, int y) { return near[(y - oy + kHalf) * kSide + (x - ox + kHalf)] != 0; };
       const double hit = model == MapModel::kLogOdds ? 0.55 : 1.0, miss = model == MapModel::kLogOdds ? 0.49 : 0.0;
       std::size_t stray = 0, spared_far = 0, spared_near = 0, cleared_far = 0;
-      const int ox = static_cast<int>(std::floor(origin.x())), oy = static_cast<int>(std::floor(origin.y()));
-      for (int y = oy - 200; y <= oy + 200; ++y)
-        for (int x = ox - 200; x <= ox + 200; ++x) {
+      for (int y = oy - kHalf; y <= oy + kHalf; ++y)
+        for (int x = ox - kHalf; x <= ox + kHalf; ++x) {
           const auto p = map->probability(CellIndex{x, y});
           if (ends.count({x, y})) {
             if (!p || std::abs(*p - hit) > 1e-6) ++stray;
