@@ -101,10 +101,11 @@ Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, 
         if (options.method == registration::Method::kCorrelative) {
           registration::CorrelativeOptions co = options.corr;
           co.refine = false;
-          const auto found = registration::matchCorrelative(points[e.pair], points[e.pair + 1], inits[e.pair + 1], co);
+          const auto grid = registration::CorrelativeGrid::fromPoints(points[e.pair], co);
+          const auto found = registration::matchCorrelative(grid, points[e.pair + 1], inits[e.pair + 1], co);
           co.linear_window_m = 0.05;
           co.angular_window_rad = 1.0 * kDeg;
-          const auto near = registration::matchCorrelative(points[e.pair], points[e.pair + 1], rel, co);
+          const auto near = registration::matchCorrelative(grid, points[e.pair + 1], rel, co);
           const SE2 d = rel.inverse() * found.T_search;
           const bool ok = withinBar(d);
           search_ok += ok;

@@ -979,6 +979,16 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
           }
         std::sort(cuts.begin(), cuts.begin() + static_cast<std::ptrdiff_t>(num_cuts));
         beam.clear_to_end = false;
+        // Where a stretch ending `to` metres out ends on the beam's walk, as steps left (at most
+        // `at_most`, the previous stretch's): the walk is monotone along each axis, so it reaches a
+        // cell after as many steps as the cell lies from its first one, |dx| + |dy|.
+        const CellIndex first = beam.walk.cell();
+        const std::int32_t total = beam.walk.stepsLeft();
+        auto untilAt = [&](double to, std::int32_t at_most) {
+          const CellIndex c = cellOfCoords(origin + dir * (to * inv_res));
+          const std::int64_t steps = std::abs(std::int64_t{c.x} - first.x) + std::abs(std::int64_t{c.y} - first.y);
+          return static_cast<std::int32_t>(std::clamp<std::int64_t>(total - steps, 0, at_most));
+        };
         for (std::size_t c = 0; c + 1 < num_cuts; ++c) {
           const double from = cuts[c], to = cuts[c + 1];
           if (!(to > from)) continue;
@@ -986,24 +996,15 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
           std::uint8_t mask = 0;
           for (std::size_t k = 0; k < 3; ++k)
             if ((lines & (1u << k)) && spans[k][0] <= mid && mid <= spans[k][1]) mask |= std::uint8_t(1u << k);
-          if (beam.num_clear > 0 && out.clear_stretches_.back().lines == mask) {
-            out.clear_stretches_.back().to = to * inv_res;  // continues the previous stretch
+          if (beam.num_clear > 0 && out.clear_stretches_.back().lines == mask) {  // continues the previous stretch
+            const std::int32_t at_most =
+                beam.num_clear > 1 ? out.clear_stretches_[out.clear_stretches_.size() - 2].until : total;
+            out.clear_stretches_.back().until = untilAt(to, at_most);
             continue;
           }
+          const std::int32_t at_most = beam.num_clear > 0 ? out.clear_stretches_.back().until : total;
           if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(out.clear_stretches_.size());
-          out.clear_stretches_.push_back({to * inv_res, 0, mask});
-        }
-        // Where each stretch ends on the beam's walk: the walk is monotone along each axis, so it
-        // reaches a cell after as many steps as the cell lies from its first one, |dx| + |dy|.
-        const CellIndex first = beam.walk.cell();
-        const std::int32_t total = beam.walk.stepsLeft();
-        std::int32_t last = total;
-        for (std::size_t k = beam.first_clear; k < beam.first_clear + beam.num_clear; ++k) {
-          ClearStretch& st = out.clear_stretches_[k];
-          const CellIndex c = cellOfCoords(origin + dir * st.to);
-          const std::int64_t steps = std::abs(std::int64_t{c.x} - first.x) + std::abs(std::int64_t{c.y} - first.y);
-          st.until = static_cast<std::int32_t>(std::clamp<std::int64_t>(total - steps, 0, last));
-          last = st.until;
+          out.clear_stretches_.push_back({untilAt(to, at_most), mask});
         }
       }
     }

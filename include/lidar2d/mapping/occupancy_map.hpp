@@ -215,7 +215,6 @@ class OccupancyMap {
   /// stretch: from the walk's first cell) to its own last cell, the cell of its far end, both
   /// inclusive. A cell where stretches meet is cleared unless each of them spares it.
   struct ClearStretch {
-    double to;            ///< distance of the far end from the origin along the beam [cells]
     std::int32_t until;   ///< the walk's steps left in the last cell (set up by `prepare`)
     std::uint8_t lines;   ///< bit k: spares the cells that Beam::guards[k] passes through (0: clears all)
   };
