@@ -18,8 +18,10 @@ build: $(BUILD)/CMakeCache.txt
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j$(JOBS)
 
+# -O1 (ASan's recommended level; asserts stay on) and -g1 (line tables, enough for the sanitizers'
+# stack traces): the tests run about 7x faster than at -O0 (14 min -> under 2 min on two cores).
 $(ASAN_BUILD)/CMakeCache.txt:
-	cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug -DLIDAR2D_SANITIZE=ON -DLIDAR2D_BUILD_BENCH=OFF $(CMAKE_FLAGS)
+	cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-g1 -O1" -DLIDAR2D_SANITIZE=ON -DLIDAR2D_BUILD_BENCH=OFF $(CMAKE_FLAGS)
 
 # AddressSanitizer + UndefinedBehaviorSanitizer build of the whole test suite.
 test-asan: $(ASAN_BUILD)/CMakeCache.txt

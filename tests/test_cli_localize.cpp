@@ -20,8 +20,7 @@ using test::runCli;
 
 class CliLocalize : public ::testing::Test {
  protected:
-  // The logs and maps are made on first use (once per process): the tests skipped under the
-  // sanitizers then do not pay for them (about 16 s there).
+  // The logs and maps are made on first use (once per process), by the first test that needs them.
   static void SetUpTestSuite() { dir_ = new test::TempDir(); }
   static void needOffice() {
     if (fs::exists(path("office.yaml"))) return;
@@ -58,10 +57,6 @@ class CliLocalize : public ::testing::Test {
 test::TempDir* CliLocalize::dir_ = nullptr;
 
 TEST_F(CliLocalize, IndexThenLocalizeWritesOneLinePerScanAndJson) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "building a database through the CLI takes minutes under the sanitizers; make test runs it "
-                  "(test_localization covers the library under them)";
-#endif
   ASSERT_NO_FATAL_FAILURE(needOffice());
   auto r = runCli({"localize-index", path("office.yaml"), "-o", path("office.db"), "--step", "0.3"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -98,10 +93,6 @@ TEST_F(CliLocalize, IndexThenLocalizeWritesOneLinePerScanAndJson) {
 }
 
 TEST_F(CliLocalize, WithoutDatabaseBuildsItInMemoryAndSelectsScans) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "building a database through the CLI takes minutes under the sanitizers; make test runs it "
-                  "(test_localization covers the library under them)";
-#endif
   ASSERT_NO_FATAL_FAILURE(needOffice());
   const auto r = runCli({"localize", path("office.yaml"), path("query.log"), "-o", path("odd.txt"), "--scans", "odd",
                          "--step", "0.3", "-q"});
@@ -111,10 +102,6 @@ TEST_F(CliLocalize, WithoutDatabaseBuildsItInMemoryAndSelectsScans) {
 }
 
 TEST_F(CliLocalize, SymmetricWorldDeclines) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "localizing 100 scans through the CLI takes minutes under the sanitizers; make test runs it "
-                  "(test_localization checks the symmetric world under them)";
-#endif
   ASSERT_NO_FATAL_FAILURE(needSymmetric());
   const auto r = runCli(
       {"localize", path("sym.yaml"), path("sym.log"), "-o", path("sym.txt"), "--scans", "odd", "--step", "0.3", "-q"});

@@ -172,9 +172,6 @@ TEST_F(CliSlam, BadInputIsOneClearError) {
 }
 
 TEST(CliSlamRealData, MitCsailRawBagBeatsItsOdometry) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "a whole-log SLAM run is too slow under the sanitizers; make test runs it";
-#endif
   LIDAR2D_REQUIRE_DATA("raw/mit-csail.orig.bag");
   TempDir t;
   const std::string bag = dataFile("raw/mit-csail.orig.bag").string();

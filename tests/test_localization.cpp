@@ -350,10 +350,6 @@ TEST(LocalizationDatabase, OtherVersionCorruptionAndTruncationAreRefused) {
 }
 
 TEST(LocalizationReal, IntelOddScansInEvenMapSubset) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "a real map's database and 45 queries take minutes under the sanitizers; make test runs it "
-                  "(the simulated worlds cover the same code under them)";
-#endif
   LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
   auto src = io::openLog(test::dataFile("corrected/intel.log.gz").string());
   std::vector<Frame> frames;

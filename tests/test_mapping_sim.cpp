@@ -63,10 +63,6 @@ class SimMapping : public ::testing::TestWithParam<std::tuple<MapModel, Placemen
 
 TEST_P(SimMapping, SeenWallsOccupiedSeenFreeSpaceFree) {
   const auto [model, placement] = GetParam();
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "about a minute per case under the sanitizers (test_occupancy_map runs the same insertion code "
-                  "there); make test runs it";
-#endif
   const SE2& S = placement.T_grid_world;
   const auto map = buildMap(model, S);
   const GridGeometry& g = map->geometry();

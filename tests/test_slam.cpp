@@ -138,10 +138,6 @@ TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
 // RMS here against under 5 cm; worse on the real logs too, BENCHMARK.md) but must still beat the
 // odometry (2 m RMS) by far and close loops.
 TEST(Slam, OfficeWithTheLikelihoodFieldFrontEnd) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "a SLAM run takes two minutes under the sanitizers; make test runs it (the likelihood-field "
-                  "matcher's own tests run under them)";
-#endif
   const auto frames = simulateWorld("office");
   SlamOptions o;
   o.front_end_likelihood_field = true;
@@ -181,9 +177,6 @@ TEST(Slam, CorridorDoesNotSlide) {
 }
 
 TEST(Slam, CorridorWithoutOdometryKeepsItsSpeedThroughAScanOutOfOrder) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "two SLAM runs take 80 s under the sanitizers; make test runs them (OfficeWithoutOdometry covers the same front-end code there)";
-#endif
   // Without odometry the prediction is constant velocity, and in the featureless corridor it alone
   // sets the translation along the corridor, so the velocity must not wander: it is the median of
   // the last steps, not the last step (which, remapped along the corridor each time, drifted to 80%
@@ -205,9 +198,6 @@ TEST(Slam, CorridorWithoutOdometryKeepsItsSpeedThroughAScanOutOfOrder) {
 }
 
 TEST(Slam, ScansLoggedLateInTurnsWithoutOdometry) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "a SLAM run takes two minutes under the sanitizers; make test runs it (OfficeWithoutOdometry covers the same front-end code there)";
-#endif
   // The Intel bag logs runs of scans up to a second late while the robot turns (alternating with
   // fresh ones): without odometry such a scan is tens of degrees from the constant-velocity
   // prediction, and the fresh scan after it continues from the scan before it. Here the office
@@ -224,9 +214,6 @@ TEST(Slam, ScansLoggedLateInTurnsWithoutOdometry) {
 }
 
 TEST(Slam, ScansLoggedLateInTurnsWithOdometry) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "a SLAM run takes two minutes under the sanitizers; make test runs it";
-#endif
   // As above, with odometry: a late scan's odometry is interpolated at its (wrong) stamp, so the
   // prediction puts it where the robot is now, tens of degrees from where it was taken; and the
   // fresh scan after it is predicted from the late scan's pose. (Without the earlier scans' poses

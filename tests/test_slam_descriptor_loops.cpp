@@ -100,9 +100,6 @@ RunResult runSlam(const std::vector<Frame>& frames, const SlamOptions& o) {
 }
 
 TEST(SlamDescriptorLoops, ClosesALoopAfterDriftBeyondTheSearchRadius) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "two SLAM runs take minutes under the sanitizers; make test runs it";
-#endif
   const auto frames = corridorThereAndBack(0.15, 1);
   SlamOptions off;
   off.descriptor_loops = false;
@@ -128,9 +125,6 @@ TEST(SlamDescriptorLoops, ClosesALoopAfterDriftBeyondTheSearchRadius) {
 }
 
 TEST(SlamDescriptorLoops, CliRecordsDescriptorClosuresInGraphSummaryAndReport) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "a SLAM run through the CLI takes minutes under the sanitizers; make test runs it";
-#endif
   const auto frames = corridorThereAndBack(0.15, 1);
   test::TempDir t;
   const std::string log = (t.path() / "corridor.log").string();
@@ -167,9 +161,6 @@ TEST(SlamDescriptorLoops, CliRecordsDescriptorClosuresInGraphSummaryAndReport) {
 }
 
 TEST(SlamDescriptorLoops, AliasedPlacesAreNotClosed) {
-#ifdef LIDAR2D_SANITIZED
-  GTEST_SKIP() << "four SLAM runs take minutes under the sanitizers; make test runs it";
-#endif
   // Four identical rooms (the symmetric world) and an office of look-alike rooms along a corridor,
   // with and without odometry, looked up far more often than by default: the descriptors propose
   // the look-alikes and the verification passes some of them, but none may enter the graph.
