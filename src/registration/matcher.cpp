@@ -1,5 +1,6 @@
 #include "lidar2d/registration/matcher.hpp"
 
+#include <string>
 #include <utility>
 
 #include "lidar2d/core/error.hpp"
@@ -92,6 +93,44 @@ PreparedTarget::PreparedTarget(const Points2& points_target, const MatcherOption
   }
 }
 
+PreparedTarget PreparedTarget::fromMap(const io::OccupancyImage& map, const MatcherOptions& options) {
+  PreparedTarget t(options.method);
+  const int occupied_min = options.map_occupied_min;
+  if (!(occupied_min >= 1 && occupied_min <= 100)) {
+    t.error_ = "MatcherOptions.map_occupied_min: must be in 1..100, got " + std::to_string(occupied_min);
+    return t;
+  }
+  switch (options.method) {
+    case Method::kP2P:
+    case Method::kP2L:
+      // See the header: matched against cell centres, ICP is biased by up to half a cell and
+      // point-to-line finds no lines along walls drawn several cells thick.
+      t.error_ = std::string("an occupancy map is matched with lf or corr, not ") + toString(options.method) +
+                 " (ICP matches point sets: build an IcpTarget from points, e.g. the scans of a local map)";
+      return t;
+    case Method::kLikelihoodField:
+    case Method::kCorrelative:
+      try {
+        if (options.method == Method::kLikelihoodField) {
+          LikelihoodFieldOptions lf = lfOptions(options);
+          lf.occupied_min = occupied_min;
+          t.field_ = std::make_unique<LikelihoodField>(LikelihoodField::fromMap(map, lf));
+        } else {
+          CorrelativeOptions corr = corrOptions(options);
+          corr.occupied_min = occupied_min;
+          corr.refinement.occupied_min = occupied_min;
+          t.grid_ = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromMap(map, corr));
+          if (corr.refine)
+            t.field_ = std::make_unique<LikelihoodField>(LikelihoodField::fromMap(map, corr.refinement));
+        }
+      } catch (const Error& e) {
+        t.error_ = e.what();
+      }
+      break;
+  }
+  return t;
+}
+
 PreparedTarget::~PreparedTarget() = default;
 PreparedTarget::PreparedTarget(PreparedTarget&&) noexcept = default;
 PreparedTarget& PreparedTarget::operator=(PreparedTarget&&) noexcept = default;
@@ -104,6 +143,7 @@ Result matchScans(const PreparedTarget& target, const Points2& source, const SE2
   switch (options.method) {
     case Method::kP2P:
     case Method::kP2L:
+      if (!target.error().empty()) return invalid(init_T_target_source, target.error());
       return alignIcp(*target.icp(), source, init_T_target_source, icpOptions(options));
     case Method::kLikelihoodField:
     case Method::kCorrelative:
