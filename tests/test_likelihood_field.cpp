@@ -65,6 +65,22 @@ const SimScans& office() {
   return s;
 }
 
+// A map built by the mapping module from noise-free scans at every 5th pose of the route.
+const io::OccupancyImage& officeMap() {
+  static const io::OccupancyImage image = [] {
+    const auto& sim = office();
+    mapping::MapOptions mo;
+    mo.resolution_m = 0.05;
+    auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
+    for (std::size_t k = 0; k < sim.route().size(); k += 5) {
+      const SE2 T = sim.route()[k].T_world_robot;
+      map->insert(sim.makeScan(T), T);
+    }
+    return mapping::toOccupancyImage(*map);
+  }();
+  return image;
+}
+
 LikelihoodFieldOptions withSolver(LfSolver solver) {
   LikelihoodFieldOptions o;
   o.solver = solver;
@@ -116,15 +132,7 @@ TEST_P(LfSolverTest, ConvergesFrom20cmAnd5Degrees) {
 
 TEST_P(LfSolverTest, ScanToMapRecoversThePose) {
   const auto& sim = office();
-  // A map built by the mapping module from noise-free scans at the true poses.
-  mapping::MapOptions mo;
-  mo.resolution_m = 0.05;
-  auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
-  for (std::size_t k = 0; k < sim.route().size(); k += 5) {
-    const SE2 T = sim.route()[k].T_world_robot;
-    map->insert(sim.makeScan(T), T);
-  }
-  const auto image = mapping::toOccupancyImage(*map);
+  const auto& image = officeMap();
   auto opts = withSolver(GetParam());
   const auto field = LikelihoodField::fromMap(image, opts);
   ASSERT_FALSE(field.empty());
@@ -139,6 +147,23 @@ TEST_P(LfSolverTest, ScanToMapRecoversThePose) {
     EXPECT_TRUE(test::IsNearPose(truth, r.T_target_source, 0.03, 0.5)) << "route index " << k;
   }
   EXPECT_EQ(ok, n);
+}
+
+TEST(LikelihoodField, LineSearchStopsAtTheMinimumOfAMap) {
+  // Plain Gauss-Newton against a map's unsigned field may step across the minimum until
+  // max_iterations (see ScanToMapRecoversThePose); with the line search every match converges, at
+  // the same accuracy.
+  const auto& sim = office();
+  LikelihoodFieldOptions opts;
+  opts.line_search = true;
+  const auto field = LikelihoodField::fromMap(officeMap(), opts);
+  for (std::size_t k = 7; k < sim.route().size(); k += sim.route().size() / 6) {
+    const SE2 truth = sim.route()[k].T_world_robot;
+    const auto r = matchLikelihoodField(field, sim.scanAt(truth), truth * SE2(0.1, -0.08, 3.0 * kDeg), opts);
+    EXPECT_TRUE(r.converged) << "route index " << k << ": " << toString(r.status) << " after " << r.iterations;
+    EXPECT_LT(r.iterations, 3 * opts.max_iterations) << "route index " << k;
+    EXPECT_TRUE(test::IsNearPose(truth, r.T_target_source, 0.03, 0.5)) << "route index " << k;
+  }
 }
 
 TEST_P(LfSolverTest, CorridorIsDegenerateAlongItsAxis) {

@@ -16,6 +16,10 @@ namespace lidar2d::bench {
 /// Reads every frame of a log into memory (so that timings exclude parsing).
 std::vector<Frame> loadFrames(const std::string& path);
 
+/// CPU time of the calling thread [s]: per-item times on a machine shared with other jobs (wall
+/// time there includes waiting for the core).
+double threadCpuSeconds();
+
 void runMapBenchmark(const std::string& data_dir);
 
 /// Options of the `match` subcommand.
@@ -40,6 +44,18 @@ struct MatchBenchOptions {
   double relation_max_deg = 45.0;
 };
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& options);
+
+/// Options of the `match-map` subcommand (scan to map: odd scans against the even scans' map).
+struct MatchMapBenchOptions {
+  double sigma_xy_m = 0.1;           ///< RMS translation error of the perturbed guess [m]
+  double sigma_theta_deg = 5.0;      ///< RMS rotation error of the perturbed guess [deg]
+  std::uint64_t seed = 1;            ///< seed of the perturbation
+  double resolution_m = 0.05;        ///< cell size of the log-odds map [m]
+  std::vector<std::string> methods;  ///< lf, corr; empty = both
+  std::vector<std::string> solvers;  ///< gn, ceres; empty = both
+  std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
+};
+void runMatchMapBenchmark(const std::string& data_dir, const MatchMapBenchOptions& options);
 
 /// Options of the `degeneracy` subcommand.
 struct DegeneracyBenchOptions {

@@ -4,6 +4,7 @@
 //   lidar2d_dataset_bench localize [--data DIR] [--stride N] [--baseline-stride N]
 //   lidar2d_dataset_bench match [--data DIR] [--sigma-xy M] [--sigma-theta DEG] [--seed N] [--methods p2p p2l ...]
 //   lidar2d_dataset_bench match --relations [--truth-check]   (the raw bags' Kuemmerle relations as pairs)
+//   lidar2d_dataset_bench match-map [--data DIR] [--methods lf corr] [--solvers gn ceres]   (scan to map)
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
@@ -54,6 +55,16 @@ int main(int argc, char** argv) {
   match->add_option("--relation-max-deg", match_options.relation_max_deg, "--relations: largest rotation of a pair [deg]")
       ->capture_default_str();
   match->callback([&] { lidar2d::bench::runMatchBenchmark(data, match_options); });
+  lidar2d::bench::MatchMapBenchOptions mm_options;
+  auto* mm = app.add_subcommand("match-map", "scan to map: odd scans matched against the even scans' map (lf, corr)");
+  mm->add_option("--sigma-xy", mm_options.sigma_xy_m, "RMS translation error of the perturbed guess [m]")->capture_default_str();
+  mm->add_option("--sigma-theta", mm_options.sigma_theta_deg, "RMS rotation error of the perturbed guess [deg]")->capture_default_str();
+  mm->add_option("--seed", mm_options.seed, "seed of the perturbation")->capture_default_str();
+  mm->add_option("--resolution", mm_options.resolution_m, "map cell size [m]")->capture_default_str();
+  mm->add_option("--methods", mm_options.methods, "methods to run (lf corr; default both)");
+  mm->add_option("--solvers", mm_options.solvers, "solvers to run (gn ceres; default both)");
+  mm->add_option("--logs", mm_options.logs, "logs under --data")->capture_default_str();
+  mm->callback([&] { lidar2d::bench::runMatchMapBenchmark(data, mm_options); });
   lidar2d::bench::DegeneracyBenchOptions deg_options;
   auto* deg = app.add_subcommand(
       "degeneracy", "degeneracy detection: precision/recall on simulated worlds, flagged share of real logs, ms per scan");

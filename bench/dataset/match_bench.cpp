@@ -34,14 +34,6 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-// CPU time of the calling thread [s]: per-pair times on a machine shared with other jobs (wall
-// time there includes waiting for the core).
-double threadCpuSeconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
 struct Row {
   eval::PairsResult eval;
   double median_ms = 0.0;
@@ -299,6 +291,12 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
 }
 
 }  // namespace
+
+double threadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo) {
   const sim::OdometryNoise noise =

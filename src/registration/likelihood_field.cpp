@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/registration/icp.hpp"
 #include "src/registration/internal/ceres_common.hpp"
 #include "src/registration/internal/lf_raster.hpp"
 
@@ -104,6 +105,17 @@ struct Linearisation {
   double sq_sum = 0.0;  // sum of squared residuals of the inliers
   std::size_t n = 0;
 };
+
+// The cost of every point at T (points outside the field count at the truncation).
+double totalCost(const LikelihoodField& field, int l, const Points2& src, const SE2& T, LfLoss loss, double k) {
+  RobustLoss rho;  // (ICP's loss: the same definitions as robustWeight's)
+  rho.kind = loss == LfLoss::kHuber ? RobustLoss::Kind::kHuber
+                                    : (loss == LfLoss::kCauchy ? RobustLoss::Kind::kCauchy : RobustLoss::Kind::kNone);
+  rho.scale_m = k;
+  double c = 0.0;
+  for (const auto& p : src) c += rho.rho(field.sample(T * p, l).value);
+  return c;
+}
 
 Linearisation linearise(const LikelihoodField& field, int l, const Points2& src, const SE2& T, LfLoss loss, double k) {
   Linearisation lin;
@@ -273,7 +285,26 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
         const double tn = dx.head<2>().norm();
         if (tn > max_step) dx.head<2>() *= max_step / tn;
         dx.z() = std::clamp(dx.z(), -0.3, 0.3);
-        T = SE2(T.x() + dx.x(), T.y() + dx.y(), T.theta() + dx.z());
+        SE2 next(T.x() + dx.x(), T.y() + dx.y(), T.theta() + dx.z());
+        if (options.line_search && l == 0) {
+          // A step that raises the cost is halved, up to kMaxHalvings times; when none lowers it,
+          // the estimate is a minimum of this level along the Gauss-Newton direction.
+          constexpr int kMaxHalvings = 4;
+          const double c0 = totalCost(field, l, src, T, options.loss, k);
+          int halvings = 0;
+          double c = totalCost(field, l, src, next, options.loss, k);
+          for (; c > c0 && halvings < kMaxHalvings; ++halvings) {
+            dx *= 0.5;
+            next = SE2(T.x() + dx.x(), T.y() + dx.y(), T.theta() + dx.z());
+            c = totalCost(field, l, src, next, options.loss, k);
+          }
+          if (c > c0) {
+            ++iterations;
+            converged = true;
+            break;
+          }
+        }
+        T = next;
         ++iterations;
         if (dx.head<2>().norm() <= options.min_translation_step_m && std::abs(dx.z()) <= options.min_rotation_step_rad) {
           converged = true;

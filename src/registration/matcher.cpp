@@ -95,6 +95,7 @@ PreparedTarget::PreparedTarget(const Points2& points_target, const MatcherOption
 
 PreparedTarget PreparedTarget::fromMap(const io::OccupancyImage& map, const MatcherOptions& options) {
   PreparedTarget t(options.method);
+  t.from_map_ = true;
   const int occupied_min = options.map_occupied_min;
   if (!(occupied_min >= 1 && occupied_min <= 100)) {
     t.error_ = "MatcherOptions.map_occupied_min: must be in 1..100, got " + std::to_string(occupied_min);
@@ -149,9 +150,12 @@ Result matchScans(const PreparedTarget& target, const Points2& source, const SE2
     case Method::kCorrelative:
       if (!target.error().empty()) return invalid(init_T_target_source, target.error());
       try {
+        LikelihoodFieldOptions lf = lfOptions(options);
+        CorrelativeOptions corr = corrOptions(options);
+        if (target.isMap()) lf.line_search = corr.refinement.line_search = true;  // (see fromMap)
         if (options.method == Method::kLikelihoodField)
-          return matchLikelihoodField(*target.field(), source, init_T_target_source, lfOptions(options));
-        return matchCorrelative(*target.grid(), source, init_T_target_source, corrOptions(options), target.field());
+          return matchLikelihoodField(*target.field(), source, init_T_target_source, lf);
+        return matchCorrelative(*target.grid(), source, init_T_target_source, corr, target.field());
       } catch (const Error& e) {
         return invalid(init_T_target_source, e.what());
       }

@@ -60,6 +60,14 @@ struct LikelihoodFieldOptions {
   double min_translation_step_m = 1e-5;  ///< converged when the step is below both [m], >= 0
   double min_rotation_step_rad = 1e-5;   ///< [rad], >= 0
   std::size_t min_points = 6;     ///< fewer valid source points (or inliers) fail the match, >= 3
+  /// Gauss-Newton at the finest level: halve a step that raises the cost (all points, those outside
+  /// the truncation counted at it), up to 4 times, and stop where none lowers it. Against a map's
+  /// unsigned field, whose bilinear interpolant has kinks along the cells, plain Gauss-Newton keeps
+  /// stepping across the minimum until max_iterations; with the search it stops there. Measured
+  /// (BENCHMARK.md, "Scan to map"): scan to map +4-5 points of success, and the matches converge;
+  /// scan to scan on intel -0.3 (perturbed guess) and -1.0 (identity) points, freiburg-079
+  /// unchanged: so off by default, on for `PreparedTarget::fromMap` targets.
+  bool line_search = false;
 
   /// Throws `lidar2d::Error` (kInvalidArgument) naming the first field out of its domain.
   void validate() const;

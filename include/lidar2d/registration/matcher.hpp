@@ -61,7 +61,10 @@ class PreparedTarget {
   /// Scan-to-map: prepares an occupancy map (world frame) for kLikelihoodField
   /// (`LikelihoodField::fromMap`) or kCorrelative (`CorrelativeGrid::fromMap`, refined by the
   /// map's field), so that the matches estimate T_world_source, the source scan's pose in the map.
-  /// Obstacles are the cells with a value >= `options.map_occupied_min`.
+  /// Obstacles are the cells with a value >= `options.map_occupied_min`. Matches against it run the
+  /// field's Gauss-Newton with `LikelihoodFieldOptions::line_search` on (for the correlative
+  /// search's refinement too): against a map's unsigned field it stops at the minimum instead of
+  /// stepping across it until max_iterations (BENCHMARK.md, "Scan to map").
   /// kP2P and kP2L give a target that every match reports as kInvalidInput: against the centres
   /// of a map's cells ICP is biased by up to half a cell (a wall on a cell border is drawn on one
   /// side of it; the field measures the distance to the cells' extent instead), and point-to-line
@@ -91,6 +94,8 @@ class PreparedTarget {
   const CorrelativeGrid* grid() const { return grid_.get(); }
   /// Why preparing failed (out-of-domain options), or empty.
   const std::string& error() const { return error_; }
+  /// True when prepared from an occupancy map (`fromMap`).
+  bool isMap() const { return from_map_; }
 
  private:
   Method method_;
@@ -99,6 +104,7 @@ class PreparedTarget {
   std::unique_ptr<LikelihoodField> field_;
   std::unique_ptr<CorrelativeGrid> grid_;
   std::string error_;  // why the target could not be prepared (bad options), reported by matchScans
+  bool from_map_ = false;
 
   explicit PreparedTarget(Method method) : method_(method) {}
 };
