@@ -449,6 +449,7 @@ std::unique_ptr<Localizer::State> makeState(const io::OccupancyImage& map, Datab
   s->lf_options.truncation_m = std::max(0.3, 2.0 * map.resolution());
   s->lf_options.occupied_min = s->db.options().occupied_min;
   s->lf_options.max_iterations = 15;
+  s->lf_options.line_search = true;  // stops at the minimum of the map's field (BENCHMARK.md, "Global localization")
   s->field = registration::LikelihoodField::fromMap(map, s->lf_options);
   if (options.fallback_branch_and_bound) {
     s->corr_options.resolution_m = std::max(map.resolution(), 0.05);
