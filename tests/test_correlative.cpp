@@ -35,15 +35,7 @@ class Office {
     route_ = sim::samplePath(scenario_.waypoints, sim::PathOptions{});
     sim_ = std::make_unique<sim::Simulator>(scenario_.world, std::vector<sim::TimedPose>{{0.0, SE2()}}, opts_);
   }
-  LaserScan makeScan(const SE2& T) const {
-    LaserScanFields f;
-    f.angle_min = opts_.laser.angleMin();
-    f.angle_increment = opts_.laser.angleIncrement();
-    f.range_min = opts_.laser.range_min_m;
-    f.range_max = opts_.laser.range_max_m;
-    f.ranges = sim_->exactRanges(T);
-    return LaserScan::create(f);
-  }
+  LaserScan makeScan(const SE2& T) const { return sim_->exactScan(T); }
   Points2 scanAt(const SE2& T) const { return makeScan(T).toPoints(); }
   const std::vector<sim::TimedPose>& route() const { return route_; }
 

@@ -52,14 +52,7 @@ class World {
         sim_(scenario_.world, {{0.0, SE2()}}, options_) {}
 
   Points2 pointsAt(const SE2& T_world_robot) const {
-    const sim::LaserModel& l = options_.laser;
-    LaserScanFields f;
-    f.angle_min = l.angleMin();
-    f.angle_increment = l.angleIncrement();
-    f.range_min = l.range_min_m;
-    f.range_max = l.range_max_m;
-    f.ranges = sim_.exactRanges(T_world_robot);
-    return LaserScan::create(f).toPoints(l.T_robot_laser);
+    return sim_.exactScan(T_world_robot).toPoints(options_.laser.T_robot_laser);
   }
   // Poses along the world's route, every `step` samples.
   std::vector<SE2> routePoses(std::size_t count) const {

@@ -41,15 +41,7 @@ class SimScans {
   }
   /// Endpoints of a scan taken at T_world_robot, in the robot frame.
   Points2 scanAt(const SE2& T_world_robot) const { return makeScan(T_world_robot).toPoints(); }
-  LaserScan makeScan(const SE2& T_world_robot) const {
-    LaserScanFields f;
-    f.angle_min = opts_.laser.angleMin();
-    f.angle_increment = opts_.laser.angleIncrement();
-    f.range_min = opts_.laser.range_min_m;
-    f.range_max = opts_.laser.range_max_m;
-    f.ranges = sim_->exactRanges(T_world_robot);
-    return LaserScan::create(f);
-  }
+  LaserScan makeScan(const SE2& T_world_robot) const { return sim_->exactScan(T_world_robot); }
   const std::vector<sim::TimedPose>& route() const { return route_; }
   const sim::World& world() const { return scenario_.world; }
 

@@ -30,14 +30,7 @@ Points2 officePoints(const SE2& T_world_robot) {
   sim::SimulatorOptions o = sim::SimulatorOptions{}.noiseFree();
   o.laser.beams = 361;
   static const sim::Simulator simulator(scenario.world, {{0.0, SE2()}}, o);
-  const sim::LaserModel& l = simulator.options().laser;
-  LaserScanFields f;
-  f.angle_min = l.angleMin();
-  f.angle_increment = l.angleIncrement();
-  f.range_min = l.range_min_m;
-  f.range_max = l.range_max_m;
-  f.ranges = simulator.exactRanges(T_world_robot);
-  return LaserScan::create(f).toPoints(l.T_robot_laser);
+  return simulator.exactScan(T_world_robot).toPoints(simulator.options().laser.T_robot_laser);
 }
 
 class MatcherVariants : public ::testing::TestWithParam<Variant> {};
@@ -99,16 +92,7 @@ struct OfficeRoute {
   std::unique_ptr<sim::Simulator> simulator;  // noise-free 360 beams over 360 deg, laser at the robot's centre
   io::OccupancyImage map;
 
-  LaserScan scanAt(const SE2& T_world_robot) const {
-    const sim::LaserModel& l = simulator->options().laser;
-    LaserScanFields f;
-    f.angle_min = l.angleMin();
-    f.angle_increment = l.angleIncrement();
-    f.range_min = l.range_min_m;
-    f.range_max = l.range_max_m;
-    f.ranges = simulator->exactRanges(T_world_robot);
-    return LaserScan::create(f);
-  }
+  LaserScan scanAt(const SE2& T_world_robot) const { return simulator->exactScan(T_world_robot); }
 };
 
 const OfficeRoute& officeRoute() {

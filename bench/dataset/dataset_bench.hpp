@@ -20,6 +20,9 @@ std::vector<Frame> loadFrames(const std::string& path);
 /// time there includes waiting for the core).
 double threadCpuSeconds();
 
+/// True when `name` is in `list`, or `list` is empty (a `--methods` / `--solvers` filter).
+bool wanted(const std::vector<std::string>& list, const std::string& name);
+
 void runMapBenchmark(const std::string& data_dir);
 
 /// Options of the `match` subcommand.

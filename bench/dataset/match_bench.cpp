@@ -251,7 +251,7 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
     for (const std::string init_name : {"perturbed", "identity"}) {
       if (std::find(bo.inits.begin(), bo.inits.end(), init_name) == bo.inits.end()) continue;
       for (const std::string method_name : {"p2p", "p2l", "lf", "corr", "corr+p2l"}) {
-        if (!bo.methods.empty() && std::find(bo.methods.begin(), bo.methods.end(), method_name) == bo.methods.end())
+        if (!wanted(bo.methods, method_name))
           continue;
         const bool two_stage = method_name == "corr+p2l";
         registration::MatcherOptions o;
@@ -296,6 +296,10 @@ double threadCpuSeconds() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+bool wanted(const std::vector<std::string>& list, const std::string& name) {
+  return list.empty() || std::find(list.begin(), list.end(), name) != list.end();
 }
 
 void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo) {
@@ -352,13 +356,13 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
           {"truth", &exact}}) {
       if (std::find(bo.inits.begin(), bo.inits.end(), init_name) == bo.inits.end()) continue;
       for (const std::string method_name : {"p2p", "p2l", "lf", "corr", "corr+p2l"}) {
-        if (!bo.methods.empty() && std::find(bo.methods.begin(), bo.methods.end(), method_name) == bo.methods.end())
+        if (!wanted(bo.methods, method_name))
           continue;
         const bool two_stage = method_name == "corr+p2l";
         const registration::Method method =
             two_stage ? registration::Method::kCorrelative : *registration::parseMethod(method_name);
         for (auto solver : {registration::Solver::kGaussNewton, registration::Solver::kCeres}) {
-          if (!bo.solvers.empty() && std::find(bo.solvers.begin(), bo.solvers.end(), registration::toString(solver)) == bo.solvers.end())
+          if (!wanted(bo.solvers, registration::toString(solver)))
             continue;
           registration::MatcherOptions o;
           o.icp = bo.icp;

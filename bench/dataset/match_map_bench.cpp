@@ -8,7 +8,6 @@
 
 #include <fmt/format.h>
 
-#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -27,10 +26,6 @@ namespace lidar2d::bench {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-
-bool wanted(const std::vector<std::string>& list, const std::string& name) {
-  return list.empty() || std::find(list.begin(), list.end(), name) != list.end();
-}
 
 }  // namespace
 

@@ -6,6 +6,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 
 #include "lidar2d/core/error.hpp"
@@ -268,6 +269,8 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
     const double max_step = field.level(l).truncation;
     converged = false;
     if (options.solver == LfSolver::kGaussNewton) {
+      // Line search: the cost at T, carried from the step that moved there (NaN: not known yet).
+      double cost_at_T = std::numeric_limits<double>::quiet_NaN();
       for (int it = 0; it < options.max_iterations; ++it) {
         const auto lin = linearise(field, l, src, T, options.loss, k);
         if (lin.n < options.min_points) {
@@ -290,7 +293,7 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
           // A step that raises the cost is halved, up to kMaxHalvings times; when none lowers it,
           // the estimate is a minimum of this level along the Gauss-Newton direction.
           constexpr int kMaxHalvings = 4;
-          const double c0 = totalCost(field, l, src, T, options.loss, k);
+          const double c0 = std::isnan(cost_at_T) ? totalCost(field, l, src, T, options.loss, k) : cost_at_T;
           int halvings = 0;
           double c = totalCost(field, l, src, next, options.loss, k);
           for (; c > c0 && halvings < kMaxHalvings; ++halvings) {
@@ -303,6 +306,7 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
             converged = true;
             break;
           }
+          cost_at_T = c;  // the cost at `next`, where T moves now
         }
         T = next;
         ++iterations;

@@ -141,14 +141,13 @@ Result matchScans(const PreparedTarget& target, const Points2& source, const SE2
   if (target.method() != options.method)
     return invalid(init_T_target_source, std::string("target prepared for method ") + toString(target.method()) +
                                              ", matched with " + toString(options.method));
+  if (!target.error().empty()) return invalid(init_T_target_source, target.error());
   switch (options.method) {
     case Method::kP2P:
     case Method::kP2L:
-      if (!target.error().empty()) return invalid(init_T_target_source, target.error());
       return alignIcp(*target.icp(), source, init_T_target_source, icpOptions(options));
     case Method::kLikelihoodField:
     case Method::kCorrelative:
-      if (!target.error().empty()) return invalid(init_T_target_source, target.error());
       try {
         LikelihoodFieldOptions lf = lfOptions(options);
         CorrelativeOptions corr = corrOptions(options);

@@ -83,6 +83,20 @@ std::vector<double> Simulator::exactRanges(const SE2& T_world_robot) const {
   return ranges;
 }
 
+LaserScan Simulator::makeScan(std::vector<double> ranges, double time_s) const {
+  const LaserModel& l = options_.laser;
+  LaserScanFields f;
+  f.time = time_s;
+  f.angle_min = l.angleMin();
+  f.angle_increment = l.angleIncrement();
+  f.range_min = l.range_min_m;
+  f.range_max = l.range_max_m;
+  f.ranges = std::move(ranges);
+  return LaserScan::create(std::move(f));
+}
+
+LaserScan Simulator::exactScan(const SE2& T_world_robot) const { return makeScan(exactRanges(T_world_robot), 0.0); }
+
 std::optional<Frame> Simulator::next() {
   if (k_ >= truth_.size()) return std::nullopt;
   const LaserModel& l = options_.laser;
@@ -101,17 +115,10 @@ std::optional<Frame> Simulator::next() {
     const SE2 T_prev_cur = truth_[k_ - 1].T_world_robot.inverse() * tp.T_world_robot;
     odom_ = odom_ * noisyOdometryStep(T_prev_cur, options_.odometry, odom_rng_);
   }
-  LaserScanFields f;
-  f.time = tp.time_s;
-  f.angle_min = l.angleMin();
-  f.angle_increment = l.angleIncrement();
-  f.range_min = l.range_min_m;
-  f.range_max = l.range_max_m;
-  f.ranges = std::move(ranges);
   Frame frame;
   frame.index = k_;
   frame.time = tp.time_s;
-  frame.scan = LaserScan::create(std::move(f));
+  frame.scan = makeScan(std::move(ranges), tp.time_s);
   frame.T_odom_robot = odom_;
   frame.T_world_robot = tp.T_world_robot;
   frame.T_robot_laser = l.T_robot_laser;

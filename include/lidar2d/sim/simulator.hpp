@@ -77,8 +77,13 @@ class Simulator {
   /// The noise-free ranges the laser would measure with the robot at `T_world_robot` (one per
   /// beam; `range_max_m` for no return).
   std::vector<double> exactRanges(const SE2& T_world_robot) const;
+  /// Those ranges as a scan of this laser (time 0): the noise-free scan at `T_world_robot`, in the
+  /// laser frame (`options().laser.T_robot_laser` mounts it on the robot).
+  LaserScan exactScan(const SE2& T_world_robot) const;
 
  private:
+  LaserScan makeScan(std::vector<double> ranges, double time_s) const;
+
   const World& world_;
   std::vector<TimedPose> truth_;
   const SimulatorOptions options_;
