@@ -261,6 +261,22 @@ TEST(Localization, MapWithoutFreeSpaceIsRefused) {
   }
 }
 
+TEST(Localization, AbsurdGridIsRefusedUpFront) {
+  // 100 m cells: a 4 km square, 4 * 10^8 positions at the 0.2 m step (the build used to run out of
+  // memory); the error names the step that would do.
+  const auto huge = io::OccupancyImage::filled(40, 40, 100.0, SE2(), io::OccupancyImage::kFree);
+  DatabaseOptions o = fastDb();
+  o.step_m = 0.2;
+  try {
+    (void)Database::build(huge, o);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kBadInput);
+    EXPECT_EQ(e.where().field, "step");
+    EXPECT_NE(std::string(e.what()).find("at least 1.28 m"), std::string::npos) << e.what();
+  }
+}
+
 TEST(LocalizationDatabase, RoundTripKeepsEverythingAndTheAnswers) {
   const SimMap& s = office();
   test::TempDir dir;
@@ -347,6 +363,18 @@ TEST(LocalizationDatabase, OtherVersionCorruptionAndTruncationAreRefused) {
   expectError(bytes.substr(0, bytes.size() - 100), ErrorKind::kBadInput, "positions");
   expectError(bytes.substr(0, 20), ErrorKind::kBadInput, "step_m");
   EXPECT_THROW((void)io::readLocalizationDatabase((dir.path() / "missing").string()), Error);
+  // Not files: read whole, /dev/zero used to run out of memory; a directory gave the standard
+  // library's message without the path.
+  for (const std::string& p : {std::string("/dev/zero"), dir.path().string()}) {
+    try {
+      (void)io::readLocalizationDatabase(p);
+      ADD_FAILURE() << "no error for " << p;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kBadInput) << e.what();
+      EXPECT_EQ(e.where().file, p);
+      EXPECT_NE(std::string(e.what()).find("not a localization database file"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(LocalizationReal, IntelOddScansInEvenMapSubset) {

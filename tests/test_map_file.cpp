@@ -228,7 +228,12 @@ TEST(MapFile, MalformedInput) {
   expectError(tmp / "missing.yaml", {"missing.yaml", "does not exist"});
   expectError(yaml("noimage.yaml", "resolution: 0.05\norigin: [0, 0, 0]\n"), {"noimage.yaml", "image", "missing"});
   expectError(yaml("res0.yaml", "image: ok.pgm\nresolution: 0\norigin: [0, 0, 0]\n"), {"res0.yaml", "resolution"});
-  expectError(yaml("resneg.yaml", "image: ok.pgm\nresolution: -1\norigin: [0, 0, 0]\n"), {"resolution", "> 0"});
+  expectError(yaml("resneg.yaml", "image: ok.pgm\nresolution: -1\norigin: [0, 0, 0]\n"), {"resolution", "between"});
+  // Absurd values that used to load, and then made `localize-index` loop without end (1e308: the
+  // map's extent overflowed) or overflow its cell arithmetic (1e-300).
+  expectError(yaml("reshuge.yaml", "image: ok.pgm\nresolution: 1e308\norigin: [0, 0, 0]\n"), {"resolution", "100 m"});
+  expectError(yaml("restiny.yaml", "image: ok.pgm\nresolution: 1e-300\norigin: [0, 0, 0]\n"), {"resolution", "0.0001"});
+  expectError(yaml("originfar.yaml", "image: ok.pgm\nresolution: 0.05\norigin: [0, -1e12, 0]\n"), {"origin", "1e+09"});
   expectError(yaml("resstr.yaml", "image: ok.pgm\nresolution: fine\norigin: [0, 0, 0]\n"), {"resolution", "numeric"});
   expectError(yaml("origin.yaml", "image: ok.pgm\nresolution: 0.05\norigin: [0, 0]\n"), {"origin"});
   expectError(yaml("thresh.yaml", "image: ok.pgm" + rest + "occupied_thresh: 0.1\nfree_thresh: 0.5\n"), {"free_thresh"});
@@ -249,6 +254,21 @@ TEST(MapFile, MalformedInput) {
   expectError(yaml("deep.yaml", "image: deep.pgm" + rest), {"deep.pgm", "8-bit"});
   writeFile(tmp / "empty.pgm", "");
   expectError(yaml("empty.yaml", "image: empty.pgm" + rest), {"empty.pgm", "empty"});
+  // Not files: a directory, and a device that never ends (read whole, it ran out of memory).
+  expectError(yaml("dir.yaml", "image: " + tmp.path().string() + rest), {"is a directory", "image file"});
+  expectError(yaml("dev.yaml", "image: /dev/zero" + rest), {"/dev/zero", "device", "image file"});
+  expectError("/dev/zero", {"/dev/zero", "device", "map YAML"});
+  expectError(tmp.path(), {"is a directory", "map YAML"});
+  writeFile(tmp / "big.yaml", "image: ok.pgm" + rest + "# " + std::string(2 << 20, 'x') + "\n");
+  expectError(tmp / "big.yaml", {"big.yaml", "MiB limit"});
+}
+
+TEST(MapFile, OccupancyImageRejectsAbsurdGeometry) {
+  const SE2 o(0, 0, 0);
+  EXPECT_TRUE(test::throwsError([&] { OccupancyImage::filled(2, 2, 1e308, o); }, ErrorKind::kInvalidArgument, {"resolution"}));
+  EXPECT_TRUE(test::throwsError([&] { OccupancyImage::filled(2, 2, 1e-5, o); }, ErrorKind::kInvalidArgument, {"resolution"}));
+  EXPECT_TRUE(test::throwsError([&] { OccupancyImage::filled(2, 2, 0.05, SE2(2e9, 0, 0)); }, ErrorKind::kInvalidArgument, {"origin"}));
+  EXPECT_NO_THROW(OccupancyImage::filled(2, 2, 100.0, SE2(-1e9, 1e9, 0)));
 }
 
 }  // namespace

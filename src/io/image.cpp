@@ -4,13 +4,11 @@
 #include <png.h>
 
 #include <cctype>
-#include <filesystem>
-#include <fstream>
 #include <limits>
-#include <sstream>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/map_file.hpp"
+#include "src/io/internal/read_file.hpp"
 
 namespace lidar2d::io {
 namespace {
@@ -132,15 +130,10 @@ GreyImage decodeGreyImage(const std::string& data, const std::string& path) {
 }
 
 GreyImage readGreyImage(const std::string& path, const std::string& field) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    std::error_code ec;
-    throw ioError(std::filesystem::exists(path, ec) ? "cannot read the image" : "image file does not exist",
-                  {path, 0, field});
-  }
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return decodeGreyImage(ss.str(), path);
+  // The largest image decodeGreyImage accepts (OccupancyImage::kMaxCells pixels) as ASCII PGM
+  // takes up to 4 bytes a pixel.
+  constexpr std::uint64_t kMaxBytes = std::uint64_t{4} << 30;
+  return decodeGreyImage(internal::readWholeFile(path, kMaxBytes, "image file", field), path);
 }
 
 std::vector<std::uint8_t> encodePng(const std::uint8_t* pixels, int width, int height, int channels,

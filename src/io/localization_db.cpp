@@ -6,12 +6,11 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 #include <type_traits>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/atomic_file.hpp"
+#include "src/io/internal/read_file.hpp"
 
 namespace lidar2d::io {
 
@@ -87,11 +86,7 @@ localization::LineExtractionOptions getLineOptions(Reader& r) {
 }
 
 std::string readAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ioError("cannot open localization database", ErrorLocation(path));
-  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) throw ioError("cannot read localization database", ErrorLocation(path));
-  return data;
+  return internal::readWholeFile(path, std::uint64_t{16} << 30, "localization database file");
 }
 
 // Checks magic and version; returns a reader positioned after them.

@@ -7,12 +7,12 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/image.hpp"
+#include "src/io/internal/read_file.hpp"
 
 namespace lidar2d::io {
 namespace fs = std::filesystem;
@@ -25,9 +25,12 @@ OccupancyImage OccupancyImage::create(int width, int height, double resolution_m
   if (width < 1 || height < 1) throw invalidArgument(fmt::format("width and height must be >= 1, got {} x {}", width, height), where);
   if (static_cast<std::uint64_t>(width) * static_cast<std::uint64_t>(height) > kMaxCells)
     throw invalidArgument(fmt::format("{} x {} cells exceed the limit of 10^9", width, height), where);
-  if (!std::isfinite(resolution_m) || resolution_m <= 0)
-    throw invalidArgument(fmt::format("resolution must be finite and > 0, got {}", resolution_m), where);
-  if (!origin.isFinite()) throw invalidArgument("origin must be finite", where);
+  if (!(resolution_m >= kMinResolution && resolution_m <= kMaxResolution))
+    throw invalidArgument(fmt::format("resolution must be between {} and {} m, got {}", kMinResolution, kMaxResolution,
+                                      resolution_m),
+                          where);
+  if (!origin.isFinite() || std::abs(origin.x()) > kMaxOriginAbs || std::abs(origin.y()) > kMaxOriginAbs)
+    throw invalidArgument(fmt::format("origin must be finite with |x|, |y| <= {:g} m", kMaxOriginAbs), where);
   if (cells.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
     throw invalidArgument(fmt::format("{} cells given for {} x {}", cells.size(), width, height), where);
   for (std::size_t i = 0; i < cells.size(); ++i)
@@ -86,12 +89,15 @@ T scalar(const YAML::Node& root, const char* key, const std::string& file) {
   }
 }
 
+// A map YAML holds a few short keys; anything near this size is not one.
+constexpr std::uint64_t kMaxYamlBytes = std::uint64_t{1} << 20;
+
 MapYaml parseYaml(const std::string& file) {
   YAML::Node root;
   try {
-    root = YAML::LoadFile(file);
-  } catch (const YAML::BadFile&) {
-    throw ioError(fs::exists(file) ? "cannot read map YAML" : "map YAML does not exist", {file});
+    // (Read by lidar2d rather than YAML::LoadFile, which would read a device such as /dev/zero
+    // without end and reports an unreadable path without the file's name.)
+    root = YAML::Load(internal::readWholeFile(file, kMaxYamlBytes, "map YAML file"));
   } catch (const YAML::ParserException& e) {
     throw badInput(fmt::format("malformed YAML: {}", e.msg), {file, static_cast<std::size_t>(e.mark.line) + 1});
   }
@@ -102,8 +108,10 @@ MapYaml parseYaml(const std::string& file) {
   y.image = scalar<std::string>(root, "image", file);
   if (y.image.empty()) throw badInput("image path is empty", {file, 0, "image"});
   y.resolution = scalar<double>(root, "resolution", file);
-  if (!std::isfinite(y.resolution) || y.resolution <= 0)
-    throw badInput(fmt::format("must be finite and > 0, got {}", y.resolution), {file, 0, "resolution"});
+  if (!(y.resolution >= OccupancyImage::kMinResolution && y.resolution <= OccupancyImage::kMaxResolution))
+    throw badInput(fmt::format("must be between {} and {} m, got {}", OccupancyImage::kMinResolution,
+                               OccupancyImage::kMaxResolution, y.resolution),
+                   {file, 0, "resolution"});
   const YAML::Node o = root["origin"];
   if (!o.IsSequence() || o.size() != 3) throw badInput("expected [x, y, yaw]", {file, 0, "origin"});
   double v[3];
@@ -114,6 +122,9 @@ MapYaml parseYaml(const std::string& file) {
       throw badInput("expected three numbers [x, y, yaw]", {file, 0, "origin"});
     }
     if (!std::isfinite(v[i])) throw badInput("values must be finite", {file, 0, "origin"});
+    if (i < 2 && std::abs(v[i]) > OccupancyImage::kMaxOriginAbs)
+      throw badInput(fmt::format("x and y must be within +-{:g} m, got {}", OccupancyImage::kMaxOriginAbs, v[i]),
+                     {file, 0, "origin"});
   }
   y.origin = SE2(v[0], v[1], v[2]);
   if (root["negate"]) {

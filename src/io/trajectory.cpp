@@ -18,6 +18,7 @@
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/atomic_file.hpp"
+#include "src/io/internal/read_file.hpp"
 
 namespace lidar2d::io {
 namespace {
@@ -62,9 +63,9 @@ std::optional<double> toDouble(std::string_view s, std::errc* ec_out = nullptr) 
 class LineReader {
  public:
   explicit LineReader(const std::string& path) : path_(path), in_(path, std::ios::binary) {
-    std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) throw badInput("is a directory, expected a text file", {path});
     if (!in_) throw ioError(std::string("cannot open: ") + std::strerror(errno), {path});
+    // (A directory opens; a device such as /dev/zero would make std::getline read without end.)
+    internal::checkInputFile(path, "text file");
   }
   /// Next data line split into fields (comments and blank lines skipped); false at the end.
   bool next(std::vector<std::string_view>& fields) {

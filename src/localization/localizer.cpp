@@ -22,6 +22,9 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
+// Grid positions (before the clearance test) a database may be built over: 10^7 is a 630 m square
+// at the default 0.2 m step, hours of virtual scans and gigabytes of memory.
+constexpr double kMaxGridPositions = 1e7;
 
 Error badOption(const char* field, double v) {
   return invalidArgument(fmt::format("localization option {} = {} is out of its domain", field, v),
@@ -262,6 +265,15 @@ Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& o
   }
 
   // Positions: a grid over the map (map frame) keeping the clearance from every non-free cell.
+  // An absurd grid (a huge map, a tiny step) is an error up front rather than hours of work and
+  // then an out-of-memory crash.
+  const double grid_positions = std::ceil(W * res / options.step_m) * std::ceil(H * res / options.step_m);
+  if (grid_positions > kMaxGridPositions)
+    throw badInput(fmt::format("the map spans {:.0f} m x {:.0f} m, which at a step of {} m is {:.3g} database positions, "
+                               "more than the limit of {:.0f}: use a step of at least {:.2f} m",
+                               W * res, H * res, options.step_m, grid_positions, kMaxGridPositions,
+                               std::sqrt(W * res * H * res / kMaxGridPositions) * 1.01),
+                   ErrorLocation({}, 0, "step"));
   const int clear = static_cast<int>(std::ceil(options.clearance_m / res));
   std::vector<Eigen::Vector2i> offsets;
   for (int dy = -clear; dy <= clear; ++dy)

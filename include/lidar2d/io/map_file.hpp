@@ -26,14 +26,20 @@ namespace lidar2d::io {
 /// world is `origin` (`p_world = origin * p_map`; the yaw is usually 0).
 /// Values: -1 unknown, 0 (free) .. 100 (occupied).
 ///
-/// Invariants (checked by `create`): width, height >= 1, width * height <= 10^9, finite resolution
-/// > 0, finite origin, cells.size() == width * height, every value in {-1, 0..100}.
+/// Invariants (checked by `create`): width, height >= 1, width * height <= 10^9, resolution in
+/// [kMinResolution, kMaxResolution] (the range `lidar2d map` accepts), finite origin with |x|, |y| <=
+/// kMaxOriginAbs, cells.size() == width * height, every value in {-1, 0..100}. (The bounds keep
+/// every derived extent and cell index finite and in range: a YAML saying `resolution: 1e308`
+/// is an error, not an endless loop.)
 class OccupancyImage {
  public:
   static constexpr std::int8_t kUnknown = -1;
   static constexpr std::int8_t kFree = 0;
   static constexpr std::int8_t kOccupied = 100;
   static constexpr std::uint64_t kMaxCells = 1000000000ULL;
+  static constexpr double kMinResolution = 1e-4;  ///< [m]
+  static constexpr double kMaxResolution = 100.0;  ///< [m]
+  static constexpr double kMaxOriginAbs = 1e9;     ///< [m]
 
   OccupancyImage() = default;
   /// Checks the invariants above; throws `lidar2d::Error` (kInvalidArgument) naming the field.
