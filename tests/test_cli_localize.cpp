@@ -151,6 +151,23 @@ TEST_F(CliLocalize, BadInputIsOneLineAndExitOne) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("not a lidar2d localization database"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(path("j.txt")));
+  // A device as the database: read whole, /dev/zero ran out of memory.
+  r = runCli({"localize", path("office.yaml"), path("query.log"), "--db", "/dev/zero", "-o", path("z.txt")});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("/dev/zero: is a device"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(path("z.txt")));
+  // The office map with 50 m cells: a grid of 10^8 positions, refused up front (it ran out of
+  // memory; with `resolution: 1e308`, now refused by the YAML check, it looped without end).
+  const std::string office_yaml = test::readFile(path("office.yaml"));
+  const std::size_t at = office_yaml.find("resolution:");
+  ASSERT_NE(at, std::string::npos);
+  const std::size_t eol = office_yaml.find('\n', at);
+  test::writeFile(path("huge.yaml"), office_yaml.substr(0, at) + "resolution: 50" + office_yaml.substr(eol));
+  r = runCli({"localize-index", path("huge.yaml"), "-o", path("h.db")});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("step: the map spans"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("use a step of at least"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(path("h.db")));
 }
 
 }  // namespace

@@ -175,10 +175,15 @@ TEST(CliMatch, BadInputExitsOneWithoutOutput) {
   EXPECT_FALSE(fs::exists(out));
   // An out-of-domain matcher option.
   test::writeFile(notruth, roomLog(3));
-  for (const char* w : {"-1", "nan"}) {
-    r = runCli({"match", notruth, "--point-pairs", w, "-o", out});
-    EXPECT_EQ(r.exit_code, 1) << w;
-    EXPECT_NE(r.err.find("point_pair_weight"), std::string::npos) << r.err;
+  r = runCli({"match", notruth, "--point-pairs", "-1", "-o", out});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("point_pair_weight"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+  // A non-finite number is a usage error of every floating-point option (exit 2).
+  for (const char* opt : {"--point-pairs", "--max-dist"}) {
+    r = runCli({"match", notruth, opt, "nan", "-o", out});
+    EXPECT_EQ(r.exit_code, 2) << opt;
+    EXPECT_NE(r.err.find(std::string(opt) + ": must be a finite number"), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(out));
   }
   // Unwritable output.

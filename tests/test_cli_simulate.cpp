@@ -191,6 +191,16 @@ TEST(SimulateCli, UsageErrorsExit2) {
   EXPECT_EQ(runCli({"simulate", "--world", "office", "--map", "m.yaml", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"simulate", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"simulate", "--world", "office"}).exit_code, 2);  // no output
+  // Non-finite numbers: CLI11 reads "nan" and "inf" as numbers, and NaN passed its range checks
+  // (--rate nan reached the path sampler; --clearance nan was taken).
+  for (const char* opt : {"--rate", "--speed", "--clearance", "--range-noise"}) {
+    r = runCli({"simulate", "--world", "office", opt, "nan", "-o", out});
+    EXPECT_EQ(r.exit_code, 2) << opt;
+    EXPECT_NE(r.err.find("must be a finite number"), std::string::npos) << opt << ": " << r.err;
+  }
+  r = runCli({"simulate", "--world", "office", "--mount", "1e308,0,0", "-o", out});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--mount"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out));
 }
 
@@ -211,6 +221,12 @@ TEST(SimulateCli, BadInputExits1WithoutOutput) {
   r = runCli({"simulate", "--world", "open", "--scans", "3", "--min-range", "40", "-o", out});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("range_max"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+  // A rate so low that 3 scans would drive the route 10^10 times (this looped without end) and,
+  // in a map, a random walk of 2.4 * 10^12 m.
+  r = runCli({"simulate", "--world", "office", "--scans", "3", "--rate", "1e-12", "-o", out});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("passes over the route"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out));
   // Leftover temporary files would be partial output.
   for (const auto& e : fs::directory_iterator(tmp.path())) EXPECT_EQ(e.path().filename(), "dir.log");

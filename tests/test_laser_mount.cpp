@@ -51,7 +51,13 @@ TEST(LaserMount, NonFinitePoseIsAnInvalidArgument) {
   ASSERT_EQ(test::runCli({"simulate", "--world", "office", "--scans", "3", "-o", log}).exit_code, 0);
   io::ReaderOptions o;
   o.laser_mount = SE2(std::numeric_limits<double>::quiet_NaN(), 0.0, 0.0);
-  EXPECT_TRUE(test::throwsError([&] { io::openLog(log, o); }, ErrorKind::kInvalidArgument, {"laser_mount", "not finite"}));
+  EXPECT_TRUE(test::throwsError([&] { io::openLog(log, o); }, ErrorKind::kInvalidArgument, {"laser_mount", "finite"}));
+  // Finite but absurd (a mistyped unit): 1e308 m made `lidar2d slam` fail deep inside with the
+  // standard library's "cannot create std::vector larger than max_size()".
+  o.laser_mount = SE2(0.0, -1e3, 0.0);
+  EXPECT_TRUE(test::throwsError([&] { io::openLog(log, o); }, ErrorKind::kInvalidArgument, {"laser_mount", "100 m"}));
+  o.laser_mount = SE2(99.0, -99.0, 3.0);
+  EXPECT_NO_THROW(io::openLog(log, o));
 }
 
 TEST(LaserMount, CommandLine) {
@@ -64,7 +70,8 @@ TEST(LaserMount, CommandLine) {
   EXPECT_NEAR(j["laser_mount"][0].get<double>(), 0.1, 1e-12);
   EXPECT_NEAR(j["laser_mount"][1].get<double>(), -0.2, 1e-12);
   EXPECT_NEAR(j["laser_mount"][2].get<double>(), std::numbers::pi / 6, 1e-12);
-  for (const std::string bad : {"0.1,0.2", "0.1,0.2,3,4", "a,0,0", "nan,0,0", "0,inf,0", "0,,0", "1e999,0,0", ""}) {
+  for (const std::string bad : {"0.1,0.2", "0.1,0.2,3,4", "a,0,0", "nan,0,0", "0,inf,0", "0,,0", "1e999,0,0", "",
+                                 "1e308,0,0", "0,-101,0"}) {
     const auto b = test::runCli({"info", log, "--laser-mount=" + bad});
     EXPECT_EQ(b.exit_code, 2) << "'" << bad << "': " << b.err;
     EXPECT_NE(b.err.find("--laser-mount"), std::string::npos) << b.err;

@@ -74,11 +74,13 @@ void writeSnapshot(const std::string& path, const Frame& f, const Points2& pts, 
     return cv::Point(static_cast<int>(std::lround(size / 2.0 + scale * p.x())),
                      static_cast<int>(std::lround(margin + size / 2.0 - scale * p.y())));
   };
-  // 1 m grid.
-  for (int k = -static_cast<int>(range_m); k <= static_cast<int>(range_m); ++k) {
+  // A 1 m grid (10 m, 100 m, ... for wide pictures: at most 50 lines each way).
+  double grid = 1.0;
+  while (range_m / grid > 50) grid *= 10;
+  for (int k = -static_cast<int>(range_m / grid); k <= static_cast<int>(range_m / grid); ++k) {
     const cv::Scalar g(235, 235, 235);
-    cv::line(img, px({double(k), -range_m}), px({double(k), range_m}), g, 1);
-    cv::line(img, px({-range_m, double(k)}), px({range_m, double(k)}), g, 1);
+    cv::line(img, px({k * grid, -range_m}), px({k * grid, range_m}), g, 1);
+    cv::line(img, px({-range_m, k * grid}), px({range_m, k * grid}), g, 1);
   }
   for (std::size_t i = 0; i < pts.size(); ++i) {
     if (!pts[i].allFinite()) continue;
@@ -189,12 +191,12 @@ void addDegeneracyCommand(CLI::App& app) {
   sub->add_option("-o,--output", a->output, "output file")->required();
   sub->add_option("--snapshots", a->snapshots, "folder for PNG pictures of chosen scans (clusters, lines, verdict)");
   sub->add_option("--snapshot-every", a->snapshot_every, "at most one snapshot per this many scans")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->capture_default_str();
   sub->add_option("--max-snapshots", a->max_snapshots, "stop drawing after this many snapshots")->capture_default_str();
   sub->add_flag("--snapshot-degenerate", a->snapshot_degenerate_only, "draw only scans flagged degenerate");
   sub->add_option("--snapshot-range", a->snapshot_range_m, "half-width of the snapshot pictures [m]")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(0.1, 1e5))
       ->capture_default_str();
   sub->add_option("--geo-threshold", a->options.geometric.threshold, "geometric detector: degenerate below this score")
       ->capture_default_str();

@@ -254,7 +254,7 @@ void addEvalCommand(CLI::App& app) {
       ->transform(CLI::CheckedTransformer(from, CLI::ignore_case))
       ->default_str("odometry");
   sub->add_option("--max-dt", args->options.max_dt_s, "time tolerance of nearest-timestamp lookups [s]")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->default_val(0.1);
   sub->add_option("--pairs", args->pairs,
                   "also score relative poses written by 'match' (t_prev t_cur dx dy dtheta converged iterations)");
@@ -267,13 +267,13 @@ void addEvalCommand(CLI::App& app) {
       ->default_str("auto");
   sub->add_flag("--no-align", args->no_align, "ATE in the given frames, without the least-squares SE(2) alignment");
   sub->add_option("--rpe-distance", args->options.rpe_distance_m, "segment length of the per-distance RPE [m]")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->default_val(1.0);
   sub->add_option("--pair-max-trans", args->options.pair_max_trans_m, "pair success threshold, translation [m]")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->default_val(0.10);
   sub->add_option("--pair-max-rot", args->options.pair_max_rot_deg, "pair success threshold, rotation [deg]")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->default_val(2.0);
   addReaderOptions(sub, args->reader);
   sub->callback([args] { run(*args); });

@@ -93,6 +93,9 @@ void run(const SimulateArgs& a) {
   parseNumbers(a.odom_noise, n, 3, false);
   parseNumbers(a.odom_drift, d, 3, false);
   parseNumbers(a.odom_bias, b, 2, true);
+  if (std::abs(m[0]) > io::kMaxLaserMountOffset || std::abs(m[1]) > io::kMaxLaserMountOffset)
+    throw invalidArgument(fmt::format("X and Y must be within +-{:g} m of the robot's centre", io::kMaxLaserMountOffset),
+                          ErrorLocation({}, 0, "--mount"));
   o.laser.T_robot_laser = SE2(m[0], m[1], m[2] * kDeg);
   o.odometry = {n[0], n[1], n[2], d[0], d[1], d[2], b[0], b[1]};
   if (a.noise_free) o = o.noiseFree();
@@ -176,19 +179,19 @@ void addSimulateCommand(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--path", a->path,
                   "trajectory file (timestamp x y theta per line): one scan at each pose instead of the route");
-  sub->add_option("--rate", a->rate_hz, "scan rate [Hz]")->capture_default_str()->check(CLI::PositiveNumber);
-  sub->add_option("--speed", a->speed_mps, "driving speed [m/s]")->capture_default_str()->check(CLI::PositiveNumber);
+  sub->add_option("--rate", a->rate_hz, "scan rate [Hz]")->capture_default_str()->check(positiveNumber());
+  sub->add_option("--speed", a->speed_mps, "driving speed [m/s]")->capture_default_str()->check(positiveNumber());
   sub->add_option("--beams", a->beams, "beams per scan")->capture_default_str()->check(CLI::Range(1, 1 << 20));
   sub->add_option("--fov", a->fov_deg, "field of view [deg], centred on the laser's x axis")
       ->capture_default_str()
       ->check(CLI::Range(1e-6, 360.0));
   sub->add_option("--max-range", a->max_range_m, "maximum range [m]; no return reads this value")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
-  sub->add_option("--min-range", a->min_range_m, "minimum valid range [m]")->capture_default_str()->check(CLI::NonNegativeNumber);
+      ->check(positiveNumber());
+  sub->add_option("--min-range", a->min_range_m, "minimum valid range [m]")->capture_default_str()->check(nonNegativeNumber());
   sub->add_option("--range-noise", a->range_noise_m, "std of the range noise [m]")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumber());
   sub->add_option("--dropout", a->dropout, "probability that a return is lost")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
@@ -209,7 +212,7 @@ void addSimulateCommand(CLI::App& app) {
       ->check(numbers("SCALE,HEADING", 2, true));
   sub->add_option("--clearance", a->clearance_m, "--map random walks keep this distance from non-free cells [m]")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumber());
   sub->add_flag("--noise-free", a->noise_free, "no range noise, no dropout, odometry equal to the true motion");
   sub->callback([a] { run(*a); });
 }

@@ -24,4 +24,12 @@ void addLocalizeCommands(CLI::App& app);
 /// --carmen-laser, --carmen-poses) bound to `options`.
 void addReaderOptions(CLI::App* sub, io::ReaderOptions& options);
 
+/// Option checks with readable messages (CLI11's PositiveNumber prints its range up to the largest
+/// double, and lets NaN through): a finite number > 0, a finite number >= 0.
+CLI::Validator positiveNumber();
+CLI::Validator nonNegativeNumber();
+/// Adds a finiteness check to every floating-point option of `app` and its subcommands, recursively
+/// (CLI11 reads "nan" and "inf" as numbers). Call after adding the subcommands.
+void requireFiniteNumbers(CLI::App& app);
+
 }  // namespace lidar2d::cli

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   lidar2d::cli::addSlamCommand(app);
   lidar2d::cli::addDegeneracyCommand(app);
   lidar2d::cli::addLocalizeCommands(app);
+  lidar2d::cli::requireFiniteNumbers(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,4 +1,7 @@
+#include <fmt/format.h>
+
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -85,8 +88,11 @@ std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOpt
 }  // namespace
 
 std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options) {
-  if (options.laser_mount && !options.laser_mount->isFinite())
-    throw invalidArgument("laser mounting pose is not finite", {"ReaderOptions", 0, "laser_mount"});
+  if (options.laser_mount && (!options.laser_mount->isFinite() || std::abs(options.laser_mount->x()) > kMaxLaserMountOffset ||
+                              std::abs(options.laser_mount->y()) > kMaxLaserMountOffset))
+    throw invalidArgument(fmt::format("laser mounting pose must be finite, within +-{:g} m of the robot's centre",
+                                      kMaxLaserMountOffset),
+                          {"ReaderOptions", 0, "laser_mount"});
   std::unique_ptr<FrameSource> source = openFormat(path, options);
   if (options.laser_mount) return std::make_unique<MountOverride>(std::move(source), *options.laser_mount);
   return source;

@@ -1,5 +1,7 @@
 #include "lidar2d/sim/path.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -101,6 +103,9 @@ double totalDuration(const std::vector<Piece>& pieces) {
 
 }  // namespace
 
+// Passes back and forth over a route that samplePath drives at most.
+constexpr double kMaxPasses = 1000;
+
 std::vector<TimedPose> samplePath(const std::vector<Eigen::Vector2d>& waypoints, const PathOptions& o,
                                   std::size_t scans) {
   const ErrorLocation where({}, 0, "path");
@@ -120,6 +125,13 @@ std::vector<TimedPose> samplePath(const std::vector<Eigen::Vector2d>& waypoints,
   if (scans > 0) {
     // Drive back and forth until the path lasts long enough for all samples.
     const double needed = static_cast<double>(scans - 1) * dt;
+    // Each pass rebuilds the pieces: bounded, so that a tiny rate cannot make this loop endless.
+    const double passes = needed / totalDuration(pieces);
+    if (!(passes <= kMaxPasses))
+      throw invalidArgument(fmt::format("{} scans at {:g} Hz last {:g} s, {:g} passes over the route at {:g} m/s: more "
+                                        "than the limit of {:g} (fewer scans, a higher rate or a lower speed?)",
+                                        scans, o.rate_hz, needed, passes, o.speed_mps, kMaxPasses),
+                            where);
     const std::vector<Eigen::Vector2d> forward = w;
     bool reverse = true;
     while (totalDuration(pieces) < needed) {

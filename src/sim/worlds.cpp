@@ -245,10 +245,18 @@ World worldFromMap(const io::OccupancyImage& map, int occupied_min, const std::s
   return World(std::move(segs), {}, name, opt);
 }
 
+// A route of 1000 km: the walk's steps are planned one by one, so a longer one would take hours.
+constexpr double kMaxRandomWalkLength = 1e6;
+
 std::vector<Eigen::Vector2d> randomWalk(const io::OccupancyImage& map, const RandomWalkOptions& o) {
   if (!(o.length_m > 0) || !(o.clearance_m >= 0) || !(o.min_step_m > 0) || !(o.max_step_m >= o.min_step_m) ||
       !(o.heading_sigma_rad >= 0))
     throw invalidArgument("random walk: length, clearance and steps must be positive", ErrorLocation({}, 0, "path"));
+  if (!(o.length_m <= kMaxRandomWalkLength))
+    throw invalidArgument(fmt::format("random walk: a length of {:g} m is more than the limit of {:g} m (fewer scans, "
+                                      "a higher rate or a lower speed?)",
+                                      o.length_m, kMaxRandomWalkLength),
+                          ErrorLocation({}, 0, "path"));
   const int w = map.width(), h = map.height();
   // Distance of every cell to the nearest non-free cell (or the map's border), in cells.
   cv::Mat free_img(h + 2, w + 2, CV_8UC1, cv::Scalar(0));

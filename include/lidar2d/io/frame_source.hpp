@@ -46,6 +46,10 @@ struct ReaderOptions {
   std::optional<SE2> laser_mount;
 };
 
+/// The farthest a laser may be mounted from the robot's frame origin: `ReaderOptions::laser_mount`
+/// beyond it is an error (a mistyped unit, not a robot) [m].
+inline constexpr double kMaxLaserMountOffset = 100.0;
+
 /// Facts a reader learns about its log (some only once the stream is exhausted).
 struct SourceNotes {
   std::string scan_source;   ///< e.g. "FLASER" or "/scan"
