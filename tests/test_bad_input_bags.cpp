@@ -113,6 +113,37 @@ TEST(BadBagsCli, CorruptFileHeader) {
   expectCliError({"info", f.string()}, f.string(), "not a readable ROS1 bag");
 }
 
+// A field length that runs past its record header: rosbag_storage's ros::Header::parse read past
+// its buffer (AddressSanitizer: heap-buffer-overflow; found by fuzzing), at the top level of a 1.2
+// bag, in a 2.0 bag's index records and inside its plain chunks. The offsets are those of the
+// (read-only) data files: a record header of 2222 bytes at byte 4120 of the 1.2 bag; in the 2.0
+// bag the connection record at its index_pos (1029025, in the file header), and the first record
+// inside the plain chunk at byte 4117 (its 41-byte header and data length put the inner record at
+// 4166).
+TEST(BadBagsCli, FieldLengthPastItsHeader) {
+  LIDAR2D_REQUIRE_DATA("bags/laser_scan_sparsifier_demo.bag");
+  LIDAR2D_REQUIRE_DATA("bags/laser_scan_matcher_demo.bag");
+  test::TempDir tmp;
+  auto corrupt = [&](const std::string& data, const std::string& name, std::streamoff record) {
+    const fs::path f = tmp / name;
+    fs::copy_file(test::dataFile(data), f);
+    std::fstream io(f, std::ios::binary | std::ios::in | std::ios::out);
+    std::uint32_t header_len = 0;
+    io.seekg(record);
+    io.read(reinterpret_cast<char*>(&header_len), 4);
+    const std::uint32_t field_len = header_len + 100;  // the first field's length, past the header
+    io.seekp(record + 4);
+    io.write(reinterpret_cast<const char*>(&field_len), 4);
+    return f.string();
+  };
+  std::string f = corrupt("bags/laser_scan_sparsifier_demo.bag", "v12.bag", 4120);
+  expectCliError({"info", f}, f, "corrupt record header at byte 4120: a field's length runs past the header's 2222 bytes");
+  f = corrupt("bags/laser_scan_matcher_demo.bag", "index.bag", 1029025);
+  expectCliError({"info", f}, f, "corrupt record header at byte 1029025");
+  f = corrupt("bags/laser_scan_matcher_demo.bag", "chunk.bag", 4166);
+  expectCliError({"info", f}, f, "corrupt record header at byte 0 of the chunk at byte 4117");
+}
+
 TEST(BadBagsCli, UnknownScanTopic) {
   const std::string f = fixture("tf_chain.bag");
   expectCliError({"info", f, "--scan-topic", "/nope"}, f,

@@ -21,6 +21,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
@@ -95,10 +96,152 @@ void explainTruncation(const std::string& path) {
                    {path});
 }
 
+// rosbag_storage parses every record header with ros::Header::parse, which checks a field's length
+// against 1 MB but not against the header holding it, and so reads past the end of its buffer when
+// a length is corrupt (found by fuzzing under AddressSanitizer: a 1.2 bag with one changed byte).
+// This pass reads the record headers rosbag will parse, in the order it finds them, and refuses a
+// field that overruns its header with an error naming the byte. Format 1.2: the records one after
+// another. Format 2.0: the file header, the connection and chunk-info records at its index_pos,
+// and each chunk's header and index records; the records inside a chunk stored plain (compression
+// none) too. Compressed (bz2, lz4) chunks are not opened here, so damage inside them remains the
+// limitation docs/file-formats.md describes. A record cut short by the end of the file, or an
+// index position outside it, ends the pass: truncation is rosbag's and `explainTruncation`'s to
+// report.
+class RecordHeaderCheck {
+ public:
+  explicit RecordHeaderCheck(std::string path) : path_(std::move(path)), in_(path_, std::ios::binary) {}
+
+  void run() {
+    std::error_code ec;
+    size_ = std::filesystem::file_size(path_, ec);
+    if (!in_ || ec) return;  // (rosbag's open reports it)
+    std::string magic(16, '\0');
+    in_.read(magic.data(), 16);
+    if (magic.rfind("#ROSRECORD V1.2\n", 0) == 0) {
+      for (std::uint64_t pos = 16; pos < size_;) {
+        const auto r = record(pos);
+        if (!r) return;
+        pos = r->end;
+      }
+    } else if (magic.rfind("#ROSBAG V2.0\n", 0) == 0) {
+      const auto head = record(13);
+      if (!head) return;
+      const std::uint64_t index_pos = number(*head, "index_pos", 8);
+      const std::uint64_t records = number(*head, "conn_count", 4) + number(*head, "chunk_count", 4);
+      std::vector<std::pair<std::uint64_t, std::uint64_t>> chunks;  // chunk_pos, connections in it
+      std::uint64_t pos = index_pos;
+      for (std::uint64_t i = 0; i < records && pos < size_; ++i) {
+        const auto r = record(pos);
+        if (!r) return;
+        if (r->op == 0x06) chunks.emplace_back(number(*r, "chunk_pos", 8), number(*r, "count", 4));
+        pos = r->end;
+      }
+      for (const auto& [chunk_pos, connections] : chunks) {
+        const auto c = record(chunk_pos);
+        if (!c) continue;
+        if (c->compression == "none") checkChunk(*c, chunk_pos);
+        std::uint64_t p = c->end;
+        for (std::uint64_t k = 0; k < connections && p < size_; ++k) {
+          const auto r = record(p);
+          if (!r) break;
+          p = r->end;
+        }
+      }
+    }
+  }
+
+ private:
+  struct Record {
+    std::vector<std::pair<std::string, std::string>> fields;
+    int op = -1;
+    std::string compression;
+    std::uint64_t data_at = 0, data_len = 0, end = 0;
+  };
+
+  static std::uint32_t u32(const char* p) {
+    std::uint32_t v;
+    std::memcpy(&v, p, 4);
+    return v;
+  }
+
+  // The fields of the header at `h` (`len` bytes), checked; `at` and `where` place it for errors.
+  std::vector<std::pair<std::string, std::string>> parseFields(const char* h, std::uint32_t len, std::uint64_t at,
+                                                              const std::string& where) const {
+    std::vector<std::pair<std::string, std::string>> out;
+    for (std::uint32_t q = 0; q < len;) {
+      if (len - q < 4 || u32(h + q) > len - q - 4)
+        throw badInput(fmt::format("corrupt record header at byte {}{}: a field's length runs past the header's {} bytes",
+                                   at, where, len),
+                       {path_});
+      const std::string_view field(h + q + 4, u32(h + q));
+      const std::size_t eq = field.find('=');
+      if (eq != std::string_view::npos) out.emplace_back(field.substr(0, eq), field.substr(eq + 1));
+      q += 4 + u32(h + q);
+    }
+    return out;
+  }
+
+  // The record at byte `pos`, its header checked; nothing when it is cut short by the end of the file.
+  std::optional<Record> record(std::uint64_t pos) {
+    if (pos >= size_ || size_ - pos < 8) return std::nullopt;
+    char len4[4];
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(pos));
+    if (!in_.read(len4, 4)) return std::nullopt;
+    const std::uint32_t hlen = u32(len4);
+    if (hlen > size_ - pos - 8) return std::nullopt;
+    header_.resize(hlen);
+    if (!in_.read(header_.data(), hlen) || !in_.read(len4, 4)) return std::nullopt;
+    Record r;
+    r.fields = parseFields(header_.data(), hlen, pos, "");
+    r.data_at = pos + 8 + hlen;
+    r.data_len = u32(len4);
+    if (r.data_len > size_ - r.data_at) return std::nullopt;
+    r.end = r.data_at + r.data_len;
+    for (const auto& [name, value] : r.fields) {
+      if (name == "op" && value.size() == 1) r.op = static_cast<unsigned char>(value[0]);
+      if (name == "compression") r.compression = value;
+    }
+    return r;
+  }
+
+  // A little-endian integer field of `bytes` bytes; 0 when absent or of another size.
+  static std::uint64_t number(const Record& r, const char* name, std::size_t bytes) {
+    for (const auto& [n, v] : r.fields)
+      if (n == name && v.size() == bytes) {
+        std::uint64_t x = 0;
+        std::memcpy(&x, v.data(), bytes);
+        return x;
+      }
+    return 0;
+  }
+
+  // The records of a plain chunk, back to back in its data.
+  void checkChunk(const Record& c, std::uint64_t chunk_pos) {
+    std::string data(c.data_len, '\0');
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(c.data_at));
+    if (!in_.read(data.data(), static_cast<std::streamsize>(data.size()))) return;
+    const std::string where = fmt::format(" of the chunk at byte {}", chunk_pos);
+    for (std::uint64_t q = 0; q + 8 <= data.size();) {
+      const std::uint32_t hlen = u32(data.data() + q);
+      if (hlen > data.size() - q - 8) return;
+      (void)parseFields(data.data() + q + 4, hlen, q, where);
+      q += 8 + hlen + u32(data.data() + q + 4 + hlen);
+    }
+  }
+
+  std::string path_;
+  std::ifstream in_;
+  std::uint64_t size_ = 0;
+  std::string header_;
+};
+
 class Ros1Source final : public FrameSource {
  public:
   Ros1Source(std::string path, const ReaderOptions& options) : path_(std::move(path)), assembler_(SE2(), false) {
     silenceRosLogging();
+    RecordHeaderCheck(path_).run();
     try {
       guarded(path_, "opening", [&] { bag_.open(path_, rosbag::bagmode::Read); });
     } catch (const Error&) {
