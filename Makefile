@@ -5,7 +5,7 @@ ASAN_BUILD ?= build-asan
 CMAKE_FLAGS ?=
 DEMO_OUT ?= out
 
-.PHONY: all build test test-asan bench demo clean format
+.PHONY: all build test test-asan fuzz bench demo clean format
 
 all: build
 
@@ -28,6 +28,16 @@ test-asan: $(ASAN_BUILD)/CMakeCache.txt
 	cmake --build $(ASAN_BUILD) -j$(JOBS)
 	cd $(ASAN_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  ctest --output-on-failure -j$(JOBS)
+
+# Mutation fuzzing of the CLI's inputs (logs, bags, maps, databases, options) with the sanitizer
+# build: reports crashes, hangs, sanitizer errors, silent failures and partial outputs, keeping the
+# inputs in $(FUZZ_WORK). About 10 minutes at the default 50 inputs per mode; FUZZ_SEED varies them.
+FUZZ_RUNS ?= 50
+FUZZ_SEED ?= 1
+FUZZ_WORK ?= fuzz-work
+fuzz: $(ASAN_BUILD)/CMakeCache.txt
+	cmake --build $(ASAN_BUILD) -j$(JOBS) --target lidar2d
+	./tools/fuzz-cli.py $(ASAN_BUILD)/lidar2d --runs $(FUZZ_RUNS) --seed $(FUZZ_SEED) --work $(FUZZ_WORK)
 
 bench: build
 	$(BUILD)/bench/lidar2d_bench
