@@ -102,7 +102,9 @@ class Database {
 
   /// Builds the database of `map` (multi-threaded over positions, `threads` = 0: hardware
   /// concurrency). Throws `lidar2d::Error`: kInvalidArgument for bad options, kBadInput (field
-  /// "free space") when the map has no free cell with the clearance.
+  /// "free space") when the map has no free cell with the clearance, kBadInput (field "step") when
+  /// the grid of positions over the map would exceed 10^7 (the message names a step that fits).
+  /// `progress(done, total, user)` is called from the calling thread as positions are indexed.
   static Database build(const io::OccupancyImage& map, const DatabaseOptions& options = {}, unsigned threads = 0,
                         ProgressCallback progress = nullptr, void* progress_user = nullptr);
   /// Assembles a database from stored parts (what a reader loaded) and builds its index.
