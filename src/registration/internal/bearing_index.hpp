@@ -90,6 +90,14 @@ class BearingIndex {
       keys_.push_back(key[i]);
     }
     keys_.push_back(std::numeric_limits<double>::infinity());  // sentinel (startOf)
+    // The ring: the nodes with kPad copies of each end beyond the other, so that the fixed windows
+    // around a position (nearest's first points, knnOfEach's neighbours) are read without the
+    // wrap-around arithmetic of `offset`.
+    if (!nodes_.empty()) {
+      const auto n = static_cast<std::ptrdiff_t>(nodes_.size());
+      ring_.reserve(nodes_.size() + 2 * kPad);
+      for (std::ptrdiff_t j = -kPad; j < n + kPad; ++j) ring_.push_back(nodes_[static_cast<std::size_t>(((j % n) + n) % n)]);
+    }
     total_ = pts.size();
     // Bucket table over the pseudo-angle: bucket b starts at the first point with key >= b * 4 / B.
     std::size_t buckets = 64;
@@ -137,8 +145,8 @@ class BearingIndex {
       if (hint) *hint = static_cast<std::uint32_t>(s);
       constexpr std::ptrdiff_t kHalf = kWindow / 2;
       for (std::ptrdiff_t k = 0; k < kHalf; ++k) {
-        consider(nodes_[offset(s, k)]);
-        consider(nodes_[offset(s, -k - 1)]);
+        consider(ringAt(s, k));
+        consider(ringAt(s, -k - 1));
       }
       walkFrom(q, offset(s, kHalf), offset(s, -kHalf - 1), kWindow, consider, [&] { return best_d2; });
     } else {
@@ -182,8 +190,8 @@ class BearingIndex {
         // always its neighbours in bearing order: those are taken without the bound test.
         best.insert(self, q);
         for (std::ptrdiff_t j = 1; j <= kKnnHalf; ++j) {
-          best.insert(nodes_[offset(p, -j)], q);
-          best.insert(nodes_[offset(p, j)], q);
+          best.insert(ringAt(p, -j), q);
+          best.insert(ringAt(p, j), q);
         }
         walkFrom(
             q, offset(p, kKnnHalf + 1), offset(p, -kKnnHalf - 1), 2 * kKnnHalf + 1,
@@ -238,6 +246,16 @@ class BearingIndex {
 
   // Points `nearest` visits before its first bound test (when there are at least kWindow + 4).
   static constexpr std::size_t kWindow = 4;
+
+  // Copies of the nodes' ends on either side of the ring (see ring_): at least the widest fixed
+  // window, kWindow / 2 + 1 and kKnnHalf.
+  static constexpr std::ptrdiff_t kPad = 3;
+  static_assert(kPad >= static_cast<std::ptrdiff_t>(kWindow / 2) + 1 && kPad >= kKnnHalf);
+
+  // The node `k` places from position `p` in bearing order, around the circle (|k| <= kPad).
+  const Node& ringAt(std::size_t p, std::ptrdiff_t k) const {
+    return ring_[static_cast<std::size_t>(static_cast<std::ptrdiff_t>(p) + kPad + k)];
+  }
 
   // Position `k` places from position `p` in bearing order, around the circle (|k| < size).
   std::size_t offset(std::size_t p, std::ptrdiff_t k) const {
@@ -332,6 +350,7 @@ class BearingIndex {
   }
 
   std::vector<Node> nodes_;
+  std::vector<Node> ring_;  // nodes_ with kPad copies of the other end before and after it
   std::vector<double> keys_;
   std::vector<std::uint32_t> at_origin_;
   std::vector<std::uint32_t> bucket_start_;  // size B + 1
