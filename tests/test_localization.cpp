@@ -277,6 +277,17 @@ TEST(Localization, AbsurdGridIsRefusedUpFront) {
   }
 }
 
+TEST(Localization, AbsurdClearanceIsRefused) {
+  // 1e9 m overflowed the clearance's cell count (UBSan: negation of INT_MIN; found by fuzzing the
+  // options); 30 m is legal but 600 cells of a 5 cm map.
+  const auto map = io::OccupancyImage::filled(40, 40, 0.05, SE2(), io::OccupancyImage::kFree);
+  DatabaseOptions o = fastDb();
+  o.clearance_m = 1e9;
+  EXPECT_TRUE(test::throwsError([&] { (void)Database::build(map, o); }, ErrorKind::kInvalidArgument, {"clearance_m"}));
+  o.clearance_m = 30;
+  EXPECT_TRUE(test::throwsError([&] { (void)Database::build(map, o); }, ErrorKind::kBadInput, {"600 cells", "500"}));
+}
+
 TEST(LocalizationDatabase, RoundTripKeepsEverythingAndTheAnswers) {
   const SimMap& s = office();
   test::TempDir dir;

@@ -25,6 +25,8 @@ constexpr double kTwoPi = 2.0 * std::numbers::pi;
 // Grid positions (before the clearance test) a database may be built over: 10^7 is a 630 m square
 // at the default 0.2 m step, hours of virtual scans and gigabytes of memory.
 constexpr double kMaxGridPositions = 1e7;
+// The clearance in cells a database build tests around each position, at most.
+constexpr double kMaxClearanceCells = 500;
 
 Error badOption(const char* field, double v) {
   return invalidArgument(fmt::format("localization option {} = {} is out of its domain", field, v),
@@ -73,7 +75,7 @@ void DatabaseOptions::validate() const {
   if (beams < 8 || beams > 100000) throw badOption("beams", beams);
   if (!(fov_rad > 0) || !(fov_rad <= kTwoPi + 1e-9)) throw badOption("fov_rad", fov_rad);
   if (!(max_range_m > 0) || !std::isfinite(max_range_m)) throw badOption("max_range_m", max_range_m);
-  if (!(clearance_m >= 0) || !std::isfinite(clearance_m)) throw badOption("clearance_m", clearance_m);
+  if (!(clearance_m >= 0) || !(clearance_m <= 100)) throw badOption("clearance_m", clearance_m);
   if (occupied_min < 1 || occupied_min > 100) throw badOption("occupied_min", occupied_min);
   if (free_max < 0 || free_max > 99 || free_max >= occupied_min) throw badOption("free_max", free_max);
   if (max_lines < 2 || max_lines > 64) throw badOption("max_lines", static_cast<double>(max_lines));
@@ -274,6 +276,12 @@ Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& o
                                W * res, H * res, options.step_m, grid_positions, kMaxGridPositions,
                                std::sqrt(W * res * H * res / kMaxGridPositions) * 1.01),
                    ErrorLocation({}, 0, "step"));
+  // (Each candidate tests the disc of cells within the clearance: bounded, as a clearance of many
+  // cells at a fine resolution would test millions per position.)
+  if (options.clearance_m / res > kMaxClearanceCells)
+    throw badInput(fmt::format("a clearance of {} m is {:.0f} cells of this map's {} m, more than the limit of {:.0f}",
+                               options.clearance_m, std::ceil(options.clearance_m / res), res, kMaxClearanceCells),
+                   ErrorLocation({}, 0, "clearance"));
   const int clear = static_cast<int>(std::ceil(options.clearance_m / res));
   std::vector<Eigen::Vector2i> offsets;
   for (int dy = -clear; dy <= clear; ++dy)

@@ -49,7 +49,7 @@ struct DatabaseOptions {
   int beams = 720;                          ///< beams of each virtual scan, 8..100000
   double fov_rad = 2.0 * std::numbers::pi;  ///< field of view of the virtual scans, centred on +x [rad], in (0, 2 pi]
   double max_range_m = 30.0;                ///< range of the virtual scans [m], > 0
-  double clearance_m = 0.25;                ///< positions keep this distance from occupied and unknown cells [m], >= 0
+  double clearance_m = 0.25;                ///< positions keep this distance from occupied and unknown cells [m], 0..100 (and at most 500 cells of the map)
   int occupied_min = 65;                    ///< map cells >= this are obstacles, 1..100
   int free_max = 25;                        ///< map cells 0..free_max are free, 0..99, < occupied_min
   std::size_t max_lines = 24;               ///< longest lines kept per position, 2..64
