@@ -36,7 +36,7 @@ FUZZ_RUNS ?= 50
 FUZZ_SEED ?= 1
 FUZZ_WORK ?= fuzz-work
 fuzz: $(ASAN_BUILD)/CMakeCache.txt
-	cmake --build $(ASAN_BUILD) -j$(JOBS) --target lidar2d
+	cmake --build $(ASAN_BUILD) -j$(JOBS) --target lidar2d_cli
 	./tools/fuzz-cli.py $(ASAN_BUILD)/lidar2d --runs $(FUZZ_RUNS) --seed $(FUZZ_SEED) --work $(FUZZ_WORK)
 
 bench: build
