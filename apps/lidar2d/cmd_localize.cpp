@@ -9,7 +9,6 @@
 // builds the descriptor database of the map and writes it (io/localization_db.hpp).
 
 #include <fmt/format.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -23,6 +22,7 @@
 #include <optional>
 
 #include "commands.hpp"
+#include "progress_line.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
@@ -48,42 +48,31 @@ struct DbArgs {
 
 io::MapFile readMapChecked(const std::string& path) { return io::readMap(path); }
 
-// Progress of a database build on stderr (a terminal only, at most ten redraws a second): a large
-// map's positions take minutes.
-struct BuildProgress {
-  Clock::time_point last{};
-  bool drawn = false;
-  static void report(std::size_t done, std::size_t total, void* user) {
-    auto* p = static_cast<BuildProgress*>(user);
-    const auto now = Clock::now();
-    if (done < total && now - p->last < std::chrono::milliseconds(100)) return;
-    p->last = now;
-    p->drawn = true;
-    std::cerr << fmt::format("\rindexing: {} of {} positions ({:.0f}%)", done, total,
-                             100.0 * static_cast<double>(done) / static_cast<double>(std::max<std::size_t>(total, 1)))
-              << std::flush;
+// Builds the database of `map`, with its progress on a terminal unless `quiet` (a large map's
+// positions take minutes); errors name `map_path`.
+localization::Database buildDatabase(const io::OccupancyImage& map, const localization::DatabaseOptions& o, bool quiet,
+                                     const std::string& map_path) {
+  ProgressLine line(quiet);
+  auto report = [](std::size_t done, std::size_t total, void* user) {
+    static_cast<ProgressLine*>(user)->update(
+        [&] {
+          return fmt::format("indexing: {} of {} positions ({:.0f}%)", done, total,
+                             100.0 * static_cast<double>(done) / static_cast<double>(std::max<std::size_t>(total, 1)));
+        },
+        done == total);
+  };
+  try {
+    return localization::Database::build(map, o, 0, line.enabled() ? +report : nullptr, &line);
+  } catch (const Error& e) {
+    throw Error(e.kind(), e.message(), ErrorLocation(map_path, 0, e.where().field));
   }
-  // Builds the database of `map`, showing progress when `show`; errors name `map_path`.
-  static localization::Database build(const io::OccupancyImage& map, const localization::DatabaseOptions& o, bool show,
-                                      const std::string& map_path) {
-    BuildProgress p;
-    try {
-      auto db = localization::Database::build(map, o, 0, show ? &report : nullptr, &p);
-      if (p.drawn) std::cerr << "\r\033[K" << std::flush;
-      return db;
-    } catch (const Error& e) {
-      if (p.drawn) std::cerr << "\r\033[K" << std::flush;
-      throw Error(e.kind(), e.message(), ErrorLocation(map_path, 0, e.where().field));
-    }
-  }
-};
+}
 
 void runIndex(DbArgs& a) {
   const auto t0 = Clock::now();
   a.options.fov_rad = a.fov_deg * kDeg;
   const io::MapFile map = readMapChecked(a.map);
-  const localization::Database db =
-      BuildProgress::build(map.map, a.options, !a.quiet && ::isatty(STDERR_FILENO), a.map);
+  const localization::Database db = buildDatabase(map.map, a.options, a.quiet, a.map);
   io::writeLocalizationDatabase(a.output, db);
   if (!a.quiet)
     std::cerr << fmt::format("indexed {} positions, {} lines, {} line pairs ({:.1f} MB in memory) in {:.2f} s -> {}\n",
@@ -118,7 +107,7 @@ void runLocalize(const LocArgs& a) {
   if (!a.db.empty()) {
     db = io::readLocalizationDatabase(a.db);
   } else {
-    db = BuildProgress::build(map.map, a.db_options, !a.quiet && ::isatty(STDERR_FILENO), a.map);
+    db = buildDatabase(map.map, a.db_options, a.quiet, a.map);
   }
   db_s = seconds(tdb);
   std::unique_ptr<localization::Localizer> loc;
@@ -139,24 +128,13 @@ void runLocalize(const LocArgs& a) {
   bool have_prev_pose = false, have_prev_odom = false;
   std::size_t odo_pairs = 0, odo_consistent = 0;
   // Progress on a terminal (a long log takes minutes at tens of milliseconds per scan).
-  const bool show = !a.quiet && ::isatty(STDERR_FILENO);
+  ProgressLine line(a.quiet);
   const std::optional<std::size_t> total = source->sizeHint();
-  Clock::time_point last_drawn{};
-  bool drawn = false;
-  struct ClearLine {  // (also when an error leaves the loop: the error's line starts clean)
-    const bool& drawn;
-    ~ClearLine() {
-      if (drawn) std::cerr << "\r\033[K" << std::flush;
-    }
-  } clear_line{drawn};
   while (auto f = source->next()) {
-    if (show && Clock::now() - last_drawn > std::chrono::milliseconds(100)) {
-      last_drawn = Clock::now();
-      drawn = true;
-      std::cerr << (total ? fmt::format("\rlocalizing: scan {} of {}", f->index + 1, *total)
-                          : fmt::format("\rlocalizing: scan {}", f->index + 1))
-                << std::flush;
-    }
+    line.update([&] {
+      return total ? fmt::format("localizing: scan {} of {}", f->index + 1, *total)
+                   : fmt::format("localizing: scan {}", f->index + 1);
+    });
     if ((a.scans == Scans::kEven && f->index % 2 != 0) || (a.scans == Scans::kOdd && f->index % 2 != 1)) continue;
     ++scans;
     const localization::LocalizationResult r = loc->localize(f->scan, f->T_robot_laser);
@@ -195,8 +173,7 @@ void runLocalize(const LocArgs& a) {
     have_prev_odom = f->T_odom_robot.has_value();
     if (have_prev_odom) prev_odom = *f->T_odom_robot;
   }
-  if (drawn) std::cerr << "\r\033[K" << std::flush;
-  drawn = false;
+  line.clear();
   if (scans == 0) throw badInput("the log has no scan to localize", ErrorLocation(a.log));
   out.commit();
   const double total_s = seconds(t0);

@@ -93,7 +93,7 @@ void run(const SimulateArgs& a) {
   parseNumbers(a.odom_noise, n, 3, false);
   parseNumbers(a.odom_drift, d, 3, false);
   parseNumbers(a.odom_bias, b, 2, true);
-  if (std::abs(m[0]) > io::kMaxLaserMountOffset || std::abs(m[1]) > io::kMaxLaserMountOffset)
+  if (!io::laserMountOffsetOk(m[0], m[1]))
     throw invalidArgument(fmt::format("X and Y must be within +-{:g} m of the robot's centre", io::kMaxLaserMountOffset),
                           ErrorLocation({}, 0, "--mount"));
   o.laser.T_robot_laser = SE2(m[0], m[1], m[2] * kDeg);

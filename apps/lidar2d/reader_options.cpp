@@ -43,7 +43,7 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
            if (xs.size() != 3)
              throw CLI::ValidationError("--laser-mount", "expected 3 comma-separated values X,Y,THETA_DEG, got " +
                                                              std::to_string(xs.size()));
-           if (std::abs(xs[0]) > io::kMaxLaserMountOffset || std::abs(xs[1]) > io::kMaxLaserMountOffset)
+           if (!io::laserMountOffsetOk(xs[0], xs[1]))
              throw CLI::ValidationError("--laser-mount", fmt::format("X and Y must be within +-{:g} m of the robot's centre",
                                                                      io::kMaxLaserMountOffset));
            options.laser_mount = SE2(xs[0], xs[1], xs[2] * std::numbers::pi / 180.0);

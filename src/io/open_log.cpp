@@ -1,7 +1,6 @@
 #include <fmt/format.h>
 
 #include <cerrno>
-#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -88,8 +87,8 @@ std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOpt
 }  // namespace
 
 std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options) {
-  if (options.laser_mount && (!options.laser_mount->isFinite() || std::abs(options.laser_mount->x()) > kMaxLaserMountOffset ||
-                              std::abs(options.laser_mount->y()) > kMaxLaserMountOffset))
+  if (options.laser_mount && (!options.laser_mount->isFinite() ||
+                              !laserMountOffsetOk(options.laser_mount->x(), options.laser_mount->y())))
     throw invalidArgument(fmt::format("laser mounting pose must be finite, within +-{:g} m of the robot's centre",
                                       kMaxLaserMountOffset),
                           {"ReaderOptions", 0, "laser_mount"});

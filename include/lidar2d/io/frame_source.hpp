@@ -2,6 +2,7 @@
 /// @file
 /// One streaming interface over every log format, so that no algorithm knows where scans come from.
 
+#include <cmath>
 #include <memory>
 #include <optional>
 #include <string>
@@ -49,6 +50,10 @@ struct ReaderOptions {
 /// The farthest a laser may be mounted from the robot's frame origin: `ReaderOptions::laser_mount`
 /// beyond it is an error (a mistyped unit, not a robot) [m].
 inline constexpr double kMaxLaserMountOffset = 100.0;
+/// Whether a mounting offset (x, y) [m] is within kMaxLaserMountOffset on both axes (false for NaN).
+inline bool laserMountOffsetOk(double x, double y) {
+  return std::abs(x) <= kMaxLaserMountOffset && std::abs(y) <= kMaxLaserMountOffset;
+}
 
 /// Facts a reader learns about its log (some only once the stream is exhausted).
 struct SourceNotes {
