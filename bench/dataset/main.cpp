@@ -41,8 +41,10 @@ int main(int argc, char** argv) {
   match->add_option("--flatness", match_options.icp.max_line_flatness, "max line flatness")->capture_default_str();
   match->add_option("--max-iterations", match_options.icp.max_iterations, "ICP max iterations")->capture_default_str();
   match->add_option("--gn-inner", match_options.icp.gn_inner_iterations, "Gauss-Newton steps per correspondence search")->capture_default_str();
-  match->add_option("--eps-m", match_options.icp.translation_eps_m, "ICP translation convergence threshold [m]")->capture_default_str();
-  match->add_option("--eps-rad", match_options.icp.rotation_eps_rad, "ICP rotation convergence threshold [rad]")->capture_default_str();
+  match->add_option("--eps-m", match_options.icp.translation_eps_m,
+                    "ICP translation convergence threshold [m] (default: 1e-3 for p2l, 1e-4 for p2p)");
+  match->add_option("--eps-rad", match_options.icp.rotation_eps_rad,
+                    "ICP rotation convergence threshold [rad] (default: 1e-3 for p2l, 1e-4 for p2p)");
   match->add_option("--search", match_options.icp.neighbor_search, "ICP nearest-neighbour search: 0 bearing walk, 1 k-d tree")->capture_default_str();
   match->add_flag("--truth-check", match_options.truth_check,
                   "match each pair from the truth with p2p, p2l and lf: pairs where all three fail but agree");

@@ -83,8 +83,8 @@ std::string IcpOptions::check() const {
   if (!finite_pos(max_correspondence_dist_m)) return "max_correspondence_dist_m must be finite and > 0";
   if (!(trim_keep_fraction > 0.0 && trim_keep_fraction <= 1.0)) return "trim_keep_fraction must be in (0, 1]";
   if (max_iterations < 1) return "max_iterations must be >= 1";
-  if (!(std::isfinite(translation_eps_m) && translation_eps_m >= 0.0)) return "translation_eps_m must be finite and >= 0";
-  if (!(std::isfinite(rotation_eps_rad) && rotation_eps_rad >= 0.0)) return "rotation_eps_rad must be finite and >= 0";
+  if (!(std::isfinite(translationEps()) && translationEps() >= 0.0)) return "translation_eps_m must be finite and >= 0";
+  if (!(std::isfinite(rotationEps()) && rotationEps() >= 0.0)) return "rotation_eps_rad must be finite and >= 0";
   if (loss.kind != RobustLoss::Kind::kNone && !finite_pos(loss.scale_m)) return "loss.scale_m must be finite and > 0";
   if (min_points < 3) return "min_points must be >= 3";
   if (min_inliers < 3) return "min_inliers must be >= 3";
@@ -510,7 +510,7 @@ void finishAt(Result& r, Icp& icp, const IcpOptions& o) {
 }
 
 bool smallStep(const Eigen::Vector3d& dx, const IcpOptions& o) {
-  return std::hypot(dx.x(), dx.y()) < o.translation_eps_m && std::abs(dx.z()) < o.rotation_eps_rad;
+  return std::hypot(dx.x(), dx.y()) < o.translationEps() && std::abs(dx.z()) < o.rotationEps();
 }
 
 Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {

@@ -181,6 +181,10 @@ struct Slam::Impl {
     opt.validate();
     icp.max_correspondence_dist_m = opt.icp_max_correspondence_m;
     icp.max_iterations = 30;
+    // The thresholds SLAM's figures (BENCHMARK.md) were measured with, kept when point-to-line's
+    // default became 1 mm / 1 mrad (IcpOptions::defaultTranslationEps).
+    icp.translation_eps_m = 1e-4;
+    icp.rotation_eps_rad = 1e-4;
     // Local maps and submaps stack several scans in a frame far from their sensors: the bearing
     // walk (made for one scan seen from its own origin) would visit many points per query there.
     icp.neighbor_search = registration::NeighborSearch::kKdTree;
