@@ -144,6 +144,37 @@ TEST(BadBagsCli, FieldLengthPastItsHeader) {
   expectCliError({"info", f}, f, "corrupt record header at byte 0 of the chunk at byte 4117");
 }
 
+// Index records (the entries after each chunk giving each message's time and offset in the chunk):
+// rosbag_storage reads a message at each offset without checking it against the chunk, so an
+// offset past a bz2 chunk's end crashed it (segmentation fault in rosbag::Bag::readHeaderFromBuffer).
+// Offsets of the read-only data files: in the bz2 bag the first index record after the chunk at
+// byte 4117 (787839 bytes uncompressed) is at 105461, its first entry's offset at 105524; in the
+// 2.0 demo bag the first index record after its plain chunk (also at 4117) is at 792650, its count
+// at 792677 and its first entry's offset (2300, a record's start) at 792713.
+TEST(BadBagsCli, IndexEntriesOutsideTheirChunk) {
+  LIDAR2D_REQUIRE_DATA("raw/mit-csail.orig.bag");
+  LIDAR2D_REQUIRE_DATA("bags/laser_scan_matcher_demo.bag");
+  test::TempDir tmp;
+  auto patched = [&](const std::string& data, const std::string& name, std::streamoff at, std::uint32_t value) {
+    const fs::path f = tmp / name;
+    fs::copy_file(test::dataFile(data), f);
+    std::fstream io(f, std::ios::binary | std::ios::in | std::ios::out);
+    io.seekp(at);
+    io.write(reinterpret_cast<const char*>(&value), 4);
+    return f.string();
+  };
+  std::string f = patched("raw/mit-csail.orig.bag", "far.bag", 105524, 0x7ffffff0u);
+  expectCliError({"info", f}, f,
+                 "corrupt index record at byte 105461: entry 0 points to byte 2147483632 of the chunk at byte 4117, past "
+                 "its end (the chunk holds 787839 bytes)");
+  f = patched("bags/laser_scan_matcher_demo.bag", "inside.bag", 792713, 2303);
+  expectCliError({"info", f}, f,
+                 "corrupt index record at byte 792650: entry 0 points to byte 2303 of the chunk at byte 4117, where no "
+                 "record starts");
+  f = patched("bags/laser_scan_matcher_demo.bag", "count.bag", 792677, 0x00ffffffu);
+  expectCliError({"info", f}, f, "corrupt index record at byte 792650: 16777215 entries of 12 bytes do not fit its");
+}
+
 TEST(BadBagsCli, UnknownScanTopic) {
   const std::string f = fixture("tf_chain.bag");
   expectCliError({"info", f, "--scan-topic", "/nope"}, f,

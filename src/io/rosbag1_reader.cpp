@@ -11,6 +11,7 @@
 #include <rosbag/query.h>
 #include <rosbag/view.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -103,8 +104,8 @@ void explainTruncation(const std::string& path) {
 // field that overruns its header with an error naming the byte. Format 1.2: the records one after
 // another. Format 2.0: the file header, the connection and chunk-info records at its index_pos,
 // and each chunk's header and index records; the records inside a chunk stored plain (compression
-// none) too. Compressed (bz2, lz4) chunks are not opened here, so damage inside them remains the
-// limitation docs/file-formats.md describes. A record cut short by the end of the file, or an
+// none) too, and the index records' entries (`checkIndex`). Compressed (bz2, lz4) chunks are not
+// opened here, so damage inside them remains the limitation docs/file-formats.md describes. A record cut short by the end of the file, or an
 // index position outside it, ends the pass: truncation is rosbag's and `explainTruncation`'s to
 // report.
 class RecordHeaderCheck {
@@ -139,11 +140,15 @@ class RecordHeaderCheck {
       for (const auto& [chunk_pos, connections] : chunks) {
         const auto c = record(chunk_pos);
         if (!c) continue;
-        if (c->compression == "none") checkChunk(*c, chunk_pos);
+        const bool plain = c->compression == "none";
+        std::vector<std::uint64_t> starts;  // a plain chunk's record offsets
+        if (plain) starts = checkChunk(*c, chunk_pos);
+        const std::uint64_t chunk_size = plain ? c->data_len : number(*c, "size", 4);
         std::uint64_t p = c->end;
         for (std::uint64_t k = 0; k < connections && p < size_; ++k) {
           const auto r = record(p);
           if (!r) break;
+          if (r->op == 0x04) checkIndex(*r, p, chunk_pos, chunk_size, plain ? &starts : nullptr);
           p = r->end;
         }
       }
@@ -216,18 +221,53 @@ class RecordHeaderCheck {
     return 0;
   }
 
-  // The records of a plain chunk, back to back in its data.
-  void checkChunk(const Record& c, std::uint64_t chunk_pos) {
+  // The records of a plain chunk, back to back in its data; returns their offsets in it.
+  std::vector<std::uint64_t> checkChunk(const Record& c, std::uint64_t chunk_pos) {
+    std::vector<std::uint64_t> starts;
     std::string data(c.data_len, '\0');
     in_.clear();
     in_.seekg(static_cast<std::streamoff>(c.data_at));
-    if (!in_.read(data.data(), static_cast<std::streamsize>(data.size()))) return;
+    if (!in_.read(data.data(), static_cast<std::streamsize>(data.size()))) return starts;
     const std::string where = fmt::format(" of the chunk at byte {}", chunk_pos);
     for (std::uint64_t q = 0; q + 8 <= data.size();) {
       const std::uint32_t hlen = u32(data.data() + q);
-      if (hlen > data.size() - q - 8) return;
+      if (hlen > data.size() - q - 8) break;
       (void)parseFields(data.data() + q + 4, hlen, q, where);
+      starts.push_back(q);
       q += 8 + hlen + u32(data.data() + q + 4 + hlen);
+    }
+    return starts;
+  }
+
+  // An index record after a chunk (op 0x04, version 1: `count` entries of a time and an offset into
+  // the chunk's uncompressed data). rosbag_storage reads `count` entries whatever the record's
+  // length, and later reads a message record at each offset without checking it against the chunk
+  // (an offset past the end crashed it: found by damaging a bz2 bag's index by hand). So the entries
+  // must fit the record, and each offset must leave room for a record in the chunk (`chunk_size`
+  // bytes); in a plain chunk it must be where a record starts (`starts`). An offset inside a
+  // compressed chunk is not checked further: that would decompress it (docs/file-formats.md).
+  void checkIndex(const Record& r, std::uint64_t pos, std::uint64_t chunk_pos, std::uint64_t chunk_size,
+                  const std::vector<std::uint64_t>* starts) {
+    if (number(r, "ver", 4) != 1) return;  // (rosbag refuses other versions itself)
+    const std::uint64_t count = number(r, "count", 4);
+    constexpr std::uint64_t kEntry = 12;
+    if (count > r.data_len / kEntry)
+      throw badInput(fmt::format("corrupt index record at byte {}: {} entries of {} bytes do not fit its {} bytes",
+                                 pos, count, kEntry, r.data_len),
+                     {path_});
+    std::string data(count * kEntry, '\0');
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(r.data_at));
+    if (!in_.read(data.data(), static_cast<std::streamsize>(data.size()))) return;
+    for (std::uint64_t e = 0; e < count; ++e) {
+      const std::uint64_t offset = u32(data.data() + e * kEntry + 8);
+      const bool fits = chunk_size >= 8 && offset <= chunk_size - 8;
+      if (!fits || (starts && !std::binary_search(starts->begin(), starts->end(), offset)))
+        throw badInput(fmt::format("corrupt index record at byte {}: entry {} points to byte {} of the chunk at byte "
+                                   "{}, {} (the chunk holds {} bytes)",
+                                   pos, e, offset, chunk_pos, fits ? "where no record starts" : "past its end",
+                                   chunk_size),
+                       {path_});
     }
   }
 
