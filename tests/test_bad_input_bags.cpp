@@ -165,8 +165,8 @@ TEST(BadBagsCli, IndexEntriesOutsideTheirChunk) {
   };
   std::string f = patched("raw/mit-csail.orig.bag", "far.bag", 105524, 0x7ffffff0u);
   expectCliError({"info", f}, f,
-                 "corrupt index record at byte 105461: entry 0 points to byte 2147483632 of the chunk at byte 4117, past "
-                 "its end (the chunk holds 787839 bytes)");
+                 "corrupt index record at byte 105461: entry 0 points to byte 2147483632 of the chunk at byte "
+                 "4117, past its end (the chunk holds 787839 bytes)");
   f = patched("bags/laser_scan_matcher_demo.bag", "inside.bag", 792713, 2303);
   expectCliError({"info", f}, f,
                  "corrupt index record at byte 792650: entry 0 points to byte 2303 of the chunk at byte 4117, where no "

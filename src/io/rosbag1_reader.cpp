@@ -105,9 +105,9 @@ void explainTruncation(const std::string& path) {
 // another. Format 2.0: the file header, the connection and chunk-info records at its index_pos,
 // and each chunk's header and index records; the records inside a chunk stored plain (compression
 // none) too, and the index records' entries (`checkIndex`). Compressed (bz2, lz4) chunks are not
-// opened here, so damage inside them remains the limitation docs/file-formats.md describes. A record cut short by the end of the file, or an
-// index position outside it, ends the pass: truncation is rosbag's and `explainTruncation`'s to
-// report.
+// opened here, so damage inside them remains the limitation docs/file-formats.md describes. A
+// record cut short by the end of the file, or an index position outside it, ends the pass:
+// truncation is rosbag's and `explainTruncation`'s to report.
 class RecordHeaderCheck {
  public:
   explicit RecordHeaderCheck(std::string path) : path_(std::move(path)), in_(path_, std::ios::binary) {}
@@ -240,12 +240,12 @@ class RecordHeaderCheck {
   }
 
   // An index record after a chunk (op 0x04, version 1: `count` entries of a time and an offset into
-  // the chunk's uncompressed data). rosbag_storage reads `count` entries whatever the record's
-  // length, and later reads a message record at each offset without checking it against the chunk
-  // (an offset past the end crashed it: found by damaging a bz2 bag's index by hand). So the entries
-  // must fit the record, and each offset must leave room for a record in the chunk (`chunk_size`
-  // bytes); in a plain chunk it must be where a record starts (`starts`). An offset inside a
-  // compressed chunk is not checked further: that would decompress it (docs/file-formats.md).
+  // the chunk's uncompressed data). rosbag_storage reads a message record at each offset without
+  // checking it against the chunk (an offset past the end of a bz2 chunk crashed it: found by
+  // damaging a bag's index by hand). So the entries must fit the record, and each offset must leave
+  // room for a record in the chunk (`chunk_size` bytes); in a plain chunk it must be where a record
+  // starts (`starts`). An offset inside a compressed chunk is not checked further: that would
+  // decompress it (docs/file-formats.md).
   void checkIndex(const Record& r, std::uint64_t pos, std::uint64_t chunk_pos, std::uint64_t chunk_size,
                   const std::vector<std::uint64_t>* starts) {
     if (number(r, "ver", 4) != 1) return;  // (rosbag refuses other versions itself)
