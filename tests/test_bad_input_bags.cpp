@@ -66,6 +66,27 @@ void copyPrefix(const fs::path& from, const fs::path& to, std::size_t bytes) {
   test::writeFile(to, data);
 }
 
+// The little-endian 32-bit word at byte `at` of the shared data file `data`.
+std::uint32_t wordAt(const std::string& data, std::streamoff at) {
+  std::ifstream in(test::dataFile(data), std::ios::binary);
+  std::uint32_t v = 0;
+  in.seekg(at);
+  in.read(reinterpret_cast<char*>(&v), 4);
+  return v;
+}
+
+// A copy of the shared data file `data` as `dir`/`name`, with the 32-bit word at byte `at` set to
+// `value`; returns its path.
+std::string patchedCopy(const fs::path& dir, const std::string& data, const std::string& name, std::streamoff at,
+                        std::uint32_t value) {
+  const fs::path f = dir / name;
+  fs::copy_file(test::dataFile(data), f);
+  std::fstream io(f, std::ios::binary | std::ios::in | std::ios::out);
+  io.seekp(at);
+  io.write(reinterpret_cast<const char*>(&value), 4);
+  return f.string();
+}
+
 void sql(const fs::path& db_path, const std::string& statements) {
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open(db_path.c_str(), &db), SQLITE_OK);
@@ -124,17 +145,9 @@ TEST(BadBagsCli, FieldLengthPastItsHeader) {
   LIDAR2D_REQUIRE_DATA("bags/laser_scan_sparsifier_demo.bag");
   LIDAR2D_REQUIRE_DATA("bags/laser_scan_matcher_demo.bag");
   test::TempDir tmp;
+  // The first field's length of the record header at `record` set 100 bytes past the header.
   auto corrupt = [&](const std::string& data, const std::string& name, std::streamoff record) {
-    const fs::path f = tmp / name;
-    fs::copy_file(test::dataFile(data), f);
-    std::fstream io(f, std::ios::binary | std::ios::in | std::ios::out);
-    std::uint32_t header_len = 0;
-    io.seekg(record);
-    io.read(reinterpret_cast<char*>(&header_len), 4);
-    const std::uint32_t field_len = header_len + 100;  // the first field's length, past the header
-    io.seekp(record + 4);
-    io.write(reinterpret_cast<const char*>(&field_len), 4);
-    return f.string();
+    return patchedCopy(tmp.path(), data, name, record + 4, wordAt(data, record) + 100);
   };
   std::string f = corrupt("bags/laser_scan_sparsifier_demo.bag", "v12.bag", 4120);
   expectCliError({"info", f}, f, "corrupt record header at byte 4120: a field's length runs past the header's 2222 bytes");
@@ -155,23 +168,15 @@ TEST(BadBagsCli, IndexEntriesOutsideTheirChunk) {
   LIDAR2D_REQUIRE_DATA("raw/mit-csail.orig.bag");
   LIDAR2D_REQUIRE_DATA("bags/laser_scan_matcher_demo.bag");
   test::TempDir tmp;
-  auto patched = [&](const std::string& data, const std::string& name, std::streamoff at, std::uint32_t value) {
-    const fs::path f = tmp / name;
-    fs::copy_file(test::dataFile(data), f);
-    std::fstream io(f, std::ios::binary | std::ios::in | std::ios::out);
-    io.seekp(at);
-    io.write(reinterpret_cast<const char*>(&value), 4);
-    return f.string();
-  };
-  std::string f = patched("raw/mit-csail.orig.bag", "far.bag", 105524, 0x7ffffff0u);
+  std::string f = patchedCopy(tmp.path(), "raw/mit-csail.orig.bag", "far.bag", 105524, 0x7ffffff0u);
   expectCliError({"info", f}, f,
                  "corrupt index record at byte 105461: entry 0 points to byte 2147483632 of the chunk at byte "
                  "4117, past its end (the chunk holds 787839 bytes)");
-  f = patched("bags/laser_scan_matcher_demo.bag", "inside.bag", 792713, 2303);
+  f = patchedCopy(tmp.path(), "bags/laser_scan_matcher_demo.bag", "inside.bag", 792713, 2303);
   expectCliError({"info", f}, f,
                  "corrupt index record at byte 792650: entry 0 points to byte 2303 of the chunk at byte 4117, where no "
                  "record starts");
-  f = patched("bags/laser_scan_matcher_demo.bag", "count.bag", 792677, 0x00ffffffu);
+  f = patchedCopy(tmp.path(), "bags/laser_scan_matcher_demo.bag", "count.bag", 792677, 0x00ffffffu);
   expectCliError({"info", f}, f, "corrupt index record at byte 792650: 16777215 entries of 12 bytes do not fit its");
 }
 

@@ -221,13 +221,21 @@ class RecordHeaderCheck {
     return 0;
   }
 
+  // `bytes` bytes of the file from byte `pos`; nothing when they cannot be read.
+  std::optional<std::string> bytesAt(std::uint64_t pos, std::uint64_t bytes) {
+    std::string data(bytes, '\0');
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(pos));
+    if (!in_.read(data.data(), static_cast<std::streamsize>(data.size()))) return std::nullopt;
+    return data;
+  }
+
   // The records of a plain chunk, back to back in its data; returns their offsets in it.
   std::vector<std::uint64_t> checkChunk(const Record& c, std::uint64_t chunk_pos) {
     std::vector<std::uint64_t> starts;
-    std::string data(c.data_len, '\0');
-    in_.clear();
-    in_.seekg(static_cast<std::streamoff>(c.data_at));
-    if (!in_.read(data.data(), static_cast<std::streamsize>(data.size()))) return starts;
+    const std::optional<std::string> bytes = bytesAt(c.data_at, c.data_len);
+    if (!bytes) return starts;
+    const std::string& data = *bytes;
     const std::string where = fmt::format(" of the chunk at byte {}", chunk_pos);
     for (std::uint64_t q = 0; q + 8 <= data.size();) {
       const std::uint32_t hlen = u32(data.data() + q);
@@ -255,12 +263,10 @@ class RecordHeaderCheck {
       throw badInput(fmt::format("corrupt index record at byte {}: {} entries of {} bytes do not fit its {} bytes",
                                  pos, count, kEntry, r.data_len),
                      {path_});
-    std::string data(count * kEntry, '\0');
-    in_.clear();
-    in_.seekg(static_cast<std::streamoff>(r.data_at));
-    if (!in_.read(data.data(), static_cast<std::streamsize>(data.size()))) return;
+    const std::optional<std::string> data = bytesAt(r.data_at, count * kEntry);
+    if (!data) return;
     for (std::uint64_t e = 0; e < count; ++e) {
-      const std::uint64_t offset = u32(data.data() + e * kEntry + 8);
+      const std::uint64_t offset = u32(data->data() + e * kEntry + 8);
       const bool fits = chunk_size >= 8 && offset <= chunk_size - 8;
       if (!fits || (starts && !std::binary_search(starts->begin(), starts->end(), offset)))
         throw badInput(fmt::format("corrupt index record at byte {}: entry {} points to byte {} of the chunk at byte "
