@@ -12,7 +12,10 @@ crash. Deterministic per --seed. Each finding's input is kept under --work.
 Modes:
   carmen   CARMEN text logs: fields replaced by NaN/inf/garbage, lines cut, dropped, duplicated,
            binary lines, counts changed, gzip and cut gzip.
-  bag1     ROS1 bags (the 1.2 and 2.0 bags of the shared data, and a bz2 one): bytes, lengths and floats changed.
+  bag1     ROS1 bags (the 1.2 and 2.0 bags of the shared data, and a bz2 one): bytes, lengths and floats changed;
+           and the 2.0 demo bag with its chunk damaged inside and then compressed (bz2, or lz4 when
+           python3-roslz4 is there: run with /usr/bin/python3), which a check outside the
+           compression cannot see.
   ros2     a ROS2 bag: message blobs, topic rows and metadata.yaml damaged.
   map      map YAML keys and PGM bytes (localize-index, map --prior, simulate --map).
   db       localization database bytes (localize --db).
@@ -162,6 +165,74 @@ def mutateBytes(rng, d, edits=5):
     return bytes(d)
 
 
+def u32(d, at):
+    return struct.unpack_from('<I', d, at)[0]
+
+
+def recordFields(h):
+    out, q = [], 0
+    while q + 4 <= len(h):
+        n = u32(h, q)
+        name, _, value = bytes(h[q + 4:q + 4 + n]).partition(b'=')
+        out.append([name, value])
+        q += 4 + n
+    return out
+
+
+def packRecord(fields, data):
+    h = b''.join(struct.pack('<I', len(k) + 1 + len(v)) + k + b'=' + v for k, v in fields)
+    return struct.pack('<I', len(h)) + h + struct.pack('<I', len(data)) + data
+
+
+def rechunked(rng, d):
+    """A 2.0 bag whose chunks are decompressed, damaged inside (their records, which a check outside
+    the compression cannot see), and compressed again with bz2 or (if python3-roslz4 is there) lz4;
+    chunk_pos and index_pos follow the new chunk sizes. The stated size is the damaged data's,
+    or sometimes the original's."""
+    import bz2
+    try:
+        import roslz4
+        kinds = ['bz2', 'lz4']
+    except ImportError:
+        roslz4, kinds = None, ['bz2']
+    out, moved, pos, index_pos = bytearray(d[:13]), {}, 13, None
+    head_at = None
+    while pos + 8 <= len(d):
+        hl = u32(d, pos)
+        h, dl = d[pos + 4:pos + 4 + hl], u32(d, pos + 4 + hl)
+        fields = recordFields(h)
+        op = dict((k, v) for k, v in fields).get(b'op', b'')
+        if op == b'\x04':  # (laser_scan_matcher_demo.bag states other data lengths: trust the count)
+            dl = 12 * struct.unpack('<I', dict((k, v) for k, v in fields)[b'count'])[0]
+        data = d[pos + 8 + hl:pos + 8 + hl + dl]
+        if op == b'\x03':
+            head_at = len(out)
+            out += d[pos:pos + 8 + hl + dl]
+        elif op == b'\x05':
+            comp = dict((k, v) for k, v in fields).get(b'compression', b'none')
+            plain = bz2.decompress(data) if comp == b'bz2' else roslz4.decompress(data) if comp == b'lz4' else data
+            damaged = mutateBytes(rng, plain, 3)
+            kind = rng.choice(kinds)
+            packed = bz2.compress(damaged) if kind == 'bz2' else roslz4.compress(damaged)
+            size = len(damaged) if rng.random() < 0.8 else len(plain)
+            moved[pos] = len(out)
+            out += packRecord([[b'op', b'\x05'], [b'compression', kind.encode()], [b'size', struct.pack('<I', size)]], packed)
+        elif op in (b'\x06', b'\x07'):
+            if index_pos is None:
+                index_pos = len(out)
+            for fld in fields:
+                if fld[0] == b'chunk_pos' and struct.unpack('<Q', fld[1])[0] in moved:
+                    fld[1] = struct.pack('<Q', moved[struct.unpack('<Q', fld[1])[0]])
+            out += packRecord(fields, data)
+        else:
+            out += packRecord(fields, data)
+        pos += 8 + hl + dl
+    if head_at is not None and index_pos is not None:
+        key = out.find(b'index_pos=', head_at)
+        out[key + 10:key + 18] = struct.pack('<Q', index_pos)
+    return bytes(out)
+
+
 def fuzzBag1(f, base, runs):
     full = [['info', '{f}'], ['match', '{f}', '--init', 'identity', '-o', '{o}/x.txt'], ['slam', '{f}', '-o', '{o}/s']]
     # The two small bags (1.2, and 2.0 with a plain chunk) through every reading command; the
@@ -173,11 +244,16 @@ def fuzzBag1(f, base, runs):
     if not sources:
         print(f'bag1: skipped, the shared data is missing ({DATA}/bags, {DATA}/raw)')
         return
+    demo = os.path.join(DATA, 'bags', 'laser_scan_matcher_demo.bag')
+    if os.path.exists(demo):  # its plain chunk damaged inside, then compressed
+        sources.append((demo, full, 'rechunked'))
     for n in range(runs):
-        src, commands = sources[n % len(sources)]
+        src, commands, *how = sources[n % len(sources)]
         path = os.path.join(f.work, 'in.bag')
-        open(path, 'wb').write(mutateBytes(f.rng, open(src, 'rb').read()))
-        runLogCommands(f, path, f'bag1 #{n} ({os.path.basename(src)})', commands)
+        data = open(src, 'rb').read()
+        open(path, 'wb').write(rechunked(f.rng, data) if how else mutateBytes(f.rng, data))
+        label = os.path.basename(src) + (', rechunked' if how else '')
+        runLogCommands(f, path, f'bag1 #{n} ({label})', commands)
 
 
 def fuzzRos2(f, base, runs):

@@ -8,7 +8,6 @@ PKGS="build-essential make cmake pkg-config git
   libcli11-dev libspdlog-dev libfmt-dev libyaml-cpp-dev nlohmann-json3-dev
   zlib1g-dev libbz2-dev liblz4-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  librosbag-storage-dev libsensor-msgs-dev libnav-msgs-dev libtf2-msgs-dev pluginlib-dev
   python3 python3-rosbag
   chromium"
 missing=""
