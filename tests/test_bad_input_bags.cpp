@@ -134,9 +134,10 @@ TEST(BadBagsCli, CorruptFileHeader) {
   expectCliError({"info", f.string()}, f.string(), "not a readable ROS1 bag");
 }
 
-// A field length that runs past its record header: rosbag_storage's ros::Header::parse read past
-// its buffer (AddressSanitizer: heap-buffer-overflow; found by fuzzing), at the top level of a 1.2
-// bag, in a 2.0 bag's index records and inside its plain chunks. The offsets are those of the
+// A field length that runs past its record header: Debian's rosbag_storage, which lidar2d used
+// before its own bag reader, read past its buffer there (AddressSanitizer: heap-buffer-overflow;
+// found by fuzzing), at the top level of a 1.2 bag, in a 2.0 bag's index records and inside its
+// plain chunks. The offsets are those of the
 // (read-only) data files: a record header of 2222 bytes at byte 4120 of the 1.2 bag; in the 2.0
 // bag the connection record at its index_pos (1029025, in the file header), and the first record
 // inside the plain chunk at byte 4117 (its 41-byte header and data length put the inner record at
@@ -158,8 +159,9 @@ TEST(BadBagsCli, FieldLengthPastItsHeader) {
 }
 
 // Index records (the entries after each chunk giving each message's time and offset in the chunk):
-// rosbag_storage reads a message at each offset without checking it against the chunk, so an
-// offset past a bz2 chunk's end crashed it (segmentation fault in rosbag::Bag::readHeaderFromBuffer).
+// rosbag_storage (lidar2d's reader before its own) read a message at each offset without checking
+// it against the chunk, so an offset past a bz2 chunk's end crashed it (segmentation fault in
+// rosbag::Bag::readHeaderFromBuffer). Damage inside compressed chunks: test_rosbag1_container.cpp.
 // Offsets of the read-only data files: in the bz2 bag the first index record after the chunk at
 // byte 4117 (787839 bytes uncompressed) is at 105461, its first entry's offset at 105524; in the
 // 2.0 demo bag the first index record after its plain chunk (also at 4117) is at 792650, its count
