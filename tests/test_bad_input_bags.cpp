@@ -120,6 +120,16 @@ TEST(BadBagsCli, TruncatedBag) {
   expectCliError({"info", f.string()}, f.string(), "truncated bag");
 }
 
+// A 1.2 bag has no chunks: its records follow one another, each message a record. Cut inside the
+// message record at byte 8581 (2231 bytes long; 2106 of data after its header):
+TEST(BadBagsCli, TruncatedVersion12Bag) {
+  LIDAR2D_REQUIRE_DATA("bags/laser_scan_sparsifier_demo.bag");
+  test::TempDir tmp;
+  const fs::path f = tmp / "cut12.bag";
+  copyPrefix(test::dataFile("bags/laser_scan_sparsifier_demo.bag"), f, 9000);
+  expectCliError({"info", f.string()}, f.string(), "truncated bag: the record at byte 8581 states 2106 bytes of data");
+}
+
 TEST(BadBagsCli, CorruptFileHeader) {
   LIDAR2D_REQUIRE_DATA("bags/laser_scan_matcher_demo.bag");
   test::TempDir tmp;
