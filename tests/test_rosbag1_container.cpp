@@ -315,6 +315,39 @@ TEST(Ros1Container, UnknownCompression) {
   expectError(buildBag(s), "is compressed with 'zstd' (lidar2d reads none, bz2 and lz4)");
 }
 
+// What `rosbag record` leaves when nothing was published: a file header whose index (no
+// connections, no chunks) starts at the end of the file.
+TEST(Ros1Container, EmptyRecording) {
+  test::TempDir tmp;
+  const auto f = tmp.path() / "empty.bag";
+  const std::string magic = "#ROSBAG V2.0\n";
+  auto header = [](std::uint64_t index_pos) {
+    return record(field("op", op(0x03)) + field("index_pos", le64(index_pos)) + field("conn_count", le32(0)) +
+                      field("chunk_count", le32(0)),
+                  std::string(100, ' '));
+  };
+  const std::uint64_t end = magic.size() + header(0).size();
+  test::writeFile(f, magic + header(end));
+  internal::Ros1Bag bag(f.string());
+  EXPECT_TRUE(bag.connections().empty());
+  try {
+    internal::openRosbag1(f.string(), {});
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("no sensor_msgs/LaserScan topic in the bag (topics: none)"));
+  }
+  // With one connection announced, the same file is cut short.
+  test::writeFile(f, magic + record(field("op", op(0x03)) + field("index_pos", le64(end)) +
+                                        field("conn_count", le32(1)) + field("chunk_count", le32(0)),
+                                    std::string(100, ' ')));
+  try {
+    internal::Ros1Bag cut(f.string());
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr("truncated bag: its index should start at byte"));
+  }
+}
+
 TEST(Ros1Container, NotABag) {
   test::TempDir tmp;
   const auto f = tmp.path() / "x.bag";

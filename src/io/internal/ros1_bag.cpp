@@ -302,7 +302,8 @@ void Ros1Bag::openV20() {
   const std::uint64_t chunk_count = number(head.fields, "chunk_count", 4, what, path_);
   if (index_pos == 0)
     throw badInput("bag has no index (the recording was not closed); 'rosbag reindex' can rebuild it", {path_});
-  if (index_pos >= size_)
+  // (An empty recording's index is empty and starts at the end of the file.)
+  if (index_pos > size_ || (index_pos == size_ && conn_count + chunk_count > 0))
     throw badInput(fmt::format("truncated bag: its index should start at byte {} but the file has {} bytes (an "
                                "interrupted recording or copy? 'rosbag reindex' can rebuild the index)",
                                index_pos, size_),
