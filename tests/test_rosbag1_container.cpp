@@ -68,7 +68,8 @@ struct Message {
 };
 
 /// What to write, and the damage to do on the way. The bag: connection 0 (/scan, LaserScan), three
-/// scans stored out of time order (stamps 10.2, 10.0, 10.1 s), one chunk, the index after it.
+/// scans stored out of time order (stamps 10.2, 10.0, 10.1 s), one chunk, the index after it (an
+/// index record per connection).
 struct BagSpec {
   std::string compression = "none";
   std::int64_t size_delta = 0;                            // added to the chunk header's uncompressed size
@@ -77,6 +78,7 @@ struct BagSpec {
   std::function<void(std::vector<std::uint32_t>&)> edit_offsets;  // the index entries' offsets
   std::uint32_t index_conn = 0;                           // the connection the index record names
   bool chunk_listed_twice = false;                        // two chunk info records for the one chunk
+  bool second_connection = false;  // the scan at 10.0 s from a second publisher (connection 1, same topic)
 };
 
 struct Built {
@@ -89,14 +91,19 @@ struct Built {
 
 Built buildBag(const BagSpec& spec) {
   const std::string md5 = "90c7ef2dc6895d81024acba2ac42f369";
-  const std::string conn_header = field("op", op(0x07)) + field("conn", le32(0)) + field("topic", "/scan");
-  const std::string conn_data = field("topic", "/scan") + field("type", "sensor_msgs/LaserScan") +
-                                field("md5sum", md5) + field("message_definition", "# test");
-  const std::vector<Message> messages = {{0, 10, 200000000, laserScan(2, 10, 200000000, {3.0f, 3.1f, 3.2f, 3.3f})},
-                                         {0, 10, 0, laserScan(0, 10, 0, {1.0f, 1.1f, 1.2f, 1.3f})},
-                                         {0, 10, 100000000, laserScan(1, 10, 100000000, {2.0f, 2.1f, 2.2f, 2.3f})}};
+  const std::uint32_t conns = spec.second_connection ? 2 : 1;
+  auto connection = [&](std::uint32_t id) {
+    return record(field("op", op(0x07)) + field("conn", le32(id)) + field("topic", "/scan"),
+                  field("topic", "/scan") + field("type", "sensor_msgs/LaserScan") + field("md5sum", md5) +
+                      field("message_definition", "# test") + field("callerid", "/publisher" + std::to_string(id)));
+  };
+  const std::vector<Message> messages = {
+      {0, 10, 200000000, laserScan(2, 10, 200000000, {3.0f, 3.1f, 3.2f, 3.3f})},
+      {spec.second_connection ? 1u : 0u, 10, 0, laserScan(0, 10, 0, {1.0f, 1.1f, 1.2f, 1.3f})},
+      {0, 10, 100000000, laserScan(1, 10, 100000000, {2.0f, 2.1f, 2.2f, 2.3f})}};
   Built b;
-  std::string chunk = record(conn_header, conn_data);
+  std::string chunk;
+  for (std::uint32_t c = 0; c < conns; ++c) chunk += connection(c);
   for (const Message& m : messages) {
     b.message_offsets.push_back(static_cast<std::uint32_t>(chunk.size()));
     chunk += record(field("op", op(0x02)) + field("conn", le32(m.conn)) + field("time", time(m.sec, m.nsec)), m.data);
@@ -109,7 +116,7 @@ Built buildBag(const BagSpec& spec) {
   const std::string magic = "#ROSBAG V2.0\n";
   const std::uint32_t chunk_infos = spec.chunk_listed_twice ? 2 : 1;
   auto fileHeader = [&](std::uint64_t index_pos) {
-    return record(field("op", op(0x03)) + field("index_pos", le64(index_pos)) + field("conn_count", le32(1)) +
+    return record(field("op", op(0x03)) + field("index_pos", le64(index_pos)) + field("conn_count", le32(conns)) +
                       field("chunk_count", le32(chunk_infos)),
                   std::string(64, ' '));
   };
@@ -120,18 +127,28 @@ Built buildBag(const BagSpec& spec) {
   b.index_record_pos = b.chunk_pos + body.size();
   std::vector<std::uint32_t> offsets = b.message_offsets;
   if (spec.edit_offsets) spec.edit_offsets(offsets);
-  std::string entries;
-  for (std::size_t k = 0; k < messages.size(); ++k) entries += time(messages[k].sec, messages[k].nsec) + le32(offsets[k]);
-  body += record(field("op", op(0x04)) + field("ver", le32(1)) + field("conn", le32(spec.index_conn)) +
-                     field("count", le32(static_cast<std::uint32_t>(messages.size()))),
-                 entries);
+  std::string counts;  // the chunk info's (connection, count) pairs
+  for (std::uint32_t c = 0; c < conns; ++c) {
+    std::string entries;
+    std::uint32_t count = 0;
+    for (std::size_t k = 0; k < messages.size(); ++k)
+      if (messages[k].conn == c) {
+        entries += time(messages[k].sec, messages[k].nsec) + le32(offsets[k]);
+        ++count;
+      }
+    const std::uint32_t named = c == 0 ? spec.index_conn : c;
+    body += record(field("op", op(0x04)) + field("ver", le32(1)) + field("conn", le32(named)) +
+                       field("count", le32(count)),
+                   entries);
+    counts += le32(named) + le32(count);
+  }
   const std::uint64_t index_pos = b.chunk_pos + body.size();
-  body += record(conn_header, conn_data);
+  for (std::uint32_t c = 0; c < conns; ++c) body += connection(c);
   for (std::uint32_t i = 0; i < chunk_infos; ++i)
     body += record(field("op", op(0x06)) + field("ver", le32(1)) + field("chunk_pos", le64(b.chunk_pos)) +
                        field("start_time", time(10, 0)) + field("end_time", time(10, 200000000)) +
-                       field("count", le32(1)),
-                   le32(spec.index_conn) + le32(static_cast<std::uint32_t>(messages.size())));
+                       field("count", le32(conns)),
+                   counts);
   b.bytes = magic + fileHeader(index_pos) + body;
   return b;
 }
@@ -196,6 +213,26 @@ TEST_P(Ros1Container, ConnectionsAndIndex) {
   EXPECT_EQ(messages[1].offset, b.message_offsets[2]);
   EXPECT_EQ(messages[2].offset, b.message_offsets[0]);
   EXPECT_TRUE(bag.messages({5}).empty());
+}
+
+TEST_P(Ros1Container, TwoConnectionsOnOneTopic) {
+  BagSpec s = spec();
+  s.second_connection = true;
+  test::TempDir tmp;
+  const Built b = buildBag(s);
+  const std::vector<Frame> frames = readBag(tmp, b);
+  ASSERT_EQ(frames.size(), 3u);
+  for (std::size_t k = 0; k < 3; ++k) {
+    EXPECT_NEAR(frames[k].time, 10.0 + 0.1 * static_cast<double>(k), 1e-9);
+    EXPECT_FLOAT_EQ(static_cast<float>(frames[k].scan.ranges()[0]), 1.0f + static_cast<float>(k));
+  }
+  internal::Ros1Bag bag((tmp.path() / "t.bag").string());
+  ASSERT_EQ(bag.connections().size(), 2u);
+  EXPECT_EQ(bag.connections()[0].messages, 2u);
+  EXPECT_EQ(bag.connections()[1].messages, 1u);
+  EXPECT_EQ(bag.connections()[1].topic, "/scan");
+  EXPECT_EQ(bag.messages({1}).size(), 1u);
+  EXPECT_EQ(bag.messages({0, 1}).size(), 3u);
 }
 
 TEST_P(Ros1Container, IndexOffsetInsideARecord) {

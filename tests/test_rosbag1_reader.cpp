@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -276,6 +277,26 @@ TEST(Rosbag1Reader, FixtureChainedTfFromOldStyleTfAndInterpolation) {
   EXPECT_THAT(all, HasSubstr("2 scans are more than 0.5 s"));  // stamps 101.64 and 101.84
   EXPECT_THAT(all, HasSubstr("10 negative ranges"));
   EXPECT_THAT(all, HasSubstr("1 messages have a zero header stamp"));
+}
+
+// many_chunks.bag: one message per bz2 chunk (91 chunks), written shuffled (see
+// tools/make-test-bags.py): the frames come in time order, every scan once, with its own ranges
+// and the odometry interpolated at its stamp (x = 2 (t - 50)).
+TEST(Rosbag1Reader, FixtureTimeOrderAcrossChunksAndConnections) {
+  auto src = internal::openRosbag1(fixture("many_chunks.bag"), {});
+  ASSERT_EQ(src->sizeHint(), std::optional<std::size_t>(30));
+  std::size_t k = 0;
+  while (auto f = src->next()) {
+    ASSERT_LT(k, 30u);
+    EXPECT_NEAR(f->time, 50.02 + 0.1 * static_cast<double>(k), 1e-9);
+    ASSERT_EQ(f->scan.ranges().size(), 8u);
+    EXPECT_NEAR(f->scan.ranges()[0], 1.0 + 0.01 * static_cast<double>(k), 1e-6);
+    EXPECT_NEAR(f->scan.ranges()[7], 1.7 + 0.01 * static_cast<double>(k), 1e-6);
+    ASSERT_TRUE(f->T_odom_robot.has_value());
+    EXPECT_NEAR(f->T_odom_robot->x(), 2.0 * (f->time - 50.0), 1e-6);
+    ++k;
+  }
+  EXPECT_EQ(k, 30u);
 }
 
 TEST(Rosbag1Reader, FixtureTopicOverrides) {

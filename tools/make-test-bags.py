@@ -17,6 +17,11 @@ Fixtures:
   NaN, inf, 0.05 (below range_min), 10.0 (= range_max), 2.0, 3.0.
 - no_scan.bag: /odom (3 messages) and /chatter (std_msgs/String), no LaserScan.
 - corrupt_scan.bag: /scan with 2 messages; the second states 1000 ranges but holds 3.
+- many_chunks.bag (bz2, one message per chunk): /odom, 60 messages at stamps 50.0 + 0.05 i with
+  x = 0.1 i (so x = 2 (t - 50)), plus a repeat of the first at the same bag time; /scan, 30 messages at
+  stamps 50.02 + 0.1 k with ranges 1 + 0.01 k + 0.1 j (j = 0..7). Written in a shuffled order
+  (fixed seed), so time order must come from the index across chunks. (python3-rosbag makes one
+  connection per topic; several on one topic are tested in test_rosbag1_container.cpp.)
 """
 
 import math
@@ -127,6 +132,23 @@ def corrupt_scan(path):
               laser_scan(1, stamp_of(5.1), "laser", [1.0, 2.0, 3.0], count=1000), 5.1)
 
 
+def many_chunks(path):
+    import random
+    events = []
+    for i in range(60):
+        t = 50.0 + 0.05 * i
+        events.append((t + 0.001, "/odom", "nav_msgs/Odometry", odometry(i, stamp_of(t), 0.1 * i, 0.0, 0.0)))
+    events.append((50.001, "/odom", "nav_msgs/Odometry", odometry(60, stamp_of(50.0), 0.0, 0.0, 0.0)))
+    for k in range(30):
+        t = 50.02 + 0.1 * k
+        ranges = [1.0 + 0.01 * k + 0.1 * j for j in range(8)]
+        events.append((t, "/scan", "sensor_msgs/LaserScan", laser_scan(k, stamp_of(t), "laser", ranges)))
+    random.Random(7).shuffle(events)
+    with rosbag.Bag(path, "w", compression="bz2", chunk_threshold=100) as bag:
+        for t, topic, typ, data in events:
+            write(bag, topic, typ, data, t)
+
+
 if __name__ == "__main__":
     import sys
     out = sys.argv[1] if len(sys.argv) > 1 else "tests/data"
@@ -134,3 +156,4 @@ if __name__ == "__main__":
     tf_chain(os.path.join(out, "tf_chain.bag"))
     no_scan(os.path.join(out, "no_scan.bag"))
     corrupt_scan(os.path.join(out, "corrupt_scan.bag"))
+    many_chunks(os.path.join(out, "many_chunks.bag"))
