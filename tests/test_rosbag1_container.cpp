@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <string>
 #include <vector>
@@ -382,6 +383,56 @@ TEST(Ros1Container, EmptyRecording) {
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
     EXPECT_THAT(e.what(), HasSubstr("truncated bag: its index should start at byte"));
+  }
+}
+
+// Chunks are decompressed ahead of the reads on other threads: a damaged chunk's error reaches the
+// reader when one of its messages is read, and only then. mit-csail.orig.bag has seven bz2 chunks;
+// the second one's compressed bytes are zeroed in the middle.
+TEST(Ros1Container, PrefetchedChunkErrorsComeWithTheirMessages) {
+  LIDAR2D_REQUIRE_DATA("raw/mit-csail.orig.bag");
+  test::TempDir tmp;
+  const auto f = tmp.path() / "second_chunk.bag";
+  std::filesystem::copy_file(test::dataFile("raw/mit-csail.orig.bag"), f);
+  std::filesystem::permissions(f, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+  std::uint64_t second_chunk = 0;
+  {
+    std::fstream io(f, std::ios::binary | std::ios::in | std::ios::out);
+    // The top-level records after the 13-byte magic: the file header, then chunks and index records.
+    std::uint64_t pos = 13;
+    int chunks = 0;
+    while (chunks < 2) {
+      std::uint32_t hlen = 0, dlen = 0;
+      io.seekg(static_cast<std::streamoff>(pos));
+      io.read(reinterpret_cast<char*>(&hlen), 4);
+      std::string header(hlen, '\0');
+      io.read(header.data(), hlen);
+      io.read(reinterpret_cast<char*>(&dlen), 4);
+      ASSERT_TRUE(io.good());
+      if (header.find(std::string("op=") + '\x05') != std::string::npos && ++chunks == 2) {
+        second_chunk = pos;
+        io.seekp(static_cast<std::streamoff>(pos + 8 + hlen + dlen / 2));
+        const std::string zeros(64, '\0');
+        io.write(zeros.data(), static_cast<std::streamsize>(zeros.size()));
+      }
+      pos += 8 + hlen + dlen;
+    }
+  }
+  {
+    internal::Ros1Bag bag(f.string());
+    const auto messages = bag.messages({0, 1, 2, 3});
+    ASSERT_FALSE(messages.empty());
+    EXPECT_EQ(messages.front().chunk, 0u);
+    EXPECT_FALSE(bag.read(messages.front()).empty());  // chunk 0; chunks 1 and 2 start decompressing
+  }  // (no error: the second chunk was never read)
+  try {
+    auto src = internal::openRosbag1(f.string(), {});
+    while (src->next()) {
+    }
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_THAT(e.what(), HasSubstr(fmt::format("not a readable ROS1 bag: the chunk at byte {}: corrupt bz2 data",
+                                                second_chunk)));
   }
 }
 

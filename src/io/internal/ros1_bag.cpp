@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <future>
+#include <map>
 #include <optional>
 #include <string_view>
 #include <utility>
@@ -467,19 +469,14 @@ std::vector<Ros1Entry> Ros1Bag::messages(const std::vector<std::uint32_t>& ids) 
   return out;
 }
 
-const Ros1Bag::CachedChunk& Ros1Bag::load(std::uint32_t chunk_no) {
-  for (std::size_t i = 0; i < cache_.size(); ++i)
-    if (cache_[i]->chunk == chunk_no) {
-      std::rotate(cache_.begin(), cache_.begin() + static_cast<std::ptrdiff_t>(i),
-                  cache_.begin() + static_cast<std::ptrdiff_t>(i) + 1);
-      return *cache_.front();
-    }
+// Decompresses a chunk (its stored bytes `raw`), walks its records and checks its index entries
+// against them. Touches no member of the bag but the (immutable) chunk table, so it may run on
+// another thread (see load()).
+std::unique_ptr<Ros1Bag::CachedChunk> Ros1Bag::decode(std::uint32_t chunk_no, std::vector<std::uint8_t> raw) const {
   const Chunk& chunk = chunks_.at(chunk_no);
   auto c = std::make_unique<CachedChunk>();
   c->chunk = chunk_no;
-  File file(in_, size_, path_);
   const std::string where = fmt::format("chunk at byte {}", chunk.pos);
-  std::vector<std::uint8_t> raw = file.bytes(chunk.data_at, chunk.data_len, where);
   if (chunk.compression == "bz2")
     c->data = Decompressed(chunk.size, where, path_).bz2(raw);
   else if (chunk.compression == "lz4")
@@ -527,6 +524,44 @@ const Ros1Bag::CachedChunk& Ros1Bag::load(std::uint32_t chunk_no) {
       if (*it->conn != index.conn)
         throw badInput(fmt::format("{}, a message of connection {}, not {}", entry, *it->conn, index.conn), {path_});
     }
+  return c;
+}
+
+const Ros1Bag::CachedChunk& Ros1Bag::load(std::uint32_t chunk_no) {
+  for (std::size_t i = 0; i < cache_.size(); ++i)
+    if (cache_[i]->chunk == chunk_no) {
+      std::rotate(cache_.begin(), cache_.begin() + static_cast<std::ptrdiff_t>(i),
+                  cache_.begin() + static_cast<std::ptrdiff_t>(i) + 1);
+      return *cache_.front();
+    }
+  File file(in_, size_, path_);
+  auto stored = [&](std::uint32_t k) {
+    const Chunk& chunk = chunks_.at(k);
+    return file.bytes(chunk.data_at, chunk.data_len, fmt::format("chunk at byte {}", chunk.pos));
+  };
+  std::unique_ptr<CachedChunk> c;
+  if (const auto it = pending_.find(chunk_no); it != pending_.end()) {
+    auto future = std::move(it->second);
+    pending_.erase(it);
+    c = future.get();  // (rethrows the chunk's error)
+  } else {
+    c = decode(chunk_no, stored(chunk_no));
+  }
+  // The next chunks in file order are the likeliest next reads (messages in time order are
+  // nearly in file order): decompress them on other threads meanwhile, so that a full read of a
+  // compressed bag uses both cores (bz2 is about 80% of reading one). A chunk prefetched but never
+  // read costs only the work; its error, if any, is never reported.
+  for (std::uint32_t k = chunk_no + 1; k < chunks_.size() && k <= chunk_no + kPrefetch; ++k) {
+    const bool cached =
+        std::any_of(cache_.begin(), cache_.end(), [&](const auto& cc) { return cc->chunk == k; });
+    if (!cached && !pending_.count(k) && chunks_[k].compression != "none")
+      pending_.emplace(k, std::async(std::launch::async, [this, k, raw = stored(k)]() mutable {
+                         return decode(k, std::move(raw));
+                       }));
+  }
+  // Prefetches that fell behind (the reads went elsewhere) are dropped; their threads finish first.
+  for (auto it = pending_.begin(); it != pending_.end();)
+    it = (it->first < chunk_no || it->first > chunk_no + kPrefetch) ? pending_.erase(it) : std::next(it);
 
   if (cache_.size() < 2) cache_.emplace_back();
   cache_.back() = std::move(c);

@@ -17,6 +17,8 @@
 
 #include <cstdint>
 #include <fstream>
+#include <future>
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -64,7 +66,8 @@ class Ros1Bag {
 
   /// The serialized message `e` (one of messages()'s). The bytes stay valid until the next call.
   /// Format 2.0 decompresses a chunk the first time one of its messages is read (the last two
-  /// chunks are kept) and checks all of its records and index entries then.
+  /// chunks are kept, and the next kPrefetch compressed ones are decompressed ahead on other
+  /// threads) and checks all of its records and index entries then.
   std::span<const std::uint8_t> read(const Ros1Entry& e);
 
  private:
@@ -74,6 +77,9 @@ class Ros1Bag {
   void openV20();
   void openV12();
   const CachedChunk& load(std::uint32_t chunk);
+  std::unique_ptr<CachedChunk> decode(std::uint32_t chunk, std::vector<std::uint8_t> raw) const;
+
+  static constexpr std::uint32_t kPrefetch = 2;  ///< compressed chunks decompressed ahead of the reads
 
   std::string path_;
   std::ifstream in_;
@@ -83,6 +89,7 @@ class Ros1Bag {
   std::vector<Ros1Entry> entries_;  // all messages, in file order
   std::vector<Chunk> chunks_;       // 2.0
   std::vector<std::unique_ptr<CachedChunk>> cache_;
+  std::map<std::uint32_t, std::future<std::unique_ptr<CachedChunk>>> pending_;  // chunks being prefetched
   std::vector<std::uint8_t> buffer_;  // 1.2: the last message read
 };
 
