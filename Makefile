@@ -5,7 +5,7 @@ ASAN_BUILD ?= build-asan
 CMAKE_FLAGS ?=
 DEMO_OUT ?= out
 
-.PHONY: all build test test-asan fuzz bench demo clean format
+.PHONY: all build test test-asan test-tsan-bags fuzz bench demo clean format
 
 all: build
 
@@ -28,6 +28,16 @@ test-asan: $(ASAN_BUILD)/CMakeCache.txt
 	cmake --build $(ASAN_BUILD) -j$(JOBS)
 	cd $(ASAN_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  ctest --output-on-failure -j$(JOBS)
+
+# ThreadSanitizer on the ROS1 bag reader's chunk prefetch (its only threads; the whole suite under
+# TSan would take another full build): the reader and a small driver, built with -fsanitize=thread,
+# read every shared bag and the fixture bags (`make test` builds those).
+DATA_DIR ?= $(if $(LIDAR2D_DATA_DIR),$(LIDAR2D_DATA_DIR),../shared/data)
+test-tsan-bags: build
+	$(CXX) -std=c++20 -O1 -g -fsanitize=thread -I. -Iinclude tests/tsan/ros1_bag_threads.cpp \
+	  src/io/internal/ros1_bag.cpp src/core/error.cpp -lfmt -lbz2 -llz4 -o $(BUILD)/tsan_ros1_bag
+	TSAN_OPTIONS=halt_on_error=1 $(BUILD)/tsan_ros1_bag $(wildcard $(DATA_DIR)/raw/*.bag $(DATA_DIR)/bags/*.bag) \
+	  $(BUILD)/tests/fixtures/tf_chain.bag $(BUILD)/tests/fixtures/many_chunks.bag
 
 # Mutation fuzzing of the CLI's inputs (logs, bags, maps, databases, options) with the sanitizer
 # build: reports crashes, hangs, sanitizer errors, silent failures and partial outputs, keeping the
