@@ -1,6 +1,6 @@
-// ThreadSanitizer check of the ROS1 bag reader's chunk prefetch, the one place where lidar2d's I/O
-// runs threads of its own (src/io/internal/ros1_bag.cpp decompresses the next chunks on other
-// threads). Built and run by `make test-tsan-bags` (CI runs it): each bag given is read whole, and
+// ThreadSanitizer check of the ROS1 bag reader's chunk prefetch (src/io/internal/ros1_bag.cpp
+// decompresses the next chunks on threads of its own). Built and run by `make test-tsan-bags` (CI
+// runs it; the whole suite under TSan would need another full build): each bag given is read whole, and
 // again only its first message, so that the bag is destroyed while prefetches are running. Exit 1
 // when a bag fails to read; ThreadSanitizer exits 66 on a race.
 
