@@ -73,21 +73,21 @@ struct Message {
 /// index record per connection).
 struct BagSpec {
   std::string compression = "none";
-  std::int64_t size_delta = 0;                            // added to the chunk header's uncompressed size
-  std::function<void(std::string&)> edit_chunk;           // the chunk's uncompressed records
-  std::function<void(std::string&)> edit_compressed;      // the chunk's stored bytes
+  std::int64_t size_delta = 0;                                    // added to the chunk header's uncompressed size
+  std::function<void(std::string&)> edit_chunk;                   // the chunk's uncompressed records
+  std::function<void(std::string&)> edit_compressed;              // the chunk's stored bytes
   std::function<void(std::vector<std::uint32_t>&)> edit_offsets;  // the index entries' offsets
-  std::uint32_t index_conn = 0;                           // the connection the index record names
-  bool chunk_listed_twice = false;                        // two chunk info records for the one chunk
+  std::uint32_t index_conn = 0;                                   // the connection the index record names
+  bool chunk_listed_twice = false;                                // two chunk info records for the one chunk
   bool second_connection = false;  // the scan at 10.0 s from a second publisher (connection 1, same topic)
 };
 
 struct Built {
   std::string bytes;
-  std::uint64_t chunk_pos = 0;                // the chunk record's byte in the file
-  std::uint64_t index_record_pos = 0;         // the index record's byte in the file
+  std::uint64_t chunk_pos = 0;                 // the chunk record's byte in the file
+  std::uint64_t index_record_pos = 0;          // the index record's byte in the file
   std::vector<std::uint32_t> message_offsets;  // in the chunk's uncompressed data, in storage order
-  std::uint64_t chunk_size = 0;               // the chunk's uncompressed bytes (after edit_chunk)
+  std::uint64_t chunk_size = 0;                // the chunk's uncompressed bytes (after edit_chunk)
 };
 
 Built buildBag(const BagSpec& spec) {
@@ -123,8 +123,8 @@ Built buildBag(const BagSpec& spec) {
   };
   b.chunk_pos = magic.size() + fileHeader(0).size();
   const auto size = static_cast<std::uint32_t>(static_cast<std::int64_t>(chunk.size()) + spec.size_delta);
-  std::string body = record(field("op", op(0x05)) + field("compression", spec.compression) + field("size", le32(size)),
-                            stored);
+  std::string body =
+      record(field("op", op(0x05)) + field("compression", spec.compression) + field("size", le32(size)), stored);
   b.index_record_pos = b.chunk_pos + body.size();
   std::vector<std::uint32_t> offsets = b.message_offsets;
   if (spec.edit_offsets) spec.edit_offsets(offsets);
@@ -138,9 +138,9 @@ Built buildBag(const BagSpec& spec) {
         ++count;
       }
     const std::uint32_t named = c == 0 ? spec.index_conn : c;
-    body += record(field("op", op(0x04)) + field("ver", le32(1)) + field("conn", le32(named)) +
-                       field("count", le32(count)),
-                   entries);
+    body +=
+        record(field("op", op(0x04)) + field("ver", le32(1)) + field("conn", le32(named)) + field("count", le32(count)),
+               entries);
     counts += le32(named) + le32(count);
   }
   const std::uint64_t index_pos = b.chunk_pos + body.size();
@@ -240,9 +240,10 @@ TEST_P(Ros1Container, IndexOffsetInsideARecord) {
   BagSpec s = spec();
   s.edit_offsets = [](auto& o) { o[1] += 3; };
   const Built b = buildBag(s);
-  expectError(b, fmt::format("corrupt index record at byte {}: entry 1 points to byte {} of the chunk at byte {}, where "
-                             "no record starts",
-                             b.index_record_pos, b.message_offsets[1] + 3, b.chunk_pos));
+  expectError(b,
+              fmt::format("corrupt index record at byte {}: entry 1 points to byte {} of the chunk at byte {}, where "
+                          "no record starts",
+                          b.index_record_pos, b.message_offsets[1] + 3, b.chunk_pos));
 }
 
 TEST_P(Ros1Container, IndexOffsetAtTheConnectionRecord) {
@@ -258,9 +259,10 @@ TEST_P(Ros1Container, IndexOffsetPastTheChunk) {
   BagSpec s = spec();
   s.edit_offsets = [](auto& o) { o[0] = 0x7ffffff0u; };
   const Built b = buildBag(s);
-  expectError(b, fmt::format("corrupt index record at byte {}: entry 0 points to byte 2147483632 of the chunk at byte {}, "
-                             "past its end",
-                             b.index_record_pos, b.chunk_pos));
+  expectError(b,
+              fmt::format("corrupt index record at byte {}: entry 0 points to byte 2147483632 of the chunk at byte {}, "
+                          "past its end",
+                          b.index_record_pos, b.chunk_pos));
 }
 
 TEST_P(Ros1Container, FieldLengthPastItsHeaderInsideTheChunk) {
@@ -424,7 +426,7 @@ TEST(Ros1Container, PrefetchedChunkErrorsComeWithTheirMessages) {
     ASSERT_FALSE(messages.empty());
     EXPECT_EQ(messages.front().chunk, 0u);
     EXPECT_FALSE(bag.read(messages.front()).empty());  // chunk 0; chunks 1 and 2 start decompressing
-  }  // (no error: the second chunk was never read)
+  }                                                    // (no error: the second chunk was never read)
   try {
     auto src = internal::openRosbag1(f.string(), {});
     while (src->next()) {

@@ -61,9 +61,7 @@ class Ros1Source final : public FrameSource {
   LogFormat format() const override { return LogFormat::kRosbag1; }
   const std::string& path() const override { return path_; }
 
-  SourceNotes notes() const override {
-    return rosNotes(notes_, assembler_.warnings(), negative_ranges_, zero_stamps_);
-  }
+  SourceNotes notes() const override { return rosNotes(notes_, assembler_.warnings(), negative_ranges_, zero_stamps_); }
 
  private:
   struct Topic {
@@ -137,15 +135,13 @@ class Ros1Source final : public FrameSource {
     }
 
     // Frames: the laser frame from the first scan, the robot frame from the first odometry message.
-    const auto first_scan = firstMessage(scan, [](auto bytes, const RosMessageRef& ref) {
-      return decodeLaserScan(bytes, RosWire::kRos1, ref);
-    });
+    const auto first_scan = firstMessage(
+        scan, [](auto bytes, const RosMessageRef& ref) { return decodeLaserScan(bytes, RosWire::kRos1, ref); });
     const std::string laser_frame = first_scan ? first_scan->frame_id : std::string();
     std::vector<std::string> robot_frames{"base_link", "base_footprint"};
     if (odom) {
-      const auto first_odom = firstMessage(*odom, [](auto bytes, const RosMessageRef& ref) {
-        return decodeOdometry(bytes, RosWire::kRos1, ref);
-      });
+      const auto first_odom = firstMessage(
+          *odom, [](auto bytes, const RosMessageRef& ref) { return decodeOdometry(bytes, RosWire::kRos1, ref); });
       if (first_odom && !first_odom->child_frame_id.empty()) robot_frames = {first_odom->child_frame_id};
     }
     const RosMount mount = findMount(topics, robot_frames, laser_frame);
@@ -153,8 +149,8 @@ class Ros1Source final : public FrameSource {
     notes_.scan_source = fmt::format("{} ({}, frame '{}'{})", scan_topic_, kLaserScanType, laser_frame,
                                      mount.found ? fmt::format(", mounting {}", mount.description) : std::string());
     if (odom)
-      notes_.odom_source = fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic_, kOdometryType,
-                                       robot_frames.front());
+      notes_.odom_source =
+          fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic_, kOdometryType, robot_frames.front());
     assembler_ = RosFrameAssembler(mount.T_robot_laser, odom != nullptr);
     view_ = bag_.messages(wanted);
   }
@@ -177,7 +173,8 @@ class Ros1Source final : public FrameSource {
     std::string source;
     if (const Topic* st = tfTopic("/tf_static"); st && !laser_frame.empty()) {
       const std::vector<Ros1Entry> messages = bag_.messages(st->connections);
-      for (std::size_t k = 0; k < messages.size() && k < kMaxTfMessages; ++k) addMessage(messages[k], st->info.name, k + 1);
+      for (std::size_t k = 0; k < messages.size() && k < kMaxTfMessages; ++k)
+        addMessage(messages[k], st->info.name, k + 1);
       mount = findRosMount(tree, robot_frames, laser_frame);
       source = "/tf_static";
     }
@@ -196,11 +193,11 @@ class Ros1Source final : public FrameSource {
   }
 
   void consume(const Ros1Entry& m) {
-    const bool is_scan = std::find(scan_connections_.begin(), scan_connections_.end(), m.conn) != scan_connections_.end();
+    const bool is_scan =
+        std::find(scan_connections_.begin(), scan_connections_.end(), m.conn) != scan_connections_.end();
     const std::string& topic = is_scan ? scan_topic_ : odom_topic_;
     const std::size_t count = is_scan ? ++scan_count_ : ++odom_count_;
-    const RosMessageRef ref{path_,
-                            fmt::format("message {} on {} (bag time {:.6f})", count, topic, rosSeconds(m.time))};
+    const RosMessageRef ref{path_, fmt::format("message {} on {} (bag time {:.6f})", count, topic, rosSeconds(m.time))};
     if (is_scan) {
       const RosLaserScanMsg msg = decodeLaserScan(bag_.read(m), RosWire::kRos1, ref);
       RosNanos stamp = msg.stamp;

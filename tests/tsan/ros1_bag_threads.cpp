@@ -1,8 +1,8 @@
 // ThreadSanitizer check of the ROS1 bag reader's chunk prefetch (src/io/internal/ros1_bag.cpp
 // decompresses the next chunks on threads of its own). Built and run by `make test-tsan-bags` (CI
-// runs it; the whole suite under TSan would need another full build): each bag given is read whole, and
-// again only its first message, so that the bag is destroyed while prefetches are running. Exit 1
-// when a bag fails to read; ThreadSanitizer exits 66 on a race.
+// runs it; the whole suite under TSan would need another full build): each bag given is read
+// whole, and again only its first message, so that the bag is destroyed while prefetches are
+// running. Exit 1 when a bag fails to read; ThreadSanitizer exits 66 on a race.
 
 #include <cstdio>
 #include <exception>

@@ -148,7 +148,8 @@ class Decompressed {
     for (;;) {
       grow();
       std::size_t dst = out_.size() - produced_, src = in.size() - consumed;
-      const std::size_t rc = LZ4F_decompress(ctx.get(), out_.data() + produced_, &dst, in.data() + consumed, &src, nullptr);
+      const std::size_t rc =
+          LZ4F_decompress(ctx.get(), out_.data() + produced_, &dst, in.data() + consumed, &src, nullptr);
       if (LZ4F_isError(rc)) fail(fmt::format("corrupt lz4 data ({})", LZ4F_getErrorName(rc)));
       produced_ += dst;
       consumed += src;
@@ -217,8 +218,9 @@ class File {
 
   std::vector<std::uint8_t> bytes(std::uint64_t pos, std::uint64_t n, const std::string& what) {
     if (pos > size_ || n > size_ - pos)
-      throw badInput(fmt::format("truncated bag: the {} at byte {} needs {} bytes but the file has {}", what, pos, n, size_),
-                     {path_});
+      throw badInput(
+          fmt::format("truncated bag: the {} at byte {} needs {} bytes but the file has {}", what, pos, n, size_),
+          {path_});
     std::vector<std::uint8_t> out(n);
     in_.clear();
     in_.seekg(static_cast<std::streamoff>(pos));
@@ -232,9 +234,9 @@ class File {
     FileRecord r;
     r.pos = pos;
     if (pos > size_ || size_ - pos < 8)
-      throw badInput(fmt::format("truncated bag: the {} at byte {} lies past the end of the file ({} bytes)", what, pos,
-                                 size_),
-                     {path_});
+      throw badInput(
+          fmt::format("truncated bag: the {} at byte {} lies past the end of the file ({} bytes)", what, pos, size_),
+          {path_});
     const std::uint32_t hlen = u32(bytes(pos, 4, what).data());
     if (hlen > size_ - pos - 8)
       throw badInput(fmt::format("not a readable ROS1 bag: the {} at byte {} states a {}-byte header, more than the {} "
@@ -256,8 +258,8 @@ class File {
 
   void expectOp(const FileRecord& r, int op, const std::string& what) const {
     if (r.fields.op != op)
-      throw badInput(fmt::format("not a readable ROS1 bag: expected a {} (op {:#04x}) at byte {}, found op {}", what, op,
-                                 r.pos, r.fields.op),
+      throw badInput(fmt::format("not a readable ROS1 bag: expected a {} (op {:#04x}) at byte {}, found op {}", what,
+                                 op, r.pos, r.fields.op),
                      {path_});
   }
 
@@ -285,9 +287,9 @@ Ros1Bag::Ros1Bag(std::string path) : path_(std::move(path)), in_(path_, std::ios
     throw badInput("not a readable ROS1 bag: it starts with neither '#ROSBAG V2.0' nor '#ROSRECORD V1.2'", {path_});
   std::sort(connections_.begin(), connections_.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
   for (const Ros1Entry& e : entries_)
-    std::lower_bound(connections_.begin(), connections_.end(), e.conn,
-                     [](const Ros1Connection& c, std::uint32_t id) { return c.id < id; })
-        ->messages++;
+    std::lower_bound(connections_.begin(), connections_.end(), e.conn, [](const Ros1Connection& c, std::uint32_t id) {
+      return c.id < id;
+    })->messages++;
 }
 
 Ros1Bag::~Ros1Bag() = default;
@@ -345,9 +347,9 @@ void Ros1Bag::openV20() {
                        {path_});
       const std::uint64_t count = number(r.fields, "count", 4, w, path_);
       if (count > r.data_len / 8)
-        throw badInput(fmt::format("not a readable ROS1 bag: the {} lists {} connections in {} bytes", w, count,
-                                   r.data_len),
-                       {path_});
+        throw badInput(
+            fmt::format("not a readable ROS1 bag: the {} lists {} connections in {} bytes", w, count, r.data_len),
+            {path_});
       infos.push_back({number(r.fields, "chunk_pos", 8, w, path_), static_cast<std::size_t>(count)});
     } else {
       throw badInput(fmt::format("not a readable ROS1 bag: the index at byte {} holds a record of op {} at byte {} "
@@ -489,9 +491,10 @@ std::unique_ptr<Ros1Bag::CachedChunk> Ros1Bag::decode(std::uint32_t chunk_no, st
   const std::string of = " of the " + where;
   for (std::uint64_t q = 0; q < d.size();) {
     if (d.size() - q < 8 || u32(d.data() + q) > d.size() - q - 8)
-      throw badInput(fmt::format("not a readable ROS1 bag: the record at byte {}{} runs past the chunk's end ({} bytes)",
-                                 q, of, d.size()),
-                     {path_});
+      throw badInput(
+          fmt::format("not a readable ROS1 bag: the record at byte {}{} runs past the chunk's end ({} bytes)", q, of,
+                      d.size()),
+          {path_});
     const std::uint32_t hlen = u32(d.data() + q);
     const Fields f = parseFields(d.data() + q + 4, hlen, q, of, path_);
     CachedChunk::Record rec;
@@ -500,11 +503,13 @@ std::unique_ptr<Ros1Bag::CachedChunk> Ros1Bag::decode(std::uint32_t chunk_no, st
     rec.data_at = q + 8 + hlen;
     rec.data_len = u32(d.data() + q + 4 + hlen);
     if (rec.data_len > d.size() - rec.data_at)
-      throw badInput(fmt::format("not a readable ROS1 bag: the record at byte {}{} runs past the chunk's end ({} bytes)",
-                                 q, of, d.size()),
-                     {path_});
+      throw badInput(
+          fmt::format("not a readable ROS1 bag: the record at byte {}{} runs past the chunk's end ({} bytes)", q, of,
+                      d.size()),
+          {path_});
     if (f.op == kMessageData)
-      rec.conn = static_cast<std::uint32_t>(number(f, "conn", 4, fmt::format("message record at byte {}{}", q, of), path_));
+      rec.conn =
+          static_cast<std::uint32_t>(number(f, "conn", 4, fmt::format("message record at byte {}{}", q, of), path_));
     c->records.push_back(rec);
     q = rec.data_at + rec.data_len;
   }
@@ -552,12 +557,10 @@ const Ros1Bag::CachedChunk& Ros1Bag::load(std::uint32_t chunk_no) {
   // compressed bag uses both cores (bz2 is about 80% of reading one). A chunk prefetched but never
   // read costs only the work; its error, if any, is never reported.
   for (std::uint32_t k = chunk_no + 1; k < chunks_.size() && k <= chunk_no + kPrefetch; ++k) {
-    const bool cached =
-        std::any_of(cache_.begin(), cache_.end(), [&](const auto& cc) { return cc->chunk == k; });
+    const bool cached = std::any_of(cache_.begin(), cache_.end(), [&](const auto& cc) { return cc->chunk == k; });
     if (!cached && !pending_.count(k) && chunks_[k].compression != "none")
-      pending_.emplace(k, std::async(std::launch::async, [this, k, raw = stored(k)]() mutable {
-                         return decode(k, std::move(raw));
-                       }));
+      pending_.emplace(k, std::async(std::launch::async,
+                                     [this, k, raw = stored(k)]() mutable { return decode(k, std::move(raw)); }));
   }
   // Prefetches that fell behind (the reads went elsewhere) are dropped; their threads finish first.
   for (auto it = pending_.begin(); it != pending_.end();)

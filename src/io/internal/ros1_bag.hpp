@@ -37,11 +37,12 @@ struct Ros1Connection {
 
 /// One message as the bag's index gives it.
 struct Ros1Entry {
-  RosNanos time = 0;         ///< the bag time (the recorder's receive time), not the header stamp
-  std::uint32_t conn = 0;    ///< Ros1Connection::id
-  std::uint32_t chunk = 0;   ///< format 2.0: the chunk holding it (0, 1, ... in file order)
-  std::uint64_t offset = 0;  ///< 2.0: its record's byte in the chunk's uncompressed data; 1.2: its data's byte in the file
-  std::uint32_t size = 0;    ///< 1.2: its data's length (2.0: from the record)
+  RosNanos time = 0;        ///< the bag time (the recorder's receive time), not the header stamp
+  std::uint32_t conn = 0;   ///< Ros1Connection::id
+  std::uint32_t chunk = 0;  ///< format 2.0: the chunk holding it (0, 1, ... in file order)
+  std::uint64_t offset =
+      0;  ///< 2.0: its record's byte in the chunk's uncompressed data; 1.2: its data's byte in the file
+  std::uint32_t size = 0;  ///< 1.2: its data's length (2.0: from the record)
 };
 
 class Ros1Bag {
@@ -90,7 +91,7 @@ class Ros1Bag {
   std::vector<Chunk> chunks_;       // 2.0
   std::vector<std::unique_ptr<CachedChunk>> cache_;
   std::map<std::uint32_t, std::future<std::unique_ptr<CachedChunk>>> pending_;  // chunks being prefetched
-  std::vector<std::uint8_t> buffer_;  // 1.2: the last message read
+  std::vector<std::uint8_t> buffer_;                                            // 1.2: the last message read
 };
 
 }  // namespace lidar2d::io::internal
