@@ -11,6 +11,7 @@
 #include <map>
 #include <optional>
 #include <string_view>
+#include <system_error>
 #include <utility>
 
 #include "lidar2d/core/error.hpp"
@@ -558,9 +559,13 @@ const Ros1Bag::CachedChunk& Ros1Bag::load(std::uint32_t chunk_no) {
   // read costs only the work; its error, if any, is never reported.
   for (std::uint32_t k = chunk_no + 1; k < chunks_.size() && k <= chunk_no + kPrefetch; ++k) {
     const bool cached = std::any_of(cache_.begin(), cache_.end(), [&](const auto& cc) { return cc->chunk == k; });
-    if (!cached && !pending_.count(k) && chunks_[k].compression != "none")
+    if (cached || pending_.count(k) || chunks_[k].compression == "none") continue;
+    try {
       pending_.emplace(k, std::async(std::launch::async,
                                      [this, k, raw = stored(k)]() mutable { return decode(k, std::move(raw)); }));
+    } catch (const std::system_error&) {  // no thread to be had: the chunk is decompressed when read
+      break;
+    }
   }
   // Prefetches that fell behind (the reads went elsewhere) are dropped; their threads finish first.
   for (auto it = pending_.begin(); it != pending_.end();)
