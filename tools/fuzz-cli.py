@@ -201,15 +201,16 @@ def rechunked(rng, d):
         hl = u32(d, pos)
         h, dl = d[pos + 4:pos + 4 + hl], u32(d, pos + 4 + hl)
         fields = recordFields(h)
-        op = dict((k, v) for k, v in fields).get(b'op', b'')
+        named = dict(fields)
+        op = named.get(b'op', b'')
         if op == b'\x04':  # (laser_scan_matcher_demo.bag states other data lengths: trust the count)
-            dl = 12 * struct.unpack('<I', dict((k, v) for k, v in fields)[b'count'])[0]
+            dl = 12 * struct.unpack('<I', named[b'count'])[0]
         data = d[pos + 8 + hl:pos + 8 + hl + dl]
         if op == b'\x03':
             head_at = len(out)
             out += d[pos:pos + 8 + hl + dl]
         elif op == b'\x05':
-            comp = dict((k, v) for k, v in fields).get(b'compression', b'none')
+            comp = named.get(b'compression', b'none')
             plain = bz2.decompress(data) if comp == b'bz2' else roslz4.decompress(data) if comp == b'lz4' else data
             damaged = mutateBytes(rng, plain, 3)
             kind = rng.choice(kinds)

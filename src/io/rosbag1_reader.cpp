@@ -97,13 +97,15 @@ class Ros1Source final : public FrameSource {
 
   /// The first message of a topic, decoded with `decode`.
   template <typename Decode>
+  /// (Taken from view_, which holds the topic's messages in time order.)
   auto firstMessage(const Topic& topic, Decode&& decode) {
     using Msg = decltype(decode(std::span<const std::uint8_t>(), RosMessageRef()));
     std::optional<Msg> out;
-    const std::vector<Ros1Entry> messages = bag_.messages(topic.connections);
-    if (!messages.empty())
-      out = decode(bag_.read(messages.front()),
-                   RosMessageRef{path_, fmt::format("first message on {}", topic.info.name)});
+    const auto first = std::find_if(view_.begin(), view_.end(), [&](const Ros1Entry& e) {
+      return std::find(topic.connections.begin(), topic.connections.end(), e.conn) != topic.connections.end();
+    });
+    if (first != view_.end())
+      out = decode(bag_.read(*first), RosMessageRef{path_, fmt::format("first message on {}", topic.info.name)});
     return out;
   }
 
@@ -134,6 +136,8 @@ class Ros1Source final : public FrameSource {
       wanted.insert(wanted.end(), odom->connections.begin(), odom->connections.end());
     }
 
+    view_ = bag_.messages(wanted);
+
     // Frames: the laser frame from the first scan, the robot frame from the first odometry message.
     const auto first_scan = firstMessage(
         scan, [](auto bytes, const RosMessageRef& ref) { return decodeLaserScan(bytes, RosWire::kRos1, ref); });
@@ -152,7 +156,6 @@ class Ros1Source final : public FrameSource {
       notes_.odom_source =
           fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic_, kOdometryType, robot_frames.front());
     assembler_ = RosFrameAssembler(mount.T_robot_laser, odom != nullptr);
-    view_ = bag_.messages(wanted);
   }
 
   RosMount findMount(const std::vector<Topic>& topics, const std::vector<std::string>& robot_frames,

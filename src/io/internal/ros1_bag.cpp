@@ -487,27 +487,23 @@ std::unique_ptr<Ros1Bag::CachedChunk> Ros1Bag::decode(std::uint32_t chunk_no, st
   else
     c->data = std::move(raw);
 
-  // Its records, back to back (connection and message records).
+  // Its records, back to back (connection and message records), each within the chunk.
   const std::vector<std::uint8_t>& d = c->data;
   const std::string of = " of the " + where;
   for (std::uint64_t q = 0; q < d.size();) {
-    if (d.size() - q < 8 || u32(d.data() + q) > d.size() - q - 8)
+    const std::uint64_t left = d.size() - q;
+    const std::uint32_t hlen = left < 8 ? 0 : u32(d.data() + q);
+    if (left < 8 || hlen > left - 8 || u32(d.data() + q + 4 + hlen) > left - 8 - hlen)
       throw badInput(
           fmt::format("not a readable ROS1 bag: the record at byte {}{} runs past the chunk's end ({} bytes)", q, of,
                       d.size()),
           {path_});
-    const std::uint32_t hlen = u32(d.data() + q);
     const Fields f = parseFields(d.data() + q + 4, hlen, q, of, path_);
     CachedChunk::Record rec;
     rec.offset = q;
     rec.op = f.op;
     rec.data_at = q + 8 + hlen;
     rec.data_len = u32(d.data() + q + 4 + hlen);
-    if (rec.data_len > d.size() - rec.data_at)
-      throw badInput(
-          fmt::format("not a readable ROS1 bag: the record at byte {}{} runs past the chunk's end ({} bytes)", q, of,
-                      d.size()),
-          {path_});
     if (f.op == kMessageData)
       rec.conn =
           static_cast<std::uint32_t>(number(f, "conn", 4, fmt::format("message record at byte {}{}", q, of), path_));
@@ -533,13 +529,15 @@ std::unique_ptr<Ros1Bag::CachedChunk> Ros1Bag::decode(std::uint32_t chunk_no, st
   return c;
 }
 
+std::vector<std::unique_ptr<Ros1Bag::CachedChunk>>::iterator Ros1Bag::cached(std::uint32_t chunk_no) {
+  return std::find_if(cache_.begin(), cache_.end(), [&](const auto& c) { return c->chunk == chunk_no; });
+}
+
 const Ros1Bag::CachedChunk& Ros1Bag::load(std::uint32_t chunk_no) {
-  for (std::size_t i = 0; i < cache_.size(); ++i)
-    if (cache_[i]->chunk == chunk_no) {
-      std::rotate(cache_.begin(), cache_.begin() + static_cast<std::ptrdiff_t>(i),
-                  cache_.begin() + static_cast<std::ptrdiff_t>(i) + 1);
-      return *cache_.front();
-    }
+  if (const auto hit = cached(chunk_no); hit != cache_.end()) {
+    std::rotate(cache_.begin(), hit, hit + 1);
+    return *cache_.front();
+  }
   File file(in_, size_, path_);
   auto stored = [&](std::uint32_t k) {
     const Chunk& chunk = chunks_.at(k);
@@ -558,8 +556,7 @@ const Ros1Bag::CachedChunk& Ros1Bag::load(std::uint32_t chunk_no) {
   // compressed bag uses both cores (bz2 is about 80% of reading one). A chunk prefetched but never
   // read costs only the work; its error, if any, is never reported.
   for (std::uint32_t k = chunk_no + 1; k < chunks_.size() && k <= chunk_no + kPrefetch; ++k) {
-    const bool cached = std::any_of(cache_.begin(), cache_.end(), [&](const auto& cc) { return cc->chunk == k; });
-    if (cached || pending_.count(k) || chunks_[k].compression == "none") continue;
+    if (cached(k) != cache_.end() || pending_.count(k) || chunks_[k].compression == "none") continue;
     try {
       pending_.emplace(k, std::async(std::launch::async,
                                      [this, k, raw = stored(k)]() mutable { return decode(k, std::move(raw)); }));

@@ -78,6 +78,7 @@ class Ros1Bag {
   void openV20();
   void openV12();
   const CachedChunk& load(std::uint32_t chunk);
+  std::vector<std::unique_ptr<CachedChunk>>::iterator cached(std::uint32_t chunk);  ///< cache_.end() if not
   std::unique_ptr<CachedChunk> decode(std::uint32_t chunk, std::vector<std::uint8_t> raw) const;
 
   static constexpr std::uint32_t kPrefetch = 2;  ///< compressed chunks decompressed ahead of the reads
