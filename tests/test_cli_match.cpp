@@ -132,6 +132,28 @@ TEST(CliMatch, PointPairsOptionMatchesAndIsRecorded) {
   EXPECT_NE(header.find("point_pairs=0.5"), std::string::npos) << header;
 }
 
+// --no-two-point-lines (IcpOptions::two_point_lines) is recorded in the header and changes the
+// matches: point-to-line then drops the pairs of the target points that fit no line.
+TEST(CliMatch, NoTwoPointLinesIsRecordedAndChangesTheMatches) {
+  LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
+  TempDir tmp;
+  const std::string log = test::dataFile("corrected/intel.log.gz").string();
+  const std::string with = (tmp / "with.txt").string(), without = (tmp / "without.txt").string();
+  ASSERT_EQ(runCli({"match", log, "-o", with}).exit_code, 0);
+  const auto r = runCli({"match", log, "--no-two-point-lines", "-o", without});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ifstream in(without);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_NE(header.find("two_point_lines=0"), std::string::npos) << header;
+  const auto a = io::readRelativePoses(with), b = io::readRelativePoses(without);
+  ASSERT_EQ(a.size(), 909u);
+  ASSERT_EQ(b.size(), a.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) differ += !test::IsNearPose(a[i].T_prev_cur, b[i].T_prev_cur, 1e-6, 1e-6);
+  EXPECT_GT(differ, 100u);
+}
+
 TEST(CliMatch, IntelLogWithItsRawOdometry) {
   LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
   TempDir tmp;

@@ -305,21 +305,32 @@ TEST_P(IcpSolvers, CorridorFreeDirectionIsTheSmallestEigenvalueOfH) {
   EXPECT_FALSE(std::isfinite(r.covariance(0, 0)));
 }
 
-// A corridor 6 m wide (walls at y = +-3, points every 5 cm) with four isolated posts inside it: the
-// walls give line pairs, which leave x free; the posts have no line. Point-to-line drops them and
-// keeps x where the guess put it; with point pairs (IcpOptions::point_pair_weight) the posts pin x.
-TEST_P(IcpSolvers, PointPairsPinTheCorridorWithPosts) {
-  Points2 target;
+// The walls of a corridor 6 m wide (y = +-3, points every 5 cm along x) and four places inside it.
+Points2 corridorWalls() {
+  Points2 walls;
   for (double x = -10.0; x <= 10.0; x += 0.05) {
-    target.emplace_back(x, 3.0);
-    target.emplace_back(x, -3.0);
+    walls.emplace_back(x, 3.0);
+    walls.emplace_back(x, -3.0);
   }
-  for (const Eigen::Vector2d& post : {Eigen::Vector2d(2.0, 0.5), Eigen::Vector2d(-3.0, -0.4),
-                                      Eigen::Vector2d(5.2, 0.2), Eigen::Vector2d(-6.5, 1.1)})
-    target.push_back(post);
-  const SE2 delta(0.3, 0.02, 1 * kDeg);
+  return walls;
+}
+const Eigen::Vector2d kCorridorSpots[] = {{2.0, 0.5}, {-3.0, -0.4}, {5.2, 0.2}, {-6.5, 1.1}};
+
+// The target's points as seen from `delta`.
+Points2 seenFrom(const SE2& delta, const Points2& target) {
   Points2 source;
   for (const auto& p : target) source.push_back(delta.inverse() * p);
+  return source;
+}
+
+// The corridor with four isolated posts inside it: the walls give line pairs, which leave x free;
+// the posts have no line. Point-to-line drops them and keeps x where the guess put it; with point
+// pairs (IcpOptions::point_pair_weight) the posts pin x.
+TEST_P(IcpSolvers, PointPairsPinTheCorridorWithPosts) {
+  Points2 target = corridorWalls();
+  for (const Eigen::Vector2d& post : kCorridorSpots) target.push_back(post);
+  const SE2 delta(0.3, 0.02, 1 * kDeg);
+  const Points2 source = seenFrom(delta, target);
   MatcherOptions o;
   o.method = Method::kP2L;
   o.solver = GetParam();
@@ -334,6 +345,41 @@ TEST_P(IcpSolvers, PointPairsPinTheCorridorWithPosts) {
   // Four posts, two residuals each, on top of the wall pairs.
   EXPECT_EQ(pinned.num_inliers, plain.num_inliers + 4);
   EXPECT_TRUE(std::isfinite(pinned.covariance(0, 0)));
+}
+
+// The corridor with four short zig-zags inside it instead of posts (five points 5 cm apart
+// along x, alternately 4 cm up and down): their line fits fail the flatness test, so point-to-line
+// without two-point lines drops their pairs and keeps x where the guess put it. With them (the
+// default) each zig-zag point pairs with the line through it and its neighbour nearest to the
+// source point, which pins x. The information leaves those lines out (icp.cpp, `finish`): it still
+// shows x as free.
+TEST_P(IcpSolvers, TwoPointLinesPinTheCorridorWithZigZags) {
+  Points2 target = corridorWalls();
+  for (const Eigen::Vector2d& start : kCorridorSpots)
+    for (int k = 0; k < 5; ++k) target.push_back(start + Eigen::Vector2d(0.05 * k, k % 2 == 1 ? 0.04 : 0.0));
+  const IcpTarget prepared(target);
+  std::size_t no_line = 0;
+  for (const auto& n : prepared.normals()) no_line += n.isZero();
+  ASSERT_EQ(no_line, 20u) << "the zig-zags (and only they) should fit no line";
+  const SE2 delta(0.03, 0.02, 0.5 * kDeg);
+  const Points2 source = seenFrom(delta, target);
+  MatcherOptions o;
+  o.method = Method::kP2L;
+  o.solver = GetParam();
+  o.icp.trim_keep_fraction = 1.0;
+  o.icp.two_point_lines = false;
+  const Result plain = matchScans(target, source, SE2(), o);
+  ASSERT_TRUE(plain.T_target_source.isFinite()) << plain.message;
+  EXPECT_GT(std::abs(plain.T_target_source.x() - delta.x()), 0.02) << "the walls alone should not pin x";
+  o.icp.two_point_lines = true;
+  const Result pinned = matchScans(target, source, SE2(), o);
+  ASSERT_TRUE(pinned.converged) << toString(pinned.status) << " " << pinned.message;
+  EXPECT_TRUE(IsNearPose(pinned.T_target_source, delta, 1e-4, 0.001)) << pinned.T_target_source.vector().transpose();
+  EXPECT_EQ(pinned.num_inliers, plain.num_inliers + 20);
+  EXPECT_FALSE(std::isfinite(pinned.covariance(0, 0)));
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(pinned.information);
+  EXPECT_GT(std::abs(es.eigenvectors().col(0).x()), 0.99) << es.eigenvectors();
+  EXPECT_LT(es.eigenvalues()(0), 1e-6 * es.eigenvalues()(2)) << es.eigenvalues().transpose();
 }
 
 TEST(PointPairs, OutOfDomainWeightIsInvalidInput) {

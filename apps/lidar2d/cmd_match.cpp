@@ -93,12 +93,13 @@ void run(const MatchArgs& a) {
   if (a.then && a.options.method == registration::Method::kCorrelative) first_options.corr.refine = false;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   io::AtomicFile out(a.output);
-  out.stream() << fmt::format("# lidar2d match: method={}{} solver={} init={}{}\n", registration::toString(a.options.method),
+  out.stream() << fmt::format("# lidar2d match: method={}{} solver={} init={}{}{}\n", registration::toString(a.options.method),
                               a.then ? std::string(" then ") + registration::toString(*a.then) : std::string(),
                               registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity",
                               a.options.icp.point_pair_weight > 0
                                   ? fmt::format(" point_pairs={}", a.options.icp.point_pair_weight)
-                                  : std::string());
+                                  : std::string(),
+                              a.options.icp.two_point_lines ? "" : " two_point_lines=0");
   out.stream() << "# t_prev t_cur dx dy dtheta converged iterations\n";
 
   // Pairs are independent, so they are matched in chunks of frames, each chunk's targets prepared
@@ -243,6 +244,9 @@ void addMatchCommand(CLI::App& app) {
                   "p2l: pair target points with no line (corners, clutter) point to point, with this weight; "
                   "pins corridors, costs time (BENCHMARK.md); 0: none, as Censi's PL-ICP")
       ->capture_default_str();
+  sub->add_flag("--no-two-point-lines{false}", a->options.icp.two_point_lines,
+                "p2l: drop the pairs whose target point fits no line (corners, clutter, short noisy walls) instead of "
+                "pairing them with the line through it and a neighbour (Censi's two nearest points; BENCHMARK.md)");
   sub->add_flag("--eval", a->eval,
                 "compare with the log's truth: success rate (< 10 cm and < 2 deg), median errors, ms per pair");
   sub->add_option("--threads", a->threads, "threads matching pairs (default: all cores)")->capture_default_str();

@@ -36,6 +36,9 @@ int main(int argc, char** argv) {
   match->add_option("--point-pairs", match_options.icp.point_pair_weight,
                     "point-to-line: weight of point pairs for target points with no line (0: none)")
       ->capture_default_str();
+  match->add_option("--two-point-lines", match_options.icp.two_point_lines,
+                    "point-to-line: target points with no line fit pair with the line to a neighbour (1) or not (0)")
+      ->capture_default_str();
   match->add_option("--loss", match_options.icp.loss.kind, "robust loss: 0 none, 1 huber, 2 cauchy")->capture_default_str();
   match->add_option("--normal-k", match_options.icp.normal_neighbors, "points per line fit")->capture_default_str();
   match->add_option("--flatness", match_options.icp.max_line_flatness, "max line flatness")->capture_default_str();

@@ -128,6 +128,18 @@ struct IcpTarget::Impl {
   bool identical = false;
   std::unique_ptr<internal::KdTree2> tree;         // NeighborSearch::kKdTree
   std::unique_ptr<internal::BearingIndex> bearing;  // NeighborSearch::kBearingWalk
+  // Point-to-line's two-point lines (IcpOptions::two_point_lines): for each point whose
+  // neighbourhood fits no line, the line through it and each of its fitted neighbours (those
+  // within normal_max_radius_m; the nearest kMaxCornerLines at most), nearest first:
+  // corner_count[i] entries from corner_slots * i.
+  static constexpr std::size_t kMaxCornerLines = 8;
+  struct CornerLine {
+    std::uint32_t neighbor;  // index of the neighbour
+    Eigen::Vector2d normal;  // unit normal of the line through the point and the neighbour
+  };
+  std::size_t corner_slots = 0;
+  std::vector<std::uint8_t> corner_count;
+  std::vector<CornerLine> corner_lines;
 
   Impl(Points2 pts, const IcpOptions& o) : points(std::move(pts)), identical(allSame(points)) {
     if (o.neighbor_search == NeighborSearch::kKdTree)
@@ -155,6 +167,9 @@ struct IcpTarget::Impl {
   // which is less sensitive to range noise than the line through exactly two points).
   void computeNormals(const IcpOptions& o) {
     normals.assign(points.size(), Eigen::Vector2d::Zero());
+    corner_slots = std::min(kMaxCornerLines, static_cast<std::size_t>(std::max(1, o.normal_neighbors - 1)));
+    corner_count.assign(points.size(), 0);
+    corner_lines.resize(corner_slots * points.size());
     const auto k = static_cast<std::size_t>(std::max(2, o.normal_neighbors));
     std::vector<std::uint32_t> idx(k);
     std::vector<double> d2(k);
@@ -183,7 +198,19 @@ struct IcpTarget::Impl {
       const double disc = std::sqrt(0.25 * (a - c) * (a - c) + b * b);
       const double lmax = half_tr + disc;
       const double lmin = std::max(0.0, half_tr - disc);
-      if (!(lmax > 1e-18) || lmin > flat2 * lmax) return;
+      if (!(lmax > 1e-18) || lmin > flat2 * lmax) {
+        CornerLine* lines = &corner_lines[corner_slots * i];
+        std::size_t c = 0;
+        for (std::size_t j = 0; j < n && c < corner_slots; ++j) {
+          if (idx[j] == i || !(d2[j] <= r2)) continue;
+          const Eigen::Vector2d d = points[idx[j]] - points[i];
+          const double len = d.norm();
+          if (!(len > 0.0)) continue;  // (a duplicate of the point: no line)
+          lines[c++] = {idx[j], Eigen::Vector2d(-d.y() / len, d.x() / len)};
+        }
+        corner_count[i] = static_cast<std::uint8_t>(c);
+        return;
+      }
       // Normal = eigenvector of lmin: (b, lmin - a) or (lmin - c, b), whichever is better
       // conditioned; sign as (-sin phi, cos phi) with phi = atan2(2b, a - c) / 2 in (-pi/2, pi/2].
       Eigen::Vector2d n1(b, lmin - a), n2(lmin - c, b);
@@ -238,6 +265,8 @@ struct Linearisation {
   double cost = 0.0;      // 0.5 * sum rho(r^2) [m^2]
   double wr2 = 0.0;       // sum w r^2 [m^2]
   std::size_t residuals = 0;
+  // H without point-to-line's two-point lines (with the cost only): the information reported.
+  Eigen::Matrix3d H_info = Eigen::Matrix3d::Zero();
 };
 
 // True when a target point has no line (its normal is (0, 0): see IcpTarget::normals).
@@ -250,9 +279,14 @@ class Icp {
         src_(source),
         o_(o),
         p2l_(o.metric == IcpMetric::kPointToLine),
+        two_point_(p2l_ && o.two_point_lines),
         point_w_(p2l_ ? o.point_pair_weight : 0.0) {
     pairs_.reserve(src_.size());
-    if (p2l_) lines_.reserve(2 * src_.size());
+    if (p2l_) {
+      lines_.reserve(2 * src_.size());
+      normal_.resize(src_.size());
+      via_corner_.assign(src_.size(), 0);
+    }
   }
 
   // Pairs each transformed source point with its nearest target point; rejects by distance (and,
@@ -284,12 +318,26 @@ class Icp {
       if (j == tp.size()) continue;
       double key = d2;
       if (p2l_) {
-        const Eigen::Vector2d& n = tn[j];
-        if (hasNoLine(n)) {
+        const Eigen::Vector2d* n = &tn[j];
+        via_corner_[i] = 0;
+        if (hasNoLine(*n) && two_point_) {
+          // The line through the target point and whichever of its fitted neighbours is nearest
+          // to q (Censi's two nearest points; ties to the neighbour nearer the target point).
+          const auto* c = &tgt_.corner_lines[tgt_.corner_slots * j];
+          double best2 = std::numeric_limits<double>::infinity();
+          for (std::size_t k = 0, e = tgt_.corner_count[j]; k < e; ++k)
+            if (const double dn2 = (tp[c[k].neighbor] - q).squaredNorm(); dn2 < best2) {
+              best2 = dn2;
+              n = &c[k].normal;
+              via_corner_[i] = 1;
+            }
+        }
+        normal_[i] = *n;
+        if (hasNoLine(*n)) {
           if (point_w_ == 0.0) continue;
           key = point_w_ * point_w_ * d2;  // (the pair's two residuals, squared and summed)
         } else {
-          const double r = n.dot(q - tp[j]);
+          const double r = n->dot(q - tp[j]);
           key = r * r;
         }
       }
@@ -309,8 +357,9 @@ class Icp {
     if (p2l_) {  // the pairs' data in order, read by every linearisation
       lines_.clear();
       for (const Pair& pr : pairs_) {
+        if (via_corner_[pr.src]) continue;  // (after the others: see info_lines_)
         const Eigen::Vector2d& p = src_[pr.src];
-        const Eigen::Vector2d& n = tn[pr.tgt];
+        const Eigen::Vector2d& n = normal_[pr.src];
         const Eigen::Vector2d& m = tp[pr.tgt];
         if (hasNoLine(n)) {  // a point pair: its x and y offsets, weighted
           lines_.push_back({p.x(), p.y(), m.x(), m.y(), point_w_, 0.0});
@@ -319,6 +368,15 @@ class Icp {
         }
         lines_.push_back({p.x(), p.y(), m.x(), m.y(), n.x(), n.y()});
       }
+      info_lines_ = lines_.size();
+      if (two_point_)
+        for (const Pair& pr : pairs_) {
+          if (!via_corner_[pr.src]) continue;
+          const Eigen::Vector2d& p = src_[pr.src];
+          const Eigen::Vector2d& n = normal_[pr.src];
+          const Eigen::Vector2d& m = tp[pr.tgt];
+          lines_.push_back({p.x(), p.y(), m.x(), m.y(), n.x(), n.y()});
+        }
     }
   }
 
@@ -344,7 +402,10 @@ class Icp {
     if (p2l_) {
       // Censi 2008, eq. (3): r = n^T (R p + t - m); J = n^T d(T p)/d(x, y, theta), with
       // d(T p)/d(x, y, theta) = [1 0 -s px - c py; 0 1 c px - s py] (SE2::pointJacobian).
-      for (const LineTerm& l : lines_) {
+      // The two-point lines come last: H_info is H before them.
+      for (std::size_t k = 0; k < lines_.size(); ++k) {
+        if (k == info_lines_ && with_cost) L.H_info << h00, h01, h02, h01, h11, h12, h02, h12, h22;
+        const LineTerm& l = lines_[k];
         const double jx = -s * l.px - c * l.py;
         const double jy = c * l.px - s * l.py;
         const double qx = c * l.px - s * l.py + T.x() - l.mx;
@@ -368,6 +429,7 @@ class Icp {
         }
       }
       L.residuals = lines_.size();
+      if (info_lines_ == lines_.size() && with_cost) L.H_info << h00, h01, h02, h01, h11, h12, h02, h12, h22;
     } else {
       const Points2& tp = tgt_.points;
       for (const Pair& pr : pairs_) {
@@ -396,6 +458,7 @@ class Icp {
         }
       }
       L.residuals = 2 * pairs_.size();
+      if (with_cost) L.H_info << h00, h01, h02, h01, h11, h12, h02, h12, h22;
     }
     L.H << h00, h01, h02, h01, h11, h12, h02, h12, h22;
     L.g << g0, g1, g2;
@@ -403,6 +466,8 @@ class Icp {
   }
 
   const std::vector<Pair>& pairs() const { return pairs_; }
+  // Point-to-line: the normal of a pair's line ((0, 0): a point pair).
+  const Eigen::Vector2d& normalOf(const Pair& pr) const { return normal_[pr.src]; }
   const Points2& source() const { return src_; }
   const IcpTarget::Impl& target() const { return tgt_; }
   double pointPairWeight() const { return point_w_; }
@@ -412,14 +477,21 @@ class Icp {
   const Points2& src_;
   const IcpOptions& o_;
   const bool p2l_;
+  const bool two_point_;  // point-to-line: IcpOptions::two_point_lines
   const double point_w_;  // point-to-line: weight of the point pairs (0: none)
   std::vector<Pair> pairs_;
+  // Point-to-line: per source point, the normal of its pair's line in the last search ((0, 0): a
+  // point pair), the target point's own or a two-point line's.
+  Points2 normal_;
   // A pair's point-to-line data, gathered once per search for the linearisations that follow:
   // source point p, target point m and the normal n of its line; r(T) = n^T (T p - m).
   struct LineTerm {
     double px, py, mx, my, nx, ny;
   };
-  std::vector<LineTerm> lines_;  // per kept pair, in the order of pairs_
+  std::vector<LineTerm> lines_;  // per kept pair, in the order of pairs_, two-point lines last
+  std::size_t info_lines_ = 0;   // lines_ before the two-point lines
+  // Point-to-line: per source point, whether its pair's line in the last search is a two-point line.
+  std::vector<std::uint8_t> via_corner_;
   std::vector<std::size_t> last_match_;  // per source point: its nearest target point last time, or size()
   static constexpr std::uint32_t kNoHint = std::numeric_limits<std::uint32_t>::max();
   std::vector<std::uint32_t> hints_;     // per source point: its search hint (IcpTarget::nearestWithin)
@@ -482,11 +554,14 @@ Result failure(const SE2& init, Status status, std::string message) {
 }
 
 // Fills information, covariance, cost and inliers of `r` from the final linearisation.
+// The information leaves out point-to-line's two-point lines (IcpOptions::two_point_lines): they
+// pin the pose in practice, but where they stand in for short noisy stretches of wall their
+// normals are partly noise, and counting them would report a corridor's free direction as pinned.
 void finish(Result& r, const Linearisation& L, std::size_t inliers) {
-  r.information = L.H;
+  r.information = L.H_info;
   r.final_cost = L.cost;
   r.num_inliers = inliers;
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(L.H);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(L.H_info);
   const double lmin = es.eigenvalues()(0), lmax = es.eigenvalues()(2);
   if (lmax > 0.0 && lmin > 1e-12 * lmax && L.residuals > 3) {
     const double sigma2 = L.wr2 / static_cast<double>(L.residuals - 3);
@@ -653,11 +728,10 @@ class CeresPairs {
     po.disable_all_safety_checks = true;
     auto problem = std::make_unique<ceres::Problem>(po);
     const Points2& tp = icp.target().points;
-    const Points2& tn = icp.target().normals;
     for (const Pair& pr : icp.pairs()) {
       Cost& c = costs_[pr.src];
-      const Eigen::Vector2d& n = tn[pr.tgt];
       if constexpr (std::is_same_v<Cost, PointToLineCost>) {
+        const Eigen::Vector2d& n = icp.normalOf(pr);
         if (hasNoLine(n)) {  // a point pair (IcpOptions::point_pair_weight)
           const double w = icp.pointPairWeight();
           c.set(icp.source()[pr.src], tp[pr.tgt], Eigen::Vector2d(w, 0.0));
@@ -667,8 +741,10 @@ class CeresPairs {
           problem->AddResidualBlock(&cy, loss, x);
           continue;
         }
+        c.set(icp.source()[pr.src], tp[pr.tgt], n);
+      } else {
+        c.set(icp.source()[pr.src], tp[pr.tgt], Eigen::Vector2d::Zero());
       }
-      c.set(icp.source()[pr.src], tp[pr.tgt], n);
       problem->AddResidualBlock(&c, loss, x);
     }
     return problem;

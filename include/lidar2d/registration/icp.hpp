@@ -115,6 +115,14 @@ struct IcpOptions {
   /// file comment), >= 0; 0 drops those pairs (Censi's point-to-line). The residuals are w times
   /// the x and y offsets [m], so the robust loss takes effect at scale_m / w of offset.
   double point_pair_weight = 0.0;
+  /// Point-to-line: pair a target point whose neighbourhood fits no line (a corner, clutter, or a
+  /// short noisy stretch of wall) with the line through it and whichever of its fitted neighbours
+  /// (the `normal_neighbors` nearest, within `normal_max_radius_m`; 8 at most) is nearest to the
+  /// source point,
+  /// as Censi's PL-ICP pairs every point with the line through its two nearest target points.
+  /// false drops those pairs (or pairs them point to point: `point_pair_weight`), as the fitted
+  /// lines alone do. Point pairs then apply only to target points without a neighbour.
+  bool two_point_lines = true;
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
 
