@@ -167,9 +167,11 @@ struct IcpTarget::Impl {
   // which is less sensitive to range noise than the line through exactly two points).
   void computeNormals(const IcpOptions& o) {
     normals.assign(points.size(), Eigen::Vector2d::Zero());
-    corner_slots = std::min(kMaxCornerLines, static_cast<std::size_t>(std::max(1, o.normal_neighbors - 1)));
-    corner_count.assign(points.size(), 0);
-    corner_lines.resize(corner_slots * points.size());
+    if (o.two_point_lines) {  // (kept only when asked for: a SLAM run holds many targets)
+      corner_slots = std::min(kMaxCornerLines, static_cast<std::size_t>(std::max(1, o.normal_neighbors - 1)));
+      corner_count.assign(points.size(), 0);
+      corner_lines.resize(corner_slots * points.size());
+    }
     const auto k = static_cast<std::size_t>(std::max(2, o.normal_neighbors));
     std::vector<std::uint32_t> idx(k);
     std::vector<double> d2(k);
@@ -199,6 +201,7 @@ struct IcpTarget::Impl {
       const double lmax = half_tr + disc;
       const double lmin = std::max(0.0, half_tr - disc);
       if (!(lmax > 1e-18) || lmin > flat2 * lmax) {
+        if (corner_count.empty()) return;
         CornerLine* lines = &corner_lines[corner_slots * i];
         std::size_t c = 0;
         for (std::size_t j = 0; j < n && c < corner_slots; ++j) {
@@ -320,7 +323,7 @@ class Icp {
       if (p2l_) {
         const Eigen::Vector2d* n = &tn[j];
         via_corner_[i] = 0;
-        if (hasNoLine(*n) && two_point_) {
+        if (hasNoLine(*n) && two_point_ && !tgt_.corner_count.empty()) {
           // The line through the target point and whichever of its fitted neighbours is nearest
           // to q (Censi's two nearest points; ties to the neighbour nearer the target point).
           const auto* c = &tgt_.corner_lines[tgt_.corner_slots * j];

@@ -13,10 +13,14 @@
 ///   point-to-point: sum_i rho(|T p_i - q_i|^2)
 ///   point-to-line:  sum_i rho((n_i . (T p_i - q_i))^2)
 /// with q_i the nearest target point, n_i the unit normal of the line fitted to q_i's neighbours
-/// (precomputed per target point) and rho the robust loss. Point-to-line drops the pairs whose
-/// target point has no line (a corner, clutter), as Censi's does, unless `point_pair_weight` > 0:
-/// then such a pair adds w (x, y) of T p_i - q_i as two residuals (each with the robust loss), which
-/// pins the direction along a corridor's walls that the line pairs leave free (BENCHMARK.md). It
+/// (precomputed per target point) and rho the robust loss. Where q_i's neighbourhood fits no line
+/// (a corner, clutter, a short noisy stretch of wall), n_i is the normal of the line through q_i
+/// and whichever of its fitted neighbours is nearest to T p_i (`two_point_lines`, the default: as
+/// Censi's PL-ICP uses the line through the two nearest target points); the reported information
+/// leaves those pairs out (`Result::information`: their normals are partly noise). Without them
+/// such pairs are dropped unless `point_pair_weight` > 0: then such a pair adds w (x, y) of
+/// T p_i - q_i as two residuals (each with the robust loss), which pins the direction along a
+/// corridor's walls that the line pairs leave free (BENCHMARK.md). It
 /// stops when the increment of the pose falls below both `translation_eps_m` and `rotation_eps_rad`
 /// (by default 1 mm and 1 mrad for point-to-line, a tenth of that for point-to-point:
 /// `IcpOptions::defaultTranslationEps`), or when a search returns a set of pairs already solved in
@@ -112,16 +116,18 @@ struct IcpOptions {
   NeighborSearch neighbor_search = NeighborSearch::kBearingWalk;  ///< nearest-neighbour structure of the target
                                                                   ///< (read by IcpTarget)
   /// Point-to-line: weight w of the point-to-point pairs of target points with no line (see the
-  /// file comment), >= 0; 0 drops those pairs (Censi's point-to-line). The residuals are w times
-  /// the x and y offsets [m], so the robust loss takes effect at scale_m / w of offset.
+  /// file comment; with `two_point_lines`, only those without a fitted neighbour), >= 0; 0 drops
+  /// those pairs. The residuals are w times the x and y offsets [m], so the robust loss takes
+  /// effect at scale_m / w of offset.
   double point_pair_weight = 0.0;
   /// Point-to-line: pair a target point whose neighbourhood fits no line (a corner, clutter, or a
   /// short noisy stretch of wall) with the line through it and whichever of its fitted neighbours
   /// (the `normal_neighbors` nearest, within `normal_max_radius_m`; 8 at most) is nearest to the
-  /// source point,
-  /// as Censi's PL-ICP pairs every point with the line through its two nearest target points.
-  /// false drops those pairs (or pairs them point to point: `point_pair_weight`), as the fitted
-  /// lines alone do. Point pairs then apply only to target points without a neighbour.
+  /// source point, as Censi's PL-ICP pairs every point with the line through its two nearest target
+  /// points. false drops those pairs (or pairs them point to point: `point_pair_weight`). These
+  /// pairs are left out of the reported information and covariance (see `finish` in icp.cpp).
+  /// Measured on the Radish logs (BENCHMARK.md, "Two-point lines"): more pairs right, and more
+  /// time on 360-beam scans, where many short fits fail the flatness test.
   bool two_point_lines = true;
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
@@ -154,8 +160,10 @@ struct IcpOptions {
 class IcpTarget {
  public:
   /// Keeps the finite points of `points_target` (in the target frame [m]) and fits their lines
-  /// with `options.normal_neighbors` and `options.normal_max_radius_m`; builds the structure of
-  /// `options.neighbor_search` (other fields are unused).
+  /// with `options.normal_neighbors`, `options.normal_max_radius_m` and `options.max_line_flatness`
+  /// (with `options.two_point_lines`, also the lines to the neighbours of each point that fits
+  /// none; a target built without them matches as if `two_point_lines` were false); builds the
+  /// structure of `options.neighbor_search` (other fields are unused).
   /// Never throws for bad points: an empty or all-NaN set gives an empty target that every match
   /// reports as kTooFewPoints.
   explicit IcpTarget(const Points2& points_target, const IcpOptions& options = {});

@@ -36,6 +36,8 @@ struct Result {
   /// Information matrix H = J^T J (Gauss-Newton approximation of the Hessian) of the last
   /// linearisation, in the parameters (x, y, theta) of T_target_source, unscaled (sum over
   /// residuals with unit weights times robust weights). Degeneracy analysis reads its eigenvalues.
+  /// Point-to-line leaves out its two-point lines (IcpOptions::two_point_lines), whose normals are
+  /// partly noise: the matrix counts only what the fitted lines (and point pairs) pin.
   Eigen::Matrix3d information = Eigen::Matrix3d::Zero();
   /// Covariance estimate of (x, y, theta) [m^2, rad^2]: sigma^2 * H^-1 with sigma^2 the residual
   /// variance, or +inf on the diagonal when H is singular.
