@@ -187,7 +187,7 @@ struct Slam::Impl {
     icp.rotation_eps_rad = 1e-4;
     // Likewise without point-to-line's two-point lines (IcpOptions::two_point_lines, 2026-12-01):
     // with them intel's relation error rose from 0.0209 to 0.0222 m, and without odometry from
-    // 0.0353 to 0.166 m (BENCHMARK.md, "Two-point lines").
+    // 0.0353 to 0.166 m (BENCHMARK.md, "What changed since the previous table", tenth session).
     icp.two_point_lines = false;
     // Local maps and submaps stack several scans in a frame far from their sensors: the bearing
     // walk (made for one scan seen from its own origin) would visit many points per query there.

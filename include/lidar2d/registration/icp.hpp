@@ -126,8 +126,9 @@ struct IcpOptions {
   /// source point, as Censi's PL-ICP pairs every point with the line through its two nearest target
   /// points. false drops those pairs (or pairs them point to point: `point_pair_weight`). These
   /// pairs are left out of the reported information and covariance (see `finish` in icp.cpp).
-  /// Measured on the Radish logs (BENCHMARK.md, "Two-point lines"): more pairs right, and more
-  /// time on 360-beam scans, where many short fits fail the flatness test.
+  /// Measured on the Radish logs (BENCHMARK.md, "What changed since the previous table", tenth
+  /// session): more pairs right, and more time on 360-beam scans, where many short fits fail the
+  /// flatness test.
   bool two_point_lines = true;
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
