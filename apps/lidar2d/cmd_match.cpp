@@ -241,8 +241,8 @@ void addMatchCommand(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--max-iterations", a->options.icp.max_iterations, "ICP: max iterations")->capture_default_str();
   sub->add_option("--point-pairs", a->options.icp.point_pair_weight,
-                  "p2l: pair target points with no line (corners, clutter) point to point, with this weight; "
-                  "pins corridors, costs time (BENCHMARK.md); 0: none, as Censi's PL-ICP")
+                  "p2l: pair target points with no line (with two-point lines: only those without a neighbour) point "
+                  "to point, with this weight; pins corridors, costs time (BENCHMARK.md); 0: none")
       ->capture_default_str();
   sub->add_flag("--no-two-point-lines{false}", a->options.icp.two_point_lines,
                 "p2l: drop the pairs whose target point fits no line (corners, clutter, short noisy walls) instead of "
