@@ -244,7 +244,7 @@ void addMatchCommand(CLI::App& app) {
                   "p2l: pair target points with no line (with two-point lines: only those without a neighbour) point "
                   "to point, with this weight; pins corridors, costs time (BENCHMARK.md); 0: none")
       ->capture_default_str();
-  sub->add_flag("--no-two-point-lines{false}", a->options.icp.two_point_lines,
+  sub->add_flag_callback("--no-two-point-lines", [a] { a->options.icp.two_point_lines = false; },
                 "p2l: drop the pairs whose target point fits no line (corners, clutter, short noisy walls) instead of "
                 "pairing them with the line through it and a neighbour (Censi's two nearest points; BENCHMARK.md)");
   sub->add_flag("--eval", a->eval,
