@@ -282,7 +282,7 @@ class Icp {
         src_(source),
         o_(o),
         p2l_(o.metric == IcpMetric::kPointToLine),
-        two_point_(p2l_ && o.two_point_lines),
+        two_point_(p2l_ && o.two_point_lines && !tgt_.corner_count.empty()),
         point_w_(p2l_ ? o.point_pair_weight : 0.0) {
     pairs_.reserve(src_.size());
     if (p2l_) {
@@ -323,7 +323,7 @@ class Icp {
       if (p2l_) {
         const Eigen::Vector2d* n = &tn[j];
         via_corner_[i] = 0;
-        if (hasNoLine(*n) && two_point_ && !tgt_.corner_count.empty()) {
+        if (hasNoLine(*n) && two_point_) {
           // The line through the target point and whichever of its fitted neighbours is nearest
           // to q (Censi's two nearest points; ties to the neighbour nearer the target point).
           const auto* c = &tgt_.corner_lines[tgt_.corner_slots * j];
@@ -359,27 +359,24 @@ class Icp {
     for (const Pair& pr : pairs_) set_hash_ += mix((static_cast<std::uint64_t>(pr.src) << 32) | pr.tgt);
     if (p2l_) {  // the pairs' data in order, read by every linearisation
       lines_.clear();
-      for (const Pair& pr : pairs_) {
-        if (via_corner_[pr.src]) continue;  // (after the others: see info_lines_)
-        const Eigen::Vector2d& p = src_[pr.src];
-        const Eigen::Vector2d& n = normal_[pr.src];
-        const Eigen::Vector2d& m = tp[pr.tgt];
-        if (hasNoLine(n)) {  // a point pair: its x and y offsets, weighted
-          lines_.push_back({p.x(), p.y(), m.x(), m.y(), point_w_, 0.0});
-          lines_.push_back({p.x(), p.y(), m.x(), m.y(), 0.0, point_w_});
-          continue;
-        }
-        lines_.push_back({p.x(), p.y(), m.x(), m.y(), n.x(), n.y()});
-      }
-      info_lines_ = lines_.size();
-      if (two_point_)
+      // The pairs with a two-point line after the others (see info_lines_).
+      auto gather = [&](bool corner) {
         for (const Pair& pr : pairs_) {
-          if (!via_corner_[pr.src]) continue;
+          if ((via_corner_[pr.src] != 0) != corner) continue;
           const Eigen::Vector2d& p = src_[pr.src];
           const Eigen::Vector2d& n = normal_[pr.src];
           const Eigen::Vector2d& m = tp[pr.tgt];
+          if (hasNoLine(n)) {  // a point pair: its x and y offsets, weighted
+            lines_.push_back({p.x(), p.y(), m.x(), m.y(), point_w_, 0.0});
+            lines_.push_back({p.x(), p.y(), m.x(), m.y(), 0.0, point_w_});
+            continue;
+          }
           lines_.push_back({p.x(), p.y(), m.x(), m.y(), n.x(), n.y()});
         }
+      };
+      gather(false);
+      info_lines_ = lines_.size();
+      if (two_point_) gather(true);
     }
   }
 
@@ -406,33 +403,36 @@ class Icp {
       // Censi 2008, eq. (3): r = n^T (R p + t - m); J = n^T d(T p)/d(x, y, theta), with
       // d(T p)/d(x, y, theta) = [1 0 -s px - c py; 0 1 c px - s py] (SE2::pointJacobian).
       // The two-point lines come last: H_info is H before them.
-      for (std::size_t k = 0; k < lines_.size(); ++k) {
-        if (k == info_lines_ && with_cost) L.H_info << h00, h01, h02, h01, h11, h12, h02, h12, h22;
-        const LineTerm& l = lines_[k];
-        const double jx = -s * l.px - c * l.py;
-        const double jy = c * l.px - s * l.py;
-        const double qx = c * l.px - s * l.py + T.x() - l.mx;
-        const double qy = s * l.px + c * l.py + T.y() - l.my;
-        const double r = l.nx * qx + l.ny * qy;
-        const double j2 = l.nx * jx + l.ny * jy;
-        const double w = weight(r);
-        const double wnx = w * l.nx, wny = w * l.ny, wj2 = w * j2;
-        h00 += wnx * l.nx;
-        h01 += wnx * l.ny;
-        h02 += wnx * j2;
-        h11 += wny * l.ny;
-        h12 += wny * j2;
-        h22 += wj2 * j2;
-        g0 += wnx * r;
-        g1 += wny * r;
-        g2 += wj2 * r;
-        if (with_cost) {
-          L.cost += 0.5 * o_.loss.rho(r);
-          L.wr2 += w * r * r;
+      auto accumulate = [&](std::size_t begin, std::size_t end) {
+        for (std::size_t k = begin; k < end; ++k) {
+          const LineTerm& l = lines_[k];
+          const double jx = -s * l.px - c * l.py;
+          const double jy = c * l.px - s * l.py;
+          const double qx = c * l.px - s * l.py + T.x() - l.mx;
+          const double qy = s * l.px + c * l.py + T.y() - l.my;
+          const double r = l.nx * qx + l.ny * qy;
+          const double j2 = l.nx * jx + l.ny * jy;
+          const double w = weight(r);
+          const double wnx = w * l.nx, wny = w * l.ny, wj2 = w * j2;
+          h00 += wnx * l.nx;
+          h01 += wnx * l.ny;
+          h02 += wnx * j2;
+          h11 += wny * l.ny;
+          h12 += wny * j2;
+          h22 += wj2 * j2;
+          g0 += wnx * r;
+          g1 += wny * r;
+          g2 += wj2 * r;
+          if (with_cost) {
+            L.cost += 0.5 * o_.loss.rho(r);
+            L.wr2 += w * r * r;
+          }
         }
-      }
+      };
+      accumulate(0, info_lines_);
+      if (with_cost) L.H_info << h00, h01, h02, h01, h11, h12, h02, h12, h22;
+      accumulate(info_lines_, lines_.size());
       L.residuals = lines_.size();
-      if (info_lines_ == lines_.size() && with_cost) L.H_info << h00, h01, h02, h01, h11, h12, h02, h12, h22;
     } else {
       const Points2& tp = tgt_.points;
       for (const Pair& pr : pairs_) {
@@ -461,9 +461,9 @@ class Icp {
         }
       }
       L.residuals = 2 * pairs_.size();
-      if (with_cost) L.H_info << h00, h01, h02, h01, h11, h12, h02, h12, h22;
     }
     L.H << h00, h01, h02, h01, h11, h12, h02, h12, h22;
+    if (with_cost && !p2l_) L.H_info = L.H;
     L.g << g0, g1, g2;
     return L;
   }
@@ -480,7 +480,7 @@ class Icp {
   const Points2& src_;
   const IcpOptions& o_;
   const bool p2l_;
-  const bool two_point_;  // point-to-line: IcpOptions::two_point_lines
+  const bool two_point_;  // point-to-line: IcpOptions::two_point_lines, and the target has them
   const double point_w_;  // point-to-line: weight of the point pairs (0: none)
   std::vector<Pair> pairs_;
   // Point-to-line: per source point, the normal of its pair's line in the last search ((0, 0): a
