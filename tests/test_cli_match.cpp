@@ -154,6 +154,35 @@ TEST(CliMatch, NoTwoPointLinesIsRecordedAndChangesTheMatches) {
   EXPECT_GT(differ, 100u);
 }
 
+// --source-spacing (IcpOptions::min_source_spacing_m) is recorded in the header when it is not the
+// default, changes the matches (0 keeps every point), and out of its domain is one clear error.
+TEST(CliMatch, SourceSpacingIsRecordedAndChangesTheMatches) {
+  LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
+  TempDir tmp;
+  const std::string log = test::dataFile("corrected/intel.log.gz").string();
+  const std::string thinned = (tmp / "thinned.txt").string(), all = (tmp / "all.txt").string();
+  ASSERT_EQ(runCli({"match", log, "-o", thinned}).exit_code, 0);
+  auto r = runCli({"match", log, "--source-spacing", "0", "-o", all});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::string header_thinned, header_all;
+  std::ifstream in_thinned(thinned), in_all(all);
+  std::getline(in_thinned, header_thinned);
+  std::getline(in_all, header_all);
+  EXPECT_EQ(header_thinned.find("source_spacing"), std::string::npos) << header_thinned;
+  EXPECT_NE(header_all.find("source_spacing=0"), std::string::npos) << header_all;
+  const auto a = io::readRelativePoses(thinned), b = io::readRelativePoses(all);
+  ASSERT_EQ(a.size(), 909u);
+  ASSERT_EQ(b.size(), a.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) differ += !test::IsNearPose(a[i].T_prev_cur, b[i].T_prev_cur, 1e-6, 1e-6);
+  EXPECT_GT(differ, 100u);
+  const std::string bad = (tmp / "bad.txt").string();
+  r = runCli({"match", log, "--source-spacing", "-0.1", "-o", bad});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("min_source_spacing_m"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(bad));
+}
+
 TEST(CliMatch, IntelLogWithItsRawOdometry) {
   LIDAR2D_REQUIRE_DATA("corrected/intel.log.gz");
   TempDir tmp;

@@ -395,6 +395,72 @@ TEST(PointPairs, OutOfDomainWeightIsInvalidInput) {
   }
 }
 
+// IcpOptions::min_source_spacing_m: on a dense scan (0.1875 degree beams, the office's walls at
+// 1-10 m: 3-33 mm apart) ICP keeps about one point in 3 cm of wall and still recovers the
+// transform; with the spacing 0 it pairs every point.
+TEST_P(IcpSolvers, SourceSpacingThinsDenseScansAndKeepsTheAnswer) {
+  const World dense("office", 1441);
+  const SE2 A = dense.routePoses(3)[1];
+  const SE2 delta(0.08, -0.04, 2 * kDeg);
+  const Points2 target = dense.pointsAt(A), source = dense.pointsAt(A * delta);
+  MatcherOptions o;
+  o.method = Method::kP2L;
+  o.solver = GetParam();
+  o.icp.trim_keep_fraction = 1.0;
+  o.icp.min_source_spacing_m = 0.0;
+  const Result all = matchScans(target, source, SE2(), o);
+  o.icp.min_source_spacing_m = 0.03;
+  const Result thinned = matchScans(target, source, SE2(), o);
+  for (const Result* r : {&all, &thinned}) {
+    ASSERT_TRUE(r->converged) << toString(r->status) << " " << r->message;
+    EXPECT_TRUE(IsNearPose(r->T_target_source, delta, 0.002, 0.05)) << r->T_target_source.vector().transpose();
+  }
+  EXPECT_GT(all.num_inliers, source.size() * 9 / 10);
+  // Kept: no two consecutive points closer than 3 cm, so at most the scan's length over 3 cm plus
+  // one point per gap; at least a tenth (no wall is much nearer than 1 m).
+  double length = 0.0;
+  for (std::size_t i = 1; i < source.size(); ++i) length += std::min((source[i] - source[i - 1]).norm(), 0.03);
+  EXPECT_LE(thinned.num_inliers, static_cast<std::size_t>(length / 0.03) + 1);
+  EXPECT_GT(thinned.num_inliers, all.num_inliers / 10);
+  EXPECT_LT(thinned.num_inliers, all.num_inliers / 2);
+}
+
+// A source whose points all lie within a few centimetres would keep fewer than min_points: it is
+// matched with all of them rather than failing for want of points.
+TEST(SourceSpacing, NeverLeavesTooFewPoints) {
+  Points2 target;
+  for (int i = 0; i <= 200; ++i) {
+    target.emplace_back(0.01 * i, 0.0);  // two walls meeting at the origin
+    target.emplace_back(0.0, 0.01 * i);
+  }
+  const SE2 delta(0.004, -0.003, 0.2 * kDeg);
+  Points2 source;
+  for (int i = 1; i <= 6; ++i) {  // 12 points within 3.5 cm of the corner
+    source.push_back(delta.inverse() * Eigen::Vector2d(0.006 * i, 0.0));
+    source.push_back(delta.inverse() * Eigen::Vector2d(0.0, 0.006 * i));
+  }
+  MatcherOptions o;
+  o.method = Method::kP2L;
+  o.icp.trim_keep_fraction = 1.0;
+  ASSERT_GT(o.icp.min_source_spacing_m, 0.02);
+  const Result r = matchScans(target, source, SE2(), o);
+  EXPECT_NE(r.status, Status::kTooFewPoints) << r.message;
+  EXPECT_EQ(r.num_inliers, source.size());
+  EXPECT_TRUE(IsNearPose(r.T_target_source, delta, 1e-3, 0.05)) << r.T_target_source.vector().transpose();
+}
+
+TEST(SourceSpacing, OutOfDomainSpacingIsInvalidInput) {
+  const Points2 pts = office().pointsAt(office().routePoses(1).front());
+  MatcherOptions o;
+  o.method = Method::kP2P;
+  for (const double s : {-0.01, kNaN, std::numeric_limits<double>::infinity()}) {
+    o.icp.min_source_spacing_m = s;
+    const Result r = matchScans(pts, pts, SE2(), o);
+    EXPECT_EQ(r.status, Status::kInvalidInput) << s;
+    EXPECT_NE(r.message.find("min_source_spacing_m"), std::string::npos) << r.message;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Solvers, IcpSolvers, ::testing::Values(Solver::kGaussNewton, Solver::kCeres),
                          [](const auto& info) { return std::string(toString(info.param)); });
 

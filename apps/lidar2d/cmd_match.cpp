@@ -93,13 +93,16 @@ void run(const MatchArgs& a) {
   if (a.then && a.options.method == registration::Method::kCorrelative) first_options.corr.refine = false;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   io::AtomicFile out(a.output);
-  out.stream() << fmt::format("# lidar2d match: method={}{} solver={} init={}{}{}\n", registration::toString(a.options.method),
-                              a.then ? std::string(" then ") + registration::toString(*a.then) : std::string(),
-                              registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity",
-                              a.options.icp.point_pair_weight > 0
-                                  ? fmt::format(" point_pairs={}", a.options.icp.point_pair_weight)
-                                  : std::string(),
-                              a.options.icp.two_point_lines ? "" : " two_point_lines=0");
+  out.stream() << fmt::format(
+      "# lidar2d match: method={}{} solver={} init={}{}{}{}\n", registration::toString(a.options.method),
+      a.then ? std::string(" then ") + registration::toString(*a.then) : std::string(),
+      registration::toString(a.options.solver), a.init == Init::kOdom ? "odom" : "identity",
+      a.options.icp.point_pair_weight > 0 ? fmt::format(" point_pairs={}", a.options.icp.point_pair_weight)
+                                          : std::string(),
+      a.options.icp.two_point_lines ? "" : " two_point_lines=0",
+      a.options.icp.min_source_spacing_m != registration::IcpOptions{}.min_source_spacing_m
+          ? fmt::format(" source_spacing={}", a.options.icp.min_source_spacing_m)
+          : std::string());
   out.stream() << "# t_prev t_cur dx dy dtheta converged iterations\n";
 
   // Pairs are independent, so they are matched in chunks of frames, each chunk's targets prepared
@@ -247,6 +250,10 @@ void addMatchCommand(CLI::App& app) {
   sub->add_flag_callback("--no-two-point-lines", [a] { a->options.icp.two_point_lines = false; },
                 "p2l: drop the pairs whose target point fits no line (corners, clutter, short noisy walls) instead of "
                 "pairing them with the line through it and a neighbour (Censi's two nearest points; BENCHMARK.md)");
+  sub->add_option("--source-spacing", a->options.icp.min_source_spacing_m,
+                  "ICP: leave out source points closer than this to the previous one kept [m]; 0 keeps all "
+                  "(BENCHMARK.md)")
+      ->capture_default_str();
   sub->add_flag("--eval", a->eval,
                 "compare with the log's truth: success rate (< 10 cm and < 2 deg), median errors, ms per pair");
   sub->add_option("--threads", a->threads, "threads matching pairs (default: all cores)")->capture_default_str();

@@ -39,6 +39,9 @@ int main(int argc, char** argv) {
   match->add_option("--two-point-lines", match_options.icp.two_point_lines,
                     "point-to-line: target points with no line fit pair with the line to a neighbour (1) or not (0)")
       ->capture_default_str();
+  match->add_option("--source-spacing", match_options.icp.min_source_spacing_m,
+                    "ICP: leave out source points closer than this to the previous one kept [m] (0: keep all)")
+      ->capture_default_str();
   match->add_option("--loss", match_options.icp.loss.kind, "robust loss: 0 none, 1 huber, 2 cauchy")->capture_default_str();
   match->add_option("--normal-k", match_options.icp.normal_neighbors, "points per line fit")->capture_default_str();
   match->add_option("--flatness", match_options.icp.max_line_flatness, "max line flatness")->capture_default_str();

@@ -94,6 +94,8 @@ std::string IcpOptions::check() const {
   if (ceres_max_inner_iterations < 1) return "ceres_max_inner_iterations must be >= 1";
   if (gn_inner_iterations < 1) return "gn_inner_iterations must be >= 1";
   if (!(std::isfinite(point_pair_weight) && point_pair_weight >= 0.0)) return "point_pair_weight must be finite and >= 0";
+  if (!(std::isfinite(min_source_spacing_m) && min_source_spacing_m >= 0.0))
+    return "min_source_spacing_m must be finite and >= 0";
   return {};
 }
 
@@ -107,6 +109,18 @@ Points2 finitePoints(const Points2& in) {
   out.reserve(in.size());
   for (const auto& p : in)
     if (std::isfinite(p.x()) && std::isfinite(p.y())) out.push_back(p);
+  return out;
+}
+
+// The points in their order (a scan's: by bearing) without those closer than `spacing` to the last
+// point kept (IcpOptions::min_source_spacing_m); all of them when spacing is 0.
+Points2 thinned(const Points2& in, double spacing) {
+  if (!(spacing > 0.0)) return in;
+  const double s2 = spacing * spacing;
+  Points2 out;
+  out.reserve(in.size());
+  for (const auto& p : in)
+    if (out.empty() || (p - out.back()).squaredNorm() >= s2) out.push_back(p);
   return out;
 }
 
@@ -813,14 +827,16 @@ Result alignIcp(const IcpTarget& target, const Points2& points_source, const SE2
     return failure(init_T_target_source, Status::kInvalidInput, "invalid option: " + bad);
   if (!init_T_target_source.isFinite())
     return failure(init_T_target_source, Status::kInvalidInput, "the initial guess is not finite");
-  const Points2 source = finitePoints(points_source);
-  if (source.size() < options.min_points || target.size() < options.min_points)
+  Points2 finite = finitePoints(points_source);
+  if (finite.size() < options.min_points || target.size() < options.min_points)
     return failure(init_T_target_source, Status::kTooFewPoints,
-                   fmt::format("{} finite source and {} finite target points, {} needed", source.size(), target.size(),
+                   fmt::format("{} finite source and {} finite target points, {} needed", finite.size(), target.size(),
                                options.min_points));
-  if (allSame(source) || target.allIdentical())
+  if (allSame(finite) || target.allIdentical())
     return failure(init_T_target_source, Status::kDegenerate,
-                   allSame(source) ? "all source points are identical" : "all target points are identical");
+                   allSame(finite) ? "all source points are identical" : "all target points are identical");
+  Points2 source = thinned(finite, options.min_source_spacing_m);
+  if (source.size() < options.min_points) source = std::move(finite);  // (thinning never makes a match fail)
   Icp icp(target, source, options);
   return options.solver == Solver::kCeres ? runCeres(icp, init_T_target_source, options)
                                           : runGaussNewton(icp, init_T_target_source, options);

@@ -189,6 +189,9 @@ struct Slam::Impl {
     // with them intel's relation error rose from 0.0209 to 0.0222 m, and without odometry from
     // 0.0353 to 0.166 m (BENCHMARK.md, "What changed since the previous table", tenth session).
     icp.two_point_lines = false;
+    // SLAM thins its scans with its own voxel filter (scan_voxel_m); ICP's spacing filter on top of
+    // it (IcpOptions::min_source_spacing_m, 2026-12-01) lost the simulated office's loops.
+    icp.min_source_spacing_m = 0.0;
     // Local maps and submaps stack several scans in a frame far from their sensors: the bearing
     // walk (made for one scan seen from its own origin) would visit many points per query there.
     icp.neighbor_search = registration::NeighborSearch::kKdTree;
