@@ -47,6 +47,9 @@ int main(int argc, char** argv) {
   match->add_option("--flatness", match_options.icp.max_line_flatness, "max line flatness")->capture_default_str();
   match->add_option("--max-iterations", match_options.icp.max_iterations, "ICP max iterations")->capture_default_str();
   match->add_option("--gn-inner", match_options.icp.gn_inner_iterations, "Gauss-Newton steps per correspondence search")->capture_default_str();
+  match->add_option("--ceres-inner", match_options.icp.ceres_max_inner_iterations,
+                    "ICP: Ceres iterations per correspondence search")
+      ->capture_default_str();
   match->add_option("--eps-m", match_options.icp.translation_eps_m,
                     "ICP translation convergence threshold [m] (default: 1e-3 for p2l, 1e-4 for p2p)");
   match->add_option("--eps-rad", match_options.icp.rotation_eps_rad,

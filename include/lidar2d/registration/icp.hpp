@@ -141,7 +141,11 @@ struct IcpOptions {
   /// flatness test.
   bool two_point_lines = true;
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
-  int ceres_max_inner_iterations = 10;  ///< Ceres iterations per set of correspondences, >= 1
+  /// Ceres (Levenberg-Marquardt) iterations per set of correspondences, >= 1. As many as the
+  /// Gauss-Newton steps: more only refine a set of pairs that the next search replaces. At 10
+  /// (before 2026-12-01) the Ceres variants took 1.5-2x as long with the same success rates from
+  /// the perturbed guess (BENCHMARK.md, "What changed since the previous table", eleventh session).
+  int ceres_max_inner_iterations = 3;
 
   /// The convergence thresholds in effect: the ones set, else the metric's defaults.
   double translationEps() const { return translation_eps_m.value_or(defaultTranslationEps(metric)); }
