@@ -113,9 +113,8 @@ Points2 finitePoints(const Points2& in) {
 }
 
 // The points in their order (a scan's: by bearing) without those closer than `spacing` to the last
-// point kept (IcpOptions::min_source_spacing_m); all of them when spacing is 0.
+// point kept (IcpOptions::min_source_spacing_m).
 Points2 thinned(const Points2& in, double spacing) {
-  if (!(spacing > 0.0)) return in;
   const double s2 = spacing * spacing;
   Points2 out;
   out.reserve(in.size());
@@ -827,16 +826,18 @@ Result alignIcp(const IcpTarget& target, const Points2& points_source, const SE2
     return failure(init_T_target_source, Status::kInvalidInput, "invalid option: " + bad);
   if (!init_T_target_source.isFinite())
     return failure(init_T_target_source, Status::kInvalidInput, "the initial guess is not finite");
-  Points2 finite = finitePoints(points_source);
-  if (finite.size() < options.min_points || target.size() < options.min_points)
+  Points2 source = finitePoints(points_source);
+  if (source.size() < options.min_points || target.size() < options.min_points)
     return failure(init_T_target_source, Status::kTooFewPoints,
-                   fmt::format("{} finite source and {} finite target points, {} needed", finite.size(), target.size(),
+                   fmt::format("{} finite source and {} finite target points, {} needed", source.size(), target.size(),
                                options.min_points));
-  if (allSame(finite) || target.allIdentical())
+  if (allSame(source) || target.allIdentical())
     return failure(init_T_target_source, Status::kDegenerate,
-                   allSame(finite) ? "all source points are identical" : "all target points are identical");
-  Points2 source = thinned(finite, options.min_source_spacing_m);
-  if (source.size() < options.min_points) source = std::move(finite);  // (thinning never makes a match fail)
+                   allSame(source) ? "all source points are identical" : "all target points are identical");
+  if (options.min_source_spacing_m > 0.0) {
+    Points2 kept = thinned(source, options.min_source_spacing_m);
+    if (kept.size() >= options.min_points) source = std::move(kept);  // (thinning never makes a match fail)
+  }
   Icp icp(target, source, options);
   return options.solver == Solver::kCeres ? runCeres(icp, init_T_target_source, options)
                                           : runGaussNewton(icp, init_T_target_source, options);

@@ -190,7 +190,8 @@ struct Slam::Impl {
     // 0.0353 to 0.166 m (BENCHMARK.md, "What changed since the previous table", tenth session).
     icp.two_point_lines = false;
     // SLAM thins its scans with its own voxel filter (scan_voxel_m); ICP's spacing filter on top of
-    // it (IcpOptions::min_source_spacing_m, 2026-12-01) lost the simulated office's loops.
+    // it (IcpOptions::min_source_spacing_m, 2026-12-01) lost the simulated office's loops, and intel
+    // without odometry went from 0.0353 to 0.0637 m (BENCHMARK.md, eleventh session).
     icp.min_source_spacing_m = 0.0;
     // Local maps and submaps stack several scans in a frame far from their sensors: the bearing
     // walk (made for one scan seen from its own origin) would visit many points per query there.
