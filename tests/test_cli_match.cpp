@@ -26,6 +26,23 @@ double valueAfter(const std::string& out, const std::string& key) {
   return std::stod(out.substr(pos + key.size()));
 }
 
+// The first line of a file (a match output's header).
+std::string headerOf(const std::string& path) {
+  std::ifstream in(path);
+  std::string header;
+  std::getline(in, header);
+  return header;
+}
+
+// How many of the 909 intel pairs of two match outputs differ (by more than 1e-6 m or rad).
+void countDifferingIntelPairs(const std::string& path_a, const std::string& path_b, std::size_t* differ) {
+  const auto a = io::readRelativePoses(path_a), b = io::readRelativePoses(path_b);
+  ASSERT_EQ(a.size(), 909u);
+  ASSERT_EQ(b.size(), a.size());
+  *differ = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) *differ += !test::IsNearPose(a[i].T_prev_cur, b[i].T_prev_cur, 1e-6, 1e-6);
+}
+
 // A CARMEN log of `n` FLASER scans of a 4 x 4 m square room seen from its centre, without truth
 // (no ODOM lines: the laser messages' poses are odometry).
 std::string roomLog(int n) {
@@ -112,9 +129,7 @@ TEST(CliMatch, CorrelativeThenIcpFromIdentity) {
   EXPECT_EQ(valueAfter(r.out, "pairs: "), 19.0) << r.out;
   EXPECT_GE(valueAfter(r.out, "success rate: "), 95.0) << r.out;
   EXPECT_LT(valueAfter(r.out, "median translation error: "), 2.0) << r.out;  // [cm]
-  std::ifstream in(out);
-  std::string header;
-  std::getline(in, header);
+  const std::string header = headerOf(out);
   EXPECT_NE(header.find("method=corr then p2l"), std::string::npos) << header;
 }
 
@@ -126,9 +141,7 @@ TEST(CliMatch, PointPairsOptionMatchesAndIsRecorded) {
   const auto r = runCli({"match", log, "--method", "p2l", "--point-pairs", "0.5", "-o", out, "--eval"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_GE(valueAfter(r.out, "success rate: "), 95.0) << r.out;
-  std::ifstream in(out);
-  std::string header;
-  std::getline(in, header);
+  const std::string header = headerOf(out);
   EXPECT_NE(header.find("point_pairs=0.5"), std::string::npos) << header;
 }
 
@@ -142,15 +155,10 @@ TEST(CliMatch, NoTwoPointLinesIsRecordedAndChangesTheMatches) {
   ASSERT_EQ(runCli({"match", log, "-o", with}).exit_code, 0);
   const auto r = runCli({"match", log, "--no-two-point-lines", "-o", without});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  std::ifstream in(without);
-  std::string header;
-  std::getline(in, header);
+  const std::string header = headerOf(without);
   EXPECT_NE(header.find("two_point_lines=0"), std::string::npos) << header;
-  const auto a = io::readRelativePoses(with), b = io::readRelativePoses(without);
-  ASSERT_EQ(a.size(), 909u);
-  ASSERT_EQ(b.size(), a.size());
   std::size_t differ = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) differ += !test::IsNearPose(a[i].T_prev_cur, b[i].T_prev_cur, 1e-6, 1e-6);
+  ASSERT_NO_FATAL_FAILURE(countDifferingIntelPairs(with, without, &differ));
   EXPECT_GT(differ, 100u);
 }
 
@@ -164,17 +172,11 @@ TEST(CliMatch, SourceSpacingIsRecordedAndChangesTheMatches) {
   ASSERT_EQ(runCli({"match", log, "-o", thinned}).exit_code, 0);
   auto r = runCli({"match", log, "--source-spacing", "0", "-o", all});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  std::string header_thinned, header_all;
-  std::ifstream in_thinned(thinned), in_all(all);
-  std::getline(in_thinned, header_thinned);
-  std::getline(in_all, header_all);
+  const std::string header_thinned = headerOf(thinned), header_all = headerOf(all);
   EXPECT_EQ(header_thinned.find("source_spacing"), std::string::npos) << header_thinned;
   EXPECT_NE(header_all.find("source_spacing=0"), std::string::npos) << header_all;
-  const auto a = io::readRelativePoses(thinned), b = io::readRelativePoses(all);
-  ASSERT_EQ(a.size(), 909u);
-  ASSERT_EQ(b.size(), a.size());
   std::size_t differ = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) differ += !test::IsNearPose(a[i].T_prev_cur, b[i].T_prev_cur, 1e-6, 1e-6);
+  ASSERT_NO_FATAL_FAILURE(countDifferingIntelPairs(thinned, all, &differ));
   EXPECT_GT(differ, 100u);
   const std::string bad = (tmp / "bad.txt").string();
   r = runCli({"match", log, "--source-spacing", "-0.1", "-o", bad});

@@ -382,17 +382,24 @@ TEST_P(IcpSolvers, TwoPointLinesPinTheCorridorWithZigZags) {
   EXPECT_LT(es.eigenvalues()(0), 1e-6 * es.eigenvalues()(2)) << es.eigenvalues().transpose();
 }
 
-TEST(PointPairs, OutOfDomainWeightIsInvalidInput) {
+// Setting the ICP option `field` to each of `values` makes a match an invalid-input failure naming it.
+void expectOutOfDomainRejected(Method method, double IcpOptions::*option, const std::string& field,
+                               std::initializer_list<double> values) {
   const Points2 pts = office().pointsAt(office().routePoses(1).front());
   MatcherOptions o;
-  o.method = Method::kP2L;
-  for (const double w : {-0.5, kNaN, std::numeric_limits<double>::infinity()}) {
-    o.icp.point_pair_weight = w;
+  o.method = method;
+  for (const double v : values) {
+    o.icp.*option = v;
     const Result r = matchScans(pts, pts, SE2(), o);
-    EXPECT_EQ(r.status, Status::kInvalidInput) << w;
+    EXPECT_EQ(r.status, Status::kInvalidInput) << field << " = " << v;
     EXPECT_FALSE(r.converged);
-    EXPECT_NE(r.message.find("point_pair_weight"), std::string::npos) << r.message;
+    EXPECT_NE(r.message.find(field), std::string::npos) << r.message;
   }
+}
+
+TEST(PointPairs, OutOfDomainWeightIsInvalidInput) {
+  expectOutOfDomainRejected(Method::kP2L, &IcpOptions::point_pair_weight, "point_pair_weight",
+                            {-0.5, kNaN, std::numeric_limits<double>::infinity()});
 }
 
 // IcpOptions::min_source_spacing_m: on a dense scan (0.1875 degree beams, the office's walls at
@@ -450,15 +457,8 @@ TEST(SourceSpacing, NeverLeavesTooFewPoints) {
 }
 
 TEST(SourceSpacing, OutOfDomainSpacingIsInvalidInput) {
-  const Points2 pts = office().pointsAt(office().routePoses(1).front());
-  MatcherOptions o;
-  o.method = Method::kP2P;
-  for (const double s : {-0.01, kNaN, std::numeric_limits<double>::infinity()}) {
-    o.icp.min_source_spacing_m = s;
-    const Result r = matchScans(pts, pts, SE2(), o);
-    EXPECT_EQ(r.status, Status::kInvalidInput) << s;
-    EXPECT_NE(r.message.find("min_source_spacing_m"), std::string::npos) << r.message;
-  }
+  expectOutOfDomainRejected(Method::kP2P, &IcpOptions::min_source_spacing_m, "min_source_spacing_m",
+                            {-0.01, kNaN, std::numeric_limits<double>::infinity()});
 }
 
 INSTANTIATE_TEST_SUITE_P(Solvers, IcpSolvers, ::testing::Values(Solver::kGaussNewton, Solver::kCeres),
