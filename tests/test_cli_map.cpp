@@ -114,6 +114,10 @@ TEST_P(CliMapBad, OneLineExit1NoFiles) {
   test::writeFile(*dir_ / "short-traj.txt", "0.0 0 0 0\n0.1 0 0 0\n");
   test::writeFile(*dir_ / "tiny-mask.pgm", std::string("P5\n3 2\n255\n") + std::string(6, '\0'));
   test::writeFile(*dir_ / "noposes.log", "RAWLASER1 0 -1.5708 3.14159 0.0174533 80 0.01 0 3 1 2 3 0 10.0 host 10.0\n");
+  // The second scan's odometry lies 10^12 m out.
+  test::writeFile(*dir_ / "farpose.log",
+                  "FLASER 3 1 2 3 0 0 0 0 0 0 0.0 host 0.0\n"
+                  "FLASER 3 1 2 3 0 0 0 0 1e12 0 1.0 host 1.0\n");
   std::vector<std::string> args{"map"};
   for (const std::string& a : c.extra) {
     // "LOG" is the simulated log; bare file names live in the test folder.
@@ -135,16 +139,19 @@ TEST_P(CliMapBad, OneLineExit1NoFiles) {
 
 INSTANTIATE_TEST_SUITE_P(
     Cases, CliMapBad,
-    ::testing::Values(BadMapCase{"ZeroResolution", {"LOG", "--resolution", "0"}, "resolution"},
-                      BadMapCase{"NegativeResolution", {"LOG", "--resolution", "-0.05"}, "resolution"},
-                      BadMapCase{"AbsurdResolution", {"LOG", "--resolution", "1e-9"}, "resolution"},
-                      BadMapCase{"OverCellBudget", {"LOG", "--resolution", "0.001", "--cell-budget", "1000000"}, "budget"},
-                      BadMapCase{"NegativeSurfaceGuard", {"LOG", "--surface-guard", "-1"}, "surface_guard"},
-                      BadMapCase{"ZeroThreads", {"LOG", "--threads", "0"}, "threads"},
-                      BadMapCase{"TrajectoryMissingTimestamp", {"LOG", "--poses", "short-traj.txt"}, "timestamp"},
-                      BadMapCase{"MaskOfAnotherSize", {"LOG", "--prior", "tiny-mask.pgm"}, "size"},
-                      BadMapCase{"LogWithoutPoses", {"noposes.log"}, "has no odometry pose"},
-                      BadMapCase{"MissingLog", {"does-not-exist.log"}, "no such file"}),
+    ::testing::Values(
+        BadMapCase{"ZeroResolution", {"LOG", "--resolution", "0"}, "resolution"},
+        BadMapCase{"NegativeResolution", {"LOG", "--resolution", "-0.05"}, "resolution"},
+        BadMapCase{"AbsurdResolution", {"LOG", "--resolution", "1e-9"}, "resolution"},
+        BadMapCase{"OverCellBudget", {"LOG", "--resolution", "0.001", "--cell-budget", "1000000"}, "budget"},
+        BadMapCase{"NegativeSurfaceGuard", {"LOG", "--surface-guard", "-1"}, "surface_guard"},
+        BadMapCase{"ZeroThreads", {"LOG", "--threads", "0"}, "threads"},
+        BadMapCase{"TrajectoryMissingTimestamp", {"LOG", "--poses", "short-traj.txt"}, "timestamp"},
+        BadMapCase{"MaskOfAnotherSize", {"LOG", "--prior", "tiny-mask.pgm"}, "size"},
+        BadMapCase{"LogWithoutPoses", {"noposes.log"}, "has no odometry pose"},
+        BadMapCase{
+            "PoseAbsurdlyFar", {"farpose.log"}, "farpose.log: scan 1 (time 1.000000) pose: laser pose is absurdly far"},
+        BadMapCase{"MissingLog", {"does-not-exist.log"}, "no such file"}),
     [](const auto& info) { return info.param.name; });
 
 }  // namespace

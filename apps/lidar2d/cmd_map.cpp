@@ -99,7 +99,17 @@ void run(const MapArgs& a) {
   // read no map state: a second thread does them, a few scans ahead of this one, which inserts
   // (the preparation is about a tenth of the work; BENCHMARK.md, mapping).
   using Prepared = mapping::OccupancyMap::PreparedScan;
-  auto produce = [&]() -> std::optional<Prepared> {
+  // A scan the map rejects (a pose too far out, an extent over the cell budget) is named in the error.
+  auto atScan = [&](const Error& e, std::size_t index, double time) {
+    return Error(e.kind(), e.message(),
+                 ErrorLocation(a.log, 0, fmt::format("scan {} (time {:.6f}) {}", index, time, e.where().field)));
+  };
+  struct Item {
+    Prepared prepared;
+    std::size_t index = 0;
+    double time = 0.0;
+  };
+  auto produce = [&]() -> std::optional<Item> {
     const std::optional<Frame> f = source->next();
     if (!f) return std::nullopt;
     SE2 T_world_robot;
@@ -114,14 +124,22 @@ void run(const MapArgs& a) {
                        ErrorLocation(a.log));
       T_world_robot = *pose;
     }
-    Prepared prepared;
-    map->prepare(f->scan, T_world_robot * f->T_robot_laser, prepared);
-    return prepared;
+    Item item{Prepared{}, f->index, f->time};
+    try {
+      map->prepare(f->scan, T_world_robot * f->T_robot_laser, item.prepared);
+    } catch (const Error& e) {
+      throw atScan(e, f->index, f->time);
+    }
+    return item;
   };
   {
-    ReadAhead<Prepared> ahead(produce, 16);  // (stops and joins its thread on an exception here)
-    while (std::optional<Prepared> prepared = ahead.next()) {
-      map->insert(*prepared);
+    ReadAhead<Item> ahead(produce, 16);  // (stops and joins its thread on an exception here)
+    while (std::optional<Item> item = ahead.next()) {
+      try {
+        map->insert(item->prepared);
+      } catch (const Error& e) {
+        throw atScan(e, item->index, item->time);
+      }
       ++scans;
       if (progress && scans % 500 == 0) std::cerr << "\rmapped " << scans << " scans" << std::flush;
     }

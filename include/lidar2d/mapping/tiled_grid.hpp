@@ -7,6 +7,8 @@
 /// (x, y) covers world points p with x*r <= p.x < (x+1)*r and y*r <= p.y < (y+1)*r, r = resolution.
 /// Cell indices are signed, so negative coordinates need no offset; `cellOf` uses floor().
 
+#include <fmt/format.h>
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -200,10 +202,11 @@ class TiledGrid {
     const double extent_cells = static_cast<double>(tx1 - tx0 + 1) * static_cast<double>(ty1 - ty0 + 1) *
                                 static_cast<double>(kTileCells);
     if (extent_cells > static_cast<double>(budget_))
-      throw badInput("the map would span " + std::to_string(static_cast<long double>(extent_cells)) +
-                         " cells, more than the cell budget of " + std::to_string(budget_) +
-                         " (absurd coordinates or ranges? raise the budget for a genuinely huge map)",
-                     ErrorLocation("", 0, "extent"));
+      throw badInput(
+          fmt::format("the map would span {:.0f} cells, more than the cell budget of {} (absurd coordinates or ranges? "
+                      "raise the budget for a genuinely huge map)",
+                      extent_cells, budget_),
+          ErrorLocation("", 0, "extent"));
     // Grow with a margin so that a robot moving steadily does not re-grow on every scan; the
     // margin is not charged to the budget (the table holds one pointer per tile).
     const std::int64_t margin = 4;
