@@ -270,6 +270,80 @@ TEST(LikelihoodField, InterpolatesTheNodesAndIsZeroOnAWall) {
   EXPECT_DOUBLE_EQ(far.value, o.truncation_m);
 }
 
+// The field of a scan node by node from its definition: the signed distance to the line of each
+// wall segment (consecutive points at most connect_max_gap_m apart) over the nodes whose
+// projection falls on the segment extended by one node spacing, positive on the sensor's side; the
+// distance to each isolated point; the value of smallest magnitude, clamped at the truncation. The
+// reference visits each segment's whole bounding box; the field build visits only the band along
+// the segment, and must not miss a node of it (segments at every angle: a noisy scan, and walls
+// exactly along the axes).
+TEST(LikelihoodField, FieldMatchesItsDefinitionNodeByNode) {
+  const auto& sim = office();
+  Points2 noisy = sim.scanAt(sim.route()[40].T_world_robot);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.01);
+  for (auto& p : noisy) p += Eigen::Vector2d(noise(rng), noise(rng));
+  Points2 square;  // walls along the axes, a gap, and an isolated point
+  for (double t = -1.0; t <= 1.0; t += 0.05) {
+    square.emplace_back(2.0, t);
+    square.emplace_back(t, -1.5);
+  }
+  square.emplace_back(-3.0, 3.0);
+  for (const Points2& pts : {noisy, sim.scanAt(sim.route()[10].T_world_robot), square}) {
+    const LikelihoodFieldOptions o;
+    const auto field = LikelihoodField::fromPoints(pts, o);
+    std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> segments;
+    std::vector<char> in_segment(pts.size(), 0);
+    for (std::size_t i = 0; i + 1 < pts.size(); ++i) {
+      const double d = (pts[i + 1] - pts[i]).norm();
+      if (d <= o.connect_max_gap_m && d > 1e-9) {
+        segments.emplace_back(pts[i], pts[i + 1]);
+        in_segment[i] = in_segment[i + 1] = 1;
+      }
+    }
+    for (int l = 0; l < field.numLevels(); ++l) {
+      const auto& lv = field.level(l);
+      const double r = lv.truncation, ext = lv.resolution;
+      std::vector<float> ref(lv.values.size(), static_cast<float>(r));
+      auto visitBox = [&](const Eigen::Vector2d& lo, const Eigen::Vector2d& hi, auto&& f) {
+        const int i0 = std::max(0, static_cast<int>(std::ceil((lo.x() - lv.origin.x()) / lv.resolution)));
+        const int i1 = std::min(lv.width - 1, static_cast<int>(std::floor((hi.x() - lv.origin.x()) / lv.resolution)));
+        const int j0 = std::max(0, static_cast<int>(std::ceil((lo.y() - lv.origin.y()) / lv.resolution)));
+        const int j1 = std::min(lv.height - 1, static_cast<int>(std::floor((hi.y() - lv.origin.y()) / lv.resolution)));
+        for (int j = j0; j <= j1; ++j)
+          for (int i = i0; i <= i1; ++i) {
+            const Eigen::Vector2d q(lv.origin.x() + i * lv.resolution, lv.origin.y() + j * lv.resolution);
+            const double d = f(q);
+            float& v =
+                ref[static_cast<std::size_t>(j) * static_cast<std::size_t>(lv.width) + static_cast<std::size_t>(i)];
+            if (std::abs(d) < std::abs(v)) v = static_cast<float>(d);
+          }
+      };
+      for (const auto& [a, b] : segments) {
+        const Eigen::Vector2d u = (b - a) / (b - a).norm();
+        const double len = (b - a).norm();
+        Eigen::Vector2d n(-u.y(), u.x());
+        if (n.dot(-a) < 0.0) n = -n;
+        visitBox(a.cwiseMin(b).array() - (r + ext), a.cwiseMax(b).array() + (r + ext), [&](const Eigen::Vector2d& q) {
+          const double t = (q - a).dot(u);
+          return t < -ext || t > len + ext ? std::numeric_limits<double>::infinity() : (q - a).dot(n);
+        });
+      }
+      for (std::size_t i = 0; i < pts.size(); ++i)
+        if (!in_segment[i])
+          visitBox(pts[i].array() - r, pts[i].array() + r,
+                   [&](const Eigen::Vector2d& q) { return (q - pts[i]).norm(); });
+      std::size_t differ = 0, near_wall = 0;
+      for (std::size_t k = 0; k < ref.size(); ++k) {
+        differ += std::abs(ref[k] - lv.values[k]) > 1e-6f;
+        near_wall += std::abs(ref[k]) < static_cast<float>(r);
+      }
+      EXPECT_EQ(differ, 0u) << "level " << l << " of " << ref.size() << " nodes";
+      EXPECT_GT(near_wall, 100u) << "level " << l;
+    }
+  }
+}
+
 TEST(LikelihoodField, OptionsOutOfDomainThrowNamingTheField) {
   const Points2 pts{{1, 0}, {1, 0.1}, {1, 0.2}};
   auto expectField = [&](LikelihoodFieldOptions o, const std::string& field) {

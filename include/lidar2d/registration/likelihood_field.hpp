@@ -82,6 +82,7 @@ class LikelihoodField {
   struct Level {
     Eigen::Vector2d origin = Eigen::Vector2d::Zero();  ///< position of node (0, 0) [m]
     double resolution = 0.0;                           ///< node spacing [m]
+    double inv_resolution = 0.0;                       ///< 1 / resolution [1/m]
     double truncation = 0.0;                           ///< |value| clamp [m]
     int width = 0;
     int height = 0;
