@@ -35,6 +35,7 @@ struct MatchBenchOptions {
   std::vector<std::string> inits{"perturbed", "identity"};  ///< initial guesses: perturbed, identity, truth
   registration::IcpOptions icp;      ///< ICP options (metric and solver are set per row)
   registration::CorrelativeOptions corr;  ///< correlative options (window, grid)
+  registration::LikelihoodFieldOptions lf;  ///< likelihood-field options (solver is set per row)
   /// Instead of the table: match every pair from its true relative pose with p2p, p2l and lf
   /// (Gauss-Newton) and count the pairs where all three fail the bar yet agree with each other.
   bool truth_check = false;

@@ -57,6 +57,9 @@ int main(int argc, char** argv) {
   match->add_option("--search", match_options.icp.neighbor_search, "ICP nearest-neighbour search: 0 bearing walk, 1 k-d tree")->capture_default_str();
   match->add_flag("--truth-check", match_options.truth_check,
                   "match each pair from the truth with p2p, p2l and lf: pairs where all three fail but agree");
+  match->add_option("--lf-levels", match_options.lf.levels, "likelihood field: resolutions")->capture_default_str();
+  match->add_option("--lf-max-iterations", match_options.lf.max_iterations, "likelihood field: iterations per level")
+      ->capture_default_str();
   match->add_option("--corr-window-m", match_options.corr.linear_window_m, "correlative linear half-window [m]")->capture_default_str();
   match->add_option("--corr-window-rad", match_options.corr.angular_window_rad, "correlative angular half-window [rad]")->capture_default_str();
   match->add_flag("--relations", match_options.relations,

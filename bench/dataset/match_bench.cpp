@@ -257,6 +257,7 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
         registration::MatcherOptions o;
         o.icp = bo.icp;
         o.corr = bo.corr;
+        o.lf = bo.lf;
         o.method = two_stage ? registration::Method::kCorrelative : *registration::parseMethod(method_name);
         std::optional<registration::MatcherOptions> then;
         if (two_stage) {
@@ -367,6 +368,7 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
           registration::MatcherOptions o;
           o.icp = bo.icp;
           o.corr = bo.corr;
+          o.lf = bo.lf;
           o.method = method;
           o.solver = solver;
           std::optional<registration::MatcherOptions> then;

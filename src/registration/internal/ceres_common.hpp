@@ -4,9 +4,6 @@
 
 #include <ceres/ceres.h>
 
-#include <cmath>
-#include <limits>
-
 namespace lidar2d::registration::internal {
 
 /// Solver options for a 3-parameter pose problem: dense QR, one thread, no logging.
@@ -22,21 +19,6 @@ inline ceres::Solver::Options poseSolverOptions(int max_iterations, double funct
   so.gradient_tolerance = 1e-14;
   so.parameter_tolerance = parameter_tolerance;
   return so;
-}
-
-// cos and sin of theta, remembered for the last angle asked: Ceres evaluates every residual block
-// at the same pose one after another, so one evaluation pass computes them once instead of once
-// per block (they were a tenth of a point-to-point Ceres match). One
-// cache per thread, shared by the matchers' cost functions.
-inline void cachedCosSin(double theta, double& c, double& s) {
-  thread_local double last = std::numeric_limits<double>::quiet_NaN(), last_c = 1.0, last_s = 0.0;
-  if (!(theta == last)) {
-    last = theta;
-    last_c = std::cos(theta);
-    last_s = std::sin(theta);
-  }
-  c = last_c;
-  s = last_s;
 }
 
 }  // namespace lidar2d::registration::internal
