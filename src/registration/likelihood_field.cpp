@@ -180,9 +180,9 @@ Linearisation linearise(const LikelihoodField& field, int l, const Points2& src,
 // Every source point's field value at T * p as one Ceres residual block of n residuals, with
 // analytic Jacobians (chain rule: field gradient times SE2::pointJacobian). Points outside the
 // inlier zone give the truncation with a zero Jacobian, the value a truncated field assigns them.
-// The robust loss (a Ceres LossFunction) is applied per point inside the block: residual
-// sign(v) sqrt(rho(v^2)), so that the block's squared norm is the sum of rho(v^2) over the points,
-// the same objective as one block per point with the loss attached. One block instead of one per
+// The robust loss (a Ceres LossFunction) is applied per point inside the block (robustScaling), so
+// that the block's squared norm is the sum of rho(v^2) over the points, the same objective as one
+// block per point with the loss attached. One block instead of one per
 // point: Ceres's bookkeeping per residual block (evaluation dispatch, validity checks, the loss's
 // Jacobian correction) took about nine tenths of the solve's time.
 class FieldResiduals final : public ceres::CostFunction {
@@ -201,15 +201,10 @@ class FieldResiduals final : public ceres::CostFunction {
       const Eigen::Vector2d q(c * p.x() - sn * p.y() + x[0], sn * p.x() + c * p.y() + x[1]);
       const auto s = sampleLevel(level_, q);
       const double v = s.inlier ? s.value : level_.truncation;
-      double r = v, dr_dv = 1.0;
-      if (loss_ != nullptr) {
-        double rho[3];
-        loss_->Evaluate(v * v, rho);
-        const double root = std::sqrt(rho[0]);
-        r = v < 0.0 ? -root : root;
-        dr_dv = root > 0.0 ? rho[1] * std::abs(v) / root : std::sqrt(rho[1]);
-      }
-      residuals[i] = r;
+      double f, g;
+      internal::robustScaling(loss_, v * v, f, g);
+      residuals[i] = f * v;
+      const double dr_dv = f + g * v * v;
       if (J != nullptr) {
         double* row = J + 3 * i;
         if (s.inlier) {

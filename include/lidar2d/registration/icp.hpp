@@ -47,7 +47,8 @@ namespace lidar2d::registration {
 /// offers both).
 enum class Solver {
   kGaussNewton,  ///< hand-written Gauss-Newton with analytic Jacobians (robust loss as IRLS weights)
-  kCeres,        ///< Ceres Solver (dense QR, Levenberg-Marquardt) with the robust loss
+  kCeres,        ///< Ceres Solver (dense QR, Levenberg-Marquardt) with the robust loss (Ceres's
+                 ///< HuberLoss / CauchyLoss, applied per pair inside one residual block per search)
 };
 /// "gn" or "ceres".
 const char* toString(Solver s);

@@ -33,7 +33,8 @@ namespace lidar2d::registration {
 /// Which solver minimises the field cost.
 enum class LfSolver {
   kGaussNewton,  ///< hand-written Gauss-Newton with analytic Jacobians and IRLS robust weights
-  kCeres,        ///< Ceres trust region, one analytic-derivative residual block per point
+  kCeres,        ///< Ceres trust region, all points in one analytic-derivative residual block per level
+                 ///< (the loss applied per point inside it: the same cost as a block per point)
 };
 
 /// Robust loss applied to the per-point residuals (metres).
@@ -57,8 +58,15 @@ struct LikelihoodFieldOptions {
   LfLoss loss = LfLoss::kHuber;
   double loss_scale_m = 0.05;     ///< robust loss scale at the finest level [m] (x 2^level), > 0
   int max_iterations = 20;        ///< iterations per level, >= 1
-  double min_translation_step_m = 1e-5;  ///< converged when the step is below both [m], >= 0
-  double min_rotation_step_rad = 1e-5;   ///< [rad], >= 0
+  /// A level ends when a step (Ceres: an accepted one) is below both [m], >= 0; the finest level's
+  /// ending so is `converged`. Coarse levels, which only seed the next, also end at steps under
+  /// 0.005 of their cell. Gauss-Newton on the piecewise-bilinear field can instead cycle between
+  /// two to four poses: a level then ends at the lowest-cost of them and their centroid, and at the
+  /// finest level that counts as converged when they lie within a tenth of a cell of each other
+  /// (else the match ends unconverged, kMaxIterations, its message giving the spread). Out of
+  /// iterations, the finest level's estimate is the lowest-cost of its last five iterates.
+  double min_translation_step_m = 1e-5;
+  double min_rotation_step_rad = 1e-5;  ///< [rad], >= 0 (see min_translation_step_m)
   std::size_t min_points = 6;     ///< fewer valid source points (or inliers) fail the match, >= 3
   /// Gauss-Newton at the finest level: halve a step that raises the cost (all points, those outside
   /// the truncation counted at it), up to 4 times, and stop where none lowers it. Against a map's

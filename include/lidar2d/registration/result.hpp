@@ -14,13 +14,14 @@ namespace lidar2d::registration {
 
 /// Why a matcher stopped.
 enum class Status {
-  kConverged,         ///< the increment fell below the thresholds (ICP: or the correspondences repeated)
-  kMaxIterations,     ///< ran out of iterations (the pose is the last estimate)
-  kTooFewPoints,      ///< source or target has fewer valid points than the method needs
-  kTooFewInliers,     ///< too few correspondences survived the rejection
-  kDegenerate,        ///< the normal equations were singular (e.g. all points identical)
-  kInvalidInput,      ///< a non-finite initial guess or option
-  kSolverFailure,     ///< the optimiser reported a failure
+  kConverged,      ///< the increment fell below the thresholds (ICP: or the correspondences repeated)
+  kMaxIterations,  ///< ran out of iterations (the pose is the last estimate; the likelihood field's: the
+                   ///< lowest-cost of its last iterates, or of a cycle too wide to call converged)
+  kTooFewPoints,   ///< source or target has fewer valid points than the method needs
+  kTooFewInliers,  ///< too few correspondences survived the rejection
+  kDegenerate,     ///< the normal equations were singular (e.g. all points identical)
+  kInvalidInput,   ///< a non-finite initial guess or option
+  kSolverFailure,  ///< the optimiser reported a failure
 };
 const char* toString(Status s);
 
