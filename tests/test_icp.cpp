@@ -19,6 +19,7 @@
 #include "lidar2d/sim/path.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
+#include "src/registration/internal/ceres_common.hpp"
 #include "support/test_support.hpp"
 
 namespace lidar2d::registration {
@@ -716,6 +717,50 @@ TEST(IcpRealData, IntelPairsFromAPerturbedGuess) {
     ok += r.T_target_source.isApprox(truth, 0.10, 2 * kDeg);
   }
   EXPECT_GE(ok, 57);
+}
+
+// The Ceres solvers put all pairs in one residual block and robustify each pair's residual r there
+// (internal::robustScaling): f r must have the squared norm rho(|r|^2), and f J + g r (r^T J) must
+// be its derivative. Checked against central differences, for 1-D and 2-D residuals, on both sides
+// of the losses' scale, at 0, and with no loss.
+TEST(RobustScaling, SquaredNormIsRhoAndTheJacobianIsItsDerivative) {
+  const ceres::HuberLoss huber(0.05);
+  const ceres::CauchyLoss cauchy(0.05);
+  const Eigen::Matrix<double, 2, 3> J = (Eigen::Matrix<double, 2, 3>() << 1.0, -0.3, 0.7, 0.2, 1.1, -0.4).finished();
+  auto robustified = [](const ceres::LossFunction* loss, const Eigen::Vector2d& r) {
+    double f, g;
+    internal::robustScaling(loss, r.squaredNorm(), f, g);
+    return Eigen::Vector2d(f * r);
+  };
+  for (const ceres::LossFunction* loss :
+       {static_cast<const ceres::LossFunction*>(&huber), static_cast<const ceres::LossFunction*>(&cauchy),
+        static_cast<const ceres::LossFunction*>(nullptr)}) {
+    for (const Eigen::Vector2d& r0 :
+         {Eigen::Vector2d(0.01, -0.02), Eigen::Vector2d(0.2, 0.1), Eigen::Vector2d(-0.04, 0.0),
+          Eigen::Vector2d(0.0, 0.0), Eigen::Vector2d(0.6, -0.9)}) {
+      for (int dims : {1, 2}) {
+        const Eigen::Vector2d r = dims == 1 ? Eigen::Vector2d(r0.x(), 0.0) : r0;
+        const Eigen::Matrix<double, 2, 3> Jd =
+            dims == 1 ? (Eigen::Matrix<double, 2, 3>() << J.row(0), 0, 0, 0).finished() : J;
+        double rho[3] = {r.squaredNorm(), 1.0, 0.0};
+        if (loss != nullptr) loss->Evaluate(r.squaredNorm(), rho);
+        EXPECT_NEAR(robustified(loss, r).squaredNorm(), rho[0], 1e-15 + 1e-12 * rho[0]);
+        // The residual moves with x as r(x) = r + Jd x; the derivative of f(x) r(x) at x = 0.
+        double f, g;
+        internal::robustScaling(loss, r.squaredNorm(), f, g);
+        const Eigen::Matrix<double, 2, 3> analytic = f * Jd + g * r * (r.transpose() * Jd);
+        for (int c = 0; c < 3; ++c) {
+          // At r = 0 the differences probe |r|^2 ~ h^2, where Ceres's rho (log(1 + s / b) for
+          // Cauchy) has lost most of its digits: a larger step there.
+          const double h = r.squaredNorm() > 0.0 ? 1e-7 : 1e-5;
+          const Eigen::Vector2d numeric =
+              (robustified(loss, r + h * Jd.col(c)) - robustified(loss, r - h * Jd.col(c))) / (2.0 * h);
+          EXPECT_LT((numeric - analytic.col(c)).norm(), 1e-6)
+              << "dims " << dims << ", r " << r.transpose() << ", column " << c;
+        }
+      }
+    }
+  }
 }
 
 }  // namespace
