@@ -661,15 +661,14 @@ Result runGaussNewton(Icp& icp, const SE2& init, const IcpOptions& o) {
 // BENCHMARK.md ("Speed against the targets") for after.
 class PairResiduals final : public ceres::CostFunction {
  public:
-  PairResiduals(const Icp& icp, bool p2l, const ceres::LossFunction* loss) : loss_(loss), p2l_(p2l) {
-    if (p2l) {
-      for (const auto& l : icp.lines()) terms_.push_back({l.px, l.py, l.mx, l.my, l.nx, l.ny});
-    } else {
+  PairResiduals(const Icp& icp, bool p2l, const ceres::LossFunction* loss)
+      : terms_(p2l ? icp.lines() : pairs_), loss_(loss), p2l_(p2l) {
+    if (!p2l) {
       const Points2& tp = icp.target().points;
       for (const Pair& pr : icp.pairs()) {
         const Eigen::Vector2d& p = icp.source()[pr.src];
         const Eigen::Vector2d& m = tp[pr.tgt];
-        terms_.push_back({p.x(), p.y(), m.x(), m.y(), 0.0, 0.0});
+        pairs_.push_back({p.x(), p.y(), m.x(), m.y(), 0.0, 0.0});
       }
     }
     set_num_residuals(static_cast<int>(p2l ? terms_.size() : 2 * terms_.size()));
@@ -717,7 +716,8 @@ class PairResiduals final : public ceres::CostFunction {
   }
 
  private:
-  std::vector<Icp::LineTerm> terms_;  // point-to-point: (px, py, mx, my), the normal unused
+  std::vector<Icp::LineTerm> pairs_;         // point-to-point: (px, py, mx, my), the normal unused
+  const std::vector<Icp::LineTerm>& terms_;  // point-to-line: the search's own line terms
   const ceres::LossFunction* loss_;
   bool p2l_;
 };
@@ -740,10 +740,7 @@ Result runCeres(Icp& icp, const SE2& init, const IcpOptions& o) {
   const std::unique_ptr<ceres::LossFunction> loss = makeLoss(o.loss);
   const ceres::Solver::Options so = internal::poseSolverOptions(o.ceres_max_inner_iterations, 1e-12, 1e-10);
   double x[3] = {init.x(), init.y(), init.theta()};
-  ceres::Problem::Options po;
-  po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  po.enable_fast_removal = false;
-  po.disable_all_safety_checks = true;
+  const ceres::Problem::Options po = internal::singleBlockProblemOptions();
   int it = 0;
   bool converged = false;
   PairSetHistory history;

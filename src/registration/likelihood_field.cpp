@@ -124,6 +124,12 @@ inline LikelihoodField::Sample sampleLevel(const LikelihoodField::Level& lv, con
   return s;
 }
 
+// d value / d theta at p (source frame) for a pose whose rotation has cosine c and sine sn: the
+// field gradient times the theta column of SE2::pointJacobian(p).
+inline double thetaDerivative(const Eigen::Vector2d& gradient, const Eigen::Vector2d& p, double c, double sn) {
+  return gradient.x() * (-sn * p.x() - c * p.y()) + gradient.y() * (c * p.x() - sn * p.y());
+}
+
 double robustWeight(LfLoss loss, double r, double k) {
   const double a = std::abs(r);
   switch (loss) {
@@ -166,8 +172,7 @@ Linearisation linearise(const LikelihoodField& field, int l, const Points2& src,
     const auto s = sampleLevel(lv, q);
     if (!s.inlier) continue;
     // gradient^T * SE2::pointJacobian(p)
-    const Eigen::Vector3d J(s.gradient.x(), s.gradient.y(),
-                            s.gradient.x() * (-sn * p.x() - c * p.y()) + s.gradient.y() * (c * p.x() - sn * p.y()));
+    const Eigen::Vector3d J(s.gradient.x(), s.gradient.y(), thetaDerivative(s.gradient, p, c, sn));
     const double w = robustWeight(loss, s.value, k);
     lin.H.noalias() += w * J * J.transpose();
     lin.g.noalias() += (w * s.value) * J;
@@ -175,6 +180,21 @@ Linearisation linearise(const LikelihoodField& field, int l, const Points2& src,
     ++lin.n;
   }
   return lin;
+}
+
+// The first of `poses` with the lowest totalCost.
+SE2 lowestCost(const LikelihoodField& field, int l, const Points2& src, const std::vector<SE2>& poses, LfLoss loss,
+               double k) {
+  SE2 best_pose = poses.front();
+  double best = std::numeric_limits<double>::infinity();
+  for (const SE2& m : poses) {
+    const double c = totalCost(field, l, src, m, loss, k);
+    if (c < best) {
+      best = c;
+      best_pose = m;
+    }
+  }
+  return best_pose;
 }
 
 // Every source point's field value at T * p as one Ceres residual block of n residuals, with
@@ -211,7 +231,7 @@ class FieldResiduals final : public ceres::CostFunction {
         if (s.inlier) {
           row[0] = dr_dv * s.gradient.x();
           row[1] = dr_dv * s.gradient.y();
-          row[2] = dr_dv * (s.gradient.x() * (-sn * p.x() - c * p.y()) + s.gradient.y() * (c * p.x() - sn * p.y()));
+          row[2] = dr_dv * thetaDerivative(s.gradient, p, c, sn);
         } else {
           row[0] = row[1] = row[2] = 0.0;
         }
@@ -333,6 +353,8 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
     const double scale = std::ldexp(1.0, l);
     const double k = options.loss_scale_m * scale;
     const double max_step = field.level(l).truncation;
+    // A coarse level only seeds the next one: it stops at steps under kCoarseStepCells of its cell.
+    const double coarse_step = l > 0 ? kCoarseStepCells * field.level(l).resolution : 0.0;
     converged = false;
     if (options.solver == LfSolver::kGaussNewton) {
       // Line search: the cost at T, carried from the step that moved there (NaN: not known yet).
@@ -341,8 +363,6 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
       std::vector<SE2> visited;
       visited.reserve(static_cast<std::size_t>(options.max_iterations));
       const double tol_t = options.min_translation_step_m * scale, tol_r = options.min_rotation_step_rad * scale;
-      // A coarse level only seeds the next one: it stops at steps under kCoarseStepCells of its cell.
-      const double coarse_step = l > 0 ? kCoarseStepCells * field.level(l).resolution : 0.0;
       const double step_t = std::max(options.min_translation_step_m, coarse_step);
       const double step_r = std::max(options.min_rotation_step_rad, coarse_step);
       for (int it = 0; it < options.max_iterations; ++it) {
@@ -411,14 +431,7 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
           const std::size_t members = candidates.size();
           sum /= static_cast<double>(members);
           candidates.emplace_back(sum.x(), sum.y(), sum.z());
-          double best = std::numeric_limits<double>::infinity();
-          for (const SE2& m : candidates) {
-            const double c = totalCost(field, l, src, m, options.loss, k);
-            if (c < best) {
-              best = c;
-              T = m;
-            }
-          }
+          T = lowestCost(field, l, src, candidates, options.loss, k);
           const double gate = kCycleSpreadCells * field.level(l).resolution;
           converged = l > 0 || (spread_t <= gate && spread_r <= gate);
           if (!converged)
@@ -432,14 +445,9 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
       if (l == 0 && !converged && wide_cycle.empty() && !visited.empty()) {
         // Out of iterations without a clean cycle (the steps wander between nearby poses): the
         // estimate is the lowest-cost of the last iterates, not whichever came last.
-        double best = totalCost(field, l, src, T, options.loss, k);
-        for (auto m = visited.rbegin(); m != visited.rend() && m - visited.rbegin() < 4; ++m) {
-          const double c = totalCost(field, l, src, *m, options.loss, k);
-          if (c < best) {
-            best = c;
-            T = *m;
-          }
-        }
+        std::vector<SE2> last{T};
+        for (auto m = visited.rbegin(); m != visited.rend() && last.size() < 5; ++m) last.push_back(*m);
+        T = lowestCost(field, l, src, last, options.loss, k);
       }
     } else {
       double x[3] = {T.x(), T.y(), T.theta()};
@@ -447,14 +455,9 @@ Result matchLikelihoodField(const LikelihoodField& field, const Points2& source,
       if (options.loss == LfLoss::kHuber) loss = std::make_unique<ceres::HuberLoss>(k);
       if (options.loss == LfLoss::kCauchy) loss = std::make_unique<ceres::CauchyLoss>(k);
       FieldResiduals residuals(field.level(l), src, loss.get());
-      ceres::Problem::Options po;
-      po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-      po.enable_fast_removal = false;
-      po.disable_all_safety_checks = true;
-      ceres::Problem problem(po);
+      ceres::Problem problem(internal::singleBlockProblemOptions());
       problem.AddResidualBlock(&residuals, nullptr, x);
       ceres::Solver::Options so = internal::poseSolverOptions(options.max_iterations, 1e-10, 1e-9);
-      const double coarse_step = l > 0 ? kCoarseStepCells * field.level(l).resolution : 0.0;
       SmallStepStop stop(
           std::max(std::min(options.min_translation_step_m, options.min_rotation_step_rad), coarse_step));
       so.callbacks.push_back(&stop);

@@ -8,6 +8,16 @@
 
 namespace lidar2d::registration::internal {
 
+/// Problem options for the matchers' problems of one residual block (see robustScaling) that
+/// their solver owns: Ceres neither takes the cost function nor checks the user-built structure.
+inline ceres::Problem::Options singleBlockProblemOptions() {
+  ceres::Problem::Options po;
+  po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  po.enable_fast_removal = false;
+  po.disable_all_safety_checks = true;
+  return po;
+}
+
 /// Solver options for a 3-parameter pose problem: dense QR, one thread, no logging.
 inline ceres::Solver::Options poseSolverOptions(int max_iterations, double function_tolerance,
                                                 double parameter_tolerance) {

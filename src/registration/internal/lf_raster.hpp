@@ -49,13 +49,22 @@ struct NodeGrid {
   int w, h;
 };
 
+/// The index range [i0, i1] x [j0, j1] of the nodes of `g` inside the box [lo, hi] (empty when
+/// i0 > i1 or j0 > j1).
+struct NodeRange {
+  int i0, i1, j0, j1;
+};
+inline NodeRange nodesInBox(const NodeGrid& g, const Eigen::Vector2d& lo, const Eigen::Vector2d& hi) {
+  return {std::max(0, static_cast<int>(std::ceil((lo.x() - g.origin.x()) / g.res))),
+          std::min(g.w - 1, static_cast<int>(std::floor((hi.x() - g.origin.x()) / g.res))),
+          std::max(0, static_cast<int>(std::ceil((lo.y() - g.origin.y()) / g.res))),
+          std::min(g.h - 1, static_cast<int>(std::floor((hi.y() - g.origin.y()) / g.res)))};
+}
+
 /// Calls f(i, j, q) for every node q of `g` inside the box [lo, hi].
 template <class F>
 void forEachNodeInBox(const NodeGrid& g, const Eigen::Vector2d& lo, const Eigen::Vector2d& hi, F&& f) {
-  const int i0 = std::max(0, static_cast<int>(std::ceil((lo.x() - g.origin.x()) / g.res)));
-  const int i1 = std::min(g.w - 1, static_cast<int>(std::floor((hi.x() - g.origin.x()) / g.res)));
-  const int j0 = std::max(0, static_cast<int>(std::ceil((lo.y() - g.origin.y()) / g.res)));
-  const int j1 = std::min(g.h - 1, static_cast<int>(std::floor((hi.y() - g.origin.y()) / g.res)));
+  const auto [i0, i1, j0, j1] = nodesInBox(g, lo, hi);
   for (int j = j0; j <= j1; ++j)
     for (int i = i0; i <= i1; ++i) f(i, j, Eigen::Vector2d(g.origin.x() + i * g.res, g.origin.y() + j * g.res));
 }
@@ -76,10 +85,7 @@ void forEachNodeNearRectangle(const NodeGrid& g, const Eigen::Vector2d& a, const
       lo = lo.cwiseMin(c);
       hi = hi.cwiseMax(c);
     }
-  const int i0 = std::max(0, static_cast<int>(std::ceil((lo.x() - g.origin.x()) / g.res)));
-  const int i1 = std::min(g.w - 1, static_cast<int>(std::floor((hi.x() - g.origin.x()) / g.res)));
-  const int j0 = std::max(0, static_cast<int>(std::ceil((lo.y() - g.origin.y()) / g.res)));
-  const int j1 = std::min(g.h - 1, static_cast<int>(std::floor((hi.y() - g.origin.y()) / g.res)));
+  const auto [i0, i1, j0, j1] = nodesInBox(g, lo, hi);
   constexpr double kFlat = 1e-12;  // a coefficient this small makes the row all in or all out
   const double inv_res = 1.0 / g.res;
   // Each condition m0 <= c * (x - a.x) + k <= m1, with k linear in the row's y.
