@@ -430,6 +430,34 @@ TEST(Insertion, GuardedStretchesClearEveryPassedCellAwayFromSurfaces) {
   EXPECT_EQ(stretched_scenes, 6u);  // the guard spared cells in every scene
 }
 
+// Beam directions are reused from the previous scan only when its angles are the same: scans of
+// the same size but other angles, one after the other, put their returns where their own angles
+// say.
+TEST(Insertion, ScansWithOtherAnglesOfTheSameSizeUseTheirOwnDirections) {
+  auto map = makeMap(MapModel::kLogOdds);
+  const GridGeometry& g = map->geometry();
+  auto scan = [](double angle_min, double increment) {
+    LaserScanFields f;
+    f.angle_min = angle_min;
+    f.angle_increment = increment;
+    f.range_max = 10;
+    f.ranges = {2.0, 2.0, 2.0};
+    return LaserScan::create(f);
+  };
+  const SE2 T(0.013, 0.027, 0.0);
+  const std::vector<std::pair<double, double>> angles = {{0.0, 0.5}, {2.5, 0.5}, {2.5, -0.7}, {0.0, 0.5}};
+  for (const auto& [angle_min, increment] : angles) {
+    map->insert(scan(angle_min, increment), T);
+    for (int i = 0; i < 3; ++i) {
+      const double a = angle_min + i * increment;
+      const Eigen::Vector2d end = T.translation() + 2.0 * Eigen::Vector2d(std::cos(a), std::sin(a));
+      const auto p = map->probability(g.cellOf(end));
+      ASSERT_TRUE(p.has_value()) << "angle " << a;
+      EXPECT_GT(*p, 0.5) << "angle " << a;
+    }
+  }
+}
+
 TEST(Count, HitsOverHitsPlusMisses) {
   auto map = makeMap(MapModel::kCount);
   LaserScanFields f;

@@ -8,10 +8,12 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <optional>
+#include <vector>
 
 #include "commands.hpp"
-#include "map_output.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/core/read_ahead.hpp"
 #include "lidar2d/eval/metrics.hpp"
@@ -21,6 +23,7 @@
 #include "lidar2d/io/trajectory.hpp"
 #include "lidar2d/mapping/export.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
+#include "map_output.hpp"
 
 namespace lidar2d::cli {
 namespace {
@@ -105,9 +108,20 @@ void run(const MapArgs& a) {
                  ErrorLocation(a.log, 0, fmt::format("scan {} (time {:.6f}) {}", index, time, e.where().field)));
   };
   struct Item {
-    Prepared prepared;
+    std::unique_ptr<Prepared> prepared;
     std::size_t index = 0;
     double time = 0.0;
+  };
+  // Inserted scans' PreparedScans go back to the preparing thread, which reuses their buffers (and
+  // the beam directions, unchanged from scan to scan) instead of allocating a fresh set per scan.
+  std::mutex spare_mutex;
+  std::vector<std::unique_ptr<Prepared>> spare;
+  auto takeSpare = [&] {
+    std::lock_guard lock(spare_mutex);
+    if (spare.empty()) return std::make_unique<Prepared>();
+    std::unique_ptr<Prepared> p = std::move(spare.back());
+    spare.pop_back();
+    return p;
   };
   auto produce = [&]() -> std::optional<Item> {
     const std::optional<Frame> f = source->next();
@@ -124,9 +138,9 @@ void run(const MapArgs& a) {
                        ErrorLocation(a.log));
       T_world_robot = *pose;
     }
-    Item item{Prepared{}, f->index, f->time};
+    Item item{takeSpare(), f->index, f->time};
     try {
-      map->prepare(f->scan, T_world_robot * f->T_robot_laser, item.prepared);
+      map->prepare(f->scan, T_world_robot * f->T_robot_laser, *item.prepared);
     } catch (const Error& e) {
       throw atScan(e, f->index, f->time);
     }
@@ -136,9 +150,13 @@ void run(const MapArgs& a) {
     ReadAhead<Item> ahead(produce, 16);  // (stops and joins its thread on an exception here)
     while (std::optional<Item> item = ahead.next()) {
       try {
-        map->insert(item->prepared);
+        map->insert(*item->prepared);
       } catch (const Error& e) {
         throw atScan(e, item->index, item->time);
+      }
+      {
+        std::lock_guard lock(spare_mutex);
+        spare.push_back(std::move(item->prepared));
       }
       ++scans;
       if (progress && scans % 500 == 0) std::cerr << "\rmapped " << scans << " scans" << std::flush;

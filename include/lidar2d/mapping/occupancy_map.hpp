@@ -254,6 +254,7 @@ class OccupancyMap::PreparedScan {
   // Scratch: beam directions, returns and surface directions (laser frame; the last two for the
   // surface guard), and which beams have a return.
   std::vector<Eigen::Vector2d> units_, points_, tangents_;
+  double units_angle_min_ = 0.0, units_angle_increment_ = 0.0;  // the angles `units_` was computed for
   std::vector<std::uint8_t> hits_;
   // Surface guard: per beam and side, the nearest occluding edge it passes (a guarded interval
   // [from, to] in metres from the laser, none when to < from; the edge's beam; how many beams away).
