@@ -160,6 +160,9 @@ template <typename Cell, typename F>
   traceInSlab(grid, ray, axis, lo, hi, 0, on_pass, on_pass);
 }
 
+// (Beams are walked cell by cell although near the sensor most cells a beam passes were already
+// cleared by a neighbouring beam: clearing row runs per beam and skipping the runs already cleared
+// removed those visits but cost more per row than the walk saves; BENCHMARK.md, mapping.)
 // The cells a beam clears (log-odds, count), restricted to `slab`: each clearing stretch's cells
 // from its start to its end cell inclusive (the stretch ends lie sqrt(2) cells from any guarded
 // surface, so their cells hold none). A beam clearing up to its return (guard off) passes the cells
