@@ -149,15 +149,23 @@ std::vector<std::uint8_t> encodePng(const std::uint8_t* pixels, int width, int h
   image.height = static_cast<png_uint_32>(height);
   image.format = channels == 1 ? PNG_FORMAT_GRAY : PNG_FORMAT_BGR;
   const auto stride = static_cast<png_int_32>(row_stride);
-  png_alloc_size_t size = 0;
-  // First call sizes the output, second fills it (libpng's documented two-step use).
-  if (!png_image_write_to_memory(&image, nullptr, &size, 0, pixels, stride, nullptr))
-    throw ioError(fmt::format("PNG encoding failed: {}", image.message), ErrorLocation(path));
-  std::vector<std::uint8_t> out(size);
-  if (!png_image_write_to_memory(&image, out.data(), &size, 0, pixels, stride, nullptr))
-    throw ioError(fmt::format("PNG encoding failed: {}", image.message), ErrorLocation(path));
-  out.resize(size);
-  return out;
+  // One compression pass into a buffer of libpng's upper bound on the encoded size
+  // (PNG_IMAGE_PNG_SIZE_MAX), rather than a first pass that only sizes the output: the compression
+  // is most of the cost (half of writing a map's files). Should the bound still fall short, libpng
+  // reports the size it needs (png.h, png_image_write_to_memory) and the second call has it.
+  std::vector<std::uint8_t> out(PNG_IMAGE_PNG_SIZE_MAX(image));
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    png_alloc_size_t size = out.size();
+    if (png_image_write_to_memory(&image, out.data(), &size, 0, pixels, stride, nullptr)) {
+      out.resize(size);
+      return out;
+    }
+    if (size <= out.size()) break;  // unchanged: an error, not a short buffer
+    out.resize(size);
+    png_image_free(&image);
+    image.warning_or_error = 0;
+  }
+  throw ioError(fmt::format("PNG encoding failed: {}", image.message), ErrorLocation(path));
 }
 
 }  // namespace lidar2d::io
