@@ -489,11 +489,8 @@ class Icp {
   const std::vector<Pair>& pairs() const { return pairs_; }
   // Point-to-line: the residuals of the last search (a point pair gives two, its x and y offsets).
   const std::vector<LineTerm>& lines() const { return lines_; }
-  // Point-to-line: the normal of a pair's line ((0, 0): a point pair).
-  const Eigen::Vector2d& normalOf(const Pair& pr) const { return normal_[pr.src]; }
   const Points2& source() const { return src_; }
   const IcpTarget::Impl& target() const { return tgt_; }
-  double pointPairWeight() const { return point_w_; }
 
  private:
   const IcpTarget::Impl& tgt_;  // (the search structures themselves: the search inlines)
