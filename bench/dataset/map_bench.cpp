@@ -1,16 +1,20 @@
 // Mapping on the corrected Radish logs with their truth poses:
 // - speed: all scans inserted, per model and thread count (InsertOptions::threads; the maps are
-//   identical; 2 with and without the adaptive back-off): ms per scan, cell updates per second, share of scans split between two threads;
+//   identical; 2 with and without the adaptive back-off): ms per scan, cell updates per second, share of scans split
+//   between two threads;
+// - OccupancyMap::prepare alone, with and without the surface guard (a table of its own);
 // - consistency: a map from the even-numbered scans must explain the odd-numbered ones: the
 //   fraction of their beam endpoints (ranges under 20 m) within one cell of an occupied cell.
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <iostream>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "dataset_bench.hpp"
 #include "lidar2d/io/frame_source.hpp"
@@ -75,6 +79,7 @@ void runMapBenchmark(const std::string& data_dir) {
   std::cout << "| dataset | model | threads | scans | split scans | ms/scan | M cells traversed/s | M cell updates/s | "
                "map cells | odd endpoints explained | odd free space occupied |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::vector<std::string> prepare_rows;
   for (const auto& rel : logs) {
     const std::string path = (std::filesystem::path(data_dir) / rel).string();
     if (!std::filesystem::exists(path)) {
@@ -82,6 +87,21 @@ void runMapBenchmark(const std::string& data_dir) {
       continue;
     }
     const std::vector<Frame> frames = loadFrames(path);
+    // OccupancyMap::prepare alone (part of "ms/scan" above), with and without the surface guard.
+    for (const bool guard : {true, false}) {
+      mapping::MapOptions o;
+      if (!guard) o.insert.surface_guard_max_m = 0.0;
+      auto map = mapping::makeMap(mapping::MapModel::kLogOdds, o);
+      mapping::OccupancyMap::PreparedScan prepared;
+      double best = 1e30;
+      for (int rep = 0; rep < 5; ++rep) {
+        const auto t0 = std::chrono::steady_clock::now();
+        for (const Frame& f : frames) map->prepare(f.scan, *f.T_world_robot * f.T_robot_laser, prepared);
+        best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      }
+      prepare_rows.push_back(fmt::format("| {} | {} | {:.4f} |\n", std::filesystem::path(rel).stem().stem().string(),
+                                         guard ? "on" : "off", 1e3 * best / static_cast<double>(frames.size())));
+    }
     // The occupancy models once more without the surface guard (InsertOptions), for comparison.
     for (const auto& [model, guard] : {std::pair{mapping::MapModel::kLogOdds, true}, std::pair{mapping::MapModel::kCount, true},
                                        std::pair{mapping::MapModel::kTsdf, true}, std::pair{mapping::MapModel::kLogOdds, false},
@@ -122,6 +142,9 @@ void runMapBenchmark(const std::string& data_dir) {
       }
     }
   }
+  std::cout << "\nOccupancyMap::prepare alone (log-odds; best of 5):\n\n| dataset | surface guard | ms/scan "
+               "|\n|---|---|---|\n";
+  for (const std::string& row : prepare_rows) std::cout << row;
 }
 
 }  // namespace lidar2d::bench
