@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <set>
@@ -78,6 +79,73 @@ TEST(TraceRay, AxisAlignedAndDegenerateSegments) {
   e = traceRay({0.5, 0.5}, {2.5, 2.5}, collect);
   EXPECT_EQ(e, (CellIndex{2, 2}));
   EXPECT_EQ(v.size(), 4u);
+}
+
+// RayWalk::run takes the steps of `step()`: on random segments (some through cell corners and
+// along grid lines, where the walk's running sums decide), with random step counts and lap lengths
+// (1 makes every step a lap; lap boundaries anywhere), the cells it visits, the coordinates it
+// reports at each lap and the walk after it are those of the step loop, and a further step loop
+// continues as if `step()` had been used throughout.
+TEST(RayWalk, RunTakesTheStepsOfStep) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-40.0, 40.0);
+  std::uniform_int_distribution<int> lap_len(1, 9), coin(0, 3);
+  for (int trial = 0; trial < 4000; ++trial) {
+    Eigen::Vector2d a(u(rng), u(rng));
+    Eigen::Vector2d b = a + Eigen::Vector2d(u(rng), u(rng)) * (trial % 4 == 0 ? 0.1 : 0.8);
+    if (trial % 5 == 1) {  // grid points: the segment passes through cell corners
+      a = a.array().round();
+      b = a + Eigen::Vector2d(std::round(u(rng) / 4), std::round(u(rng) / 4));
+    } else if (trial % 5 == 2) {  // along a grid line, or parallel to an axis
+      b.y() = a.y() = coin(rng) == 0 ? std::round(a.y()) : a.y();
+    } else if (trial % 5 == 3) {  // diagonal: the crossings tie
+      b = a + Eigen::Vector2d(1, 1) * u(rng) / 3;
+    }
+    const RayWalk start(a, b);
+    // The reference: step() throughout.
+    std::vector<CellIndex> ref;
+    for (RayWalk w = start; !w.done(); w.step()) ref.push_back(w.cell());
+    const auto total = static_cast<std::int32_t>(ref.size());
+    ASSERT_EQ(total, start.stepsLeft());
+    const std::int32_t n = total == 0 ? 0 : std::uniform_int_distribution<std::int32_t>(0, total)(rng);
+    const std::int32_t lap = lap_len(rng);
+    const std::int32_t first_x = std::uniform_int_distribution<std::int32_t>(1, lap)(rng);
+    const std::int32_t first_y = std::uniform_int_distribution<std::int32_t>(1, lap)(rng);
+    // Follow the walk as a caller of run() does: by the steps, corrected at the laps.
+    RayWalk w = start;
+    CellIndex at = w.cell();
+    std::vector<CellIndex> visited;
+    std::int32_t xs = 0, ys = 0, lap_errors = 0, laps = 0;
+    w.run(
+        n, first_x, first_y, lap, [&] { visited.push_back(at); },
+        [&] {
+          at.x += start.stepX();
+          ++xs;
+        },
+        [&] {
+          at.y += start.stepY();
+          ++ys;
+        },
+        [&](std::int32_t x, std::int32_t y, bool visit) {
+          ++laps;
+          lap_errors += !(x == at.x && y == at.y);
+          lap_errors += visit != (static_cast<std::int32_t>(visited.size()) < n);  // the new cell is visited
+        });
+    ASSERT_EQ(visited.size(), static_cast<std::size_t>(n)) << "trial " << trial;
+    EXPECT_TRUE(std::equal(visited.begin(), visited.end(), ref.begin())) << "trial " << trial;
+    EXPECT_EQ(lap_errors, 0) << "trial " << trial;
+    // Laps after first_x, first_x + lap, ... x steps (and the same for y).
+    const std::int32_t expected_laps =
+        (xs >= first_x ? 1 + (xs - first_x) / lap : 0) + (ys >= first_y ? 1 + (ys - first_y) / lap : 0);
+    EXPECT_EQ(laps, expected_laps) << "trial " << trial;
+    EXPECT_EQ(w.stepsLeft(), total - n) << "trial " << trial;
+    EXPECT_EQ(w.cell(), n < total ? ref[static_cast<std::size_t>(n)] : traceRay(a, b, [](CellIndex) {}))
+        << "trial " << trial;
+    std::vector<CellIndex> rest;
+    for (; !w.done(); w.step()) rest.push_back(w.cell());
+    EXPECT_TRUE(std::equal(rest.begin(), rest.end(), ref.begin() + n, ref.end())) << "trial " << trial;
+    EXPECT_EQ(w.cell(), traceRay(a, b, [](CellIndex) {})) << "trial " << trial;
+  }
 }
 
 // floorToInt32 (the walk's and insertion's floor) equals std::floor over the int32 range: at and

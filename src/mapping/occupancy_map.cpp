@@ -69,6 +69,32 @@ class GridWalk {
     }
   }
 
+  // Calls on_cell(Cell&) for each cell the walk leaves until `stop_at` steps are left (stop_at <=
+  // stepsLeft()): the loop of `ref()` and `step()` in fewer instructions per cell (a pointer
+  // follows the walk; the tile is looked up at each tile entry instead of testing every step for
+  // one). For a walk whose every cell is accessed (no slab): it looks up the tile of each cell it
+  // visits, as `ref()`, and no other.
+  template <typename F>
+  [[gnu::always_inline]] void run(std::int32_t stop_at, F&& on_cell) {
+    const std::int32_t n = walk_.stepsLeft() - stop_at;
+    if (n <= 0) return;
+    Cell* p = &ref();
+    // x (y) steps to the next tile: the first of the next tile along the step's direction.
+    const std::int32_t mx = walk_.x() & Grid::kTileMask, my = walk_.y() & Grid::kTileMask;
+    const std::int32_t lap_x = step_x_ > 0 ? Grid::kTileSize - mx : mx + 1;
+    const std::int32_t lap_y = step_y_ > 0 ? Grid::kTileSize - my : my + 1;
+    walk_.run(
+        n, lap_x, lap_y, Grid::kTileSize, [&]() __attribute__((always_inline)) { on_cell(*p); },
+        [&]() __attribute__((always_inline)) { p += step_x_; }, [&]() __attribute__((always_inline)) { p += step_y_; },
+        [&](std::int32_t x, std::int32_t y, bool visited) {
+          // (Not inlined: once per tile.) The tile is looked up only when one of its cells is.
+          tile_ = visited ? &grid_.cellUnchecked(CellIndex{x & ~Grid::kTileMask, y & ~Grid::kTileMask}) : nullptr;
+          index_ = indexOf(CellIndex{x, y});
+          p = tile_ + index_;
+        });
+    if (tile_) index_ = p - tile_;
+  }
+
  private:
   static std::ptrdiff_t indexOf(CellIndex c) {
     return ((c.y & Grid::kTileMask) << Grid::kTileBits) | (c.x & Grid::kTileMask);
@@ -96,6 +122,13 @@ class CellAt {
  private:
   TiledGrid<Cell>& grid_;
   CellIndex c_;
+};
+
+// A cell reached by GridWalk::run, with the `ref()` of a GridWalk (for callbacks that need no more).
+template <typename Cell>
+struct RefAt {
+  Cell& cell;
+  Cell& ref() { return cell; }
 };
 
 // Calls visit(CellAt) for cell c when `slab` holds it (the end cells of the traversals).
@@ -134,11 +167,19 @@ template <int kAxis, typename Cell, typename Far, typename Near>
 
 // As above; the cells at most `near_steps` (>= 0) steps before the end cell go to on_near, the
 // others to on_far (so that a test only the last cells need is not made for every cell).
-template <typename Cell, typename Far, typename Near>
+// With kRun (on_far only calls `ref()`: log-odds and count), the far cells of the whole walk (no
+// slab) are visited by GridWalk::run.
+template <bool kRun = false, typename Cell, typename Far, typename Near>
 [[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const RayWalk& ray, int axis, std::int32_t lo,
                                                std::int32_t hi, std::int32_t near_steps, Far&& on_far, Near&& on_near) {
   if (axis < 0) {
     GridWalk<Cell> walk(grid, ray);  // traceRay
+    if constexpr (kRun)
+      walk.run(
+          near_steps, [&](Cell & c) __attribute__((always_inline)) {
+            RefAt<Cell> at{c};
+            on_far(at);
+          });
     while (walk.stepsLeft() > near_steps) {  // (near_steps >= 0: not done)
       on_far(walk);
       walk.step();
@@ -191,9 +232,9 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
         }
         on_clear(at);
       };
-      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
+      traceInSlab<true>(grid, b.walk, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
     } else {
-      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, on_clear);
+      traceInSlab<true>(grid, b.walk, slab.axis, slab.lo, slab.hi, 0, on_clear, on_clear);
     }
     visitCell(grid, slab, cellOfCoords(b.end), on_clear);  // a hit's cell keeps its hit (stamp)
     return;
@@ -213,7 +254,8 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
   const std::size_t n = b.num_clear;
   if (n == 0) return;  // (prepare gives every beam with clear_len > 0 a stretch; kept safe regardless)
   // inside(walk): the walk's cell is in the slab; past(walk): the walk has left it for good.
-  auto walkStretches = [&](auto inside, auto past) __attribute__((always_inline)) {
+  auto walkStretches = [&](auto inside, auto past, auto whole) __attribute__((always_inline)) {
+    constexpr bool kWhole = decltype(whole)::value;  // no slab: GridWalk::run for the unguarded runs
     GridWalk<Cell> walk(grid, b.walk);
     std::size_t k = 0;
     while (true) {
@@ -221,6 +263,12 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
       const std::int32_t until = st[k].until;
       const std::uint8_t lines = st[k].lines;
       if (lines == 0) {
+        if constexpr (kWhole)
+          walk.run(
+              until, [&](Cell & c) __attribute__((always_inline)) {
+                RefAt<Cell> at{c};
+                on_clear(at);
+              });
         while (walk.stepsLeft() > until) {
           if (past(walk)) return;
           if (inside(walk)) on_clear(walk);
@@ -248,8 +296,9 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
     }
   };
   if (slab.axis < 0) {
-    walkStretches([](const auto&) __attribute__((always_inline)) { return true; },
-                  [](const auto&) __attribute__((always_inline)) { return false; });
+    walkStretches(
+        [](const auto&) __attribute__((always_inline)) { return true; },
+        [](const auto&) __attribute__((always_inline)) { return false; }, std::true_type{});
   } else {
     // Only the slab's cells are accessed; the walk is monotone along each axis, so once beyond the
     // slab's far side it stays outside.
@@ -257,14 +306,15 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
     const std::int32_t lo = slab.lo, hi = slab.hi;
     const bool ascending = (axis == 0 ? b.walk.stepX() : b.walk.stepY()) > 0;
     walkStretches(
-        [axis, lo, hi](const auto& w) __attribute__((always_inline)) {
+        [ axis, lo, hi ](const auto& w) __attribute__((always_inline)) {
           const std::int32_t v = axis == 0 ? w.x() : w.y();
           return v >= lo && v < hi;
         },
-        [axis, lo, hi, ascending](const auto& w) __attribute__((always_inline)) {
+        [ axis, lo, hi, ascending ](const auto& w) __attribute__((always_inline)) {
           const std::int32_t v = axis == 0 ? w.x() : w.y();
           return ascending ? v >= hi : v < lo;
-        });
+        },
+        std::false_type{});
   }
 }
 
