@@ -53,6 +53,8 @@ class GridWalk {
   CellIndex cell() const { return walk_.cell(); }
   std::int32_t x() const { return walk_.x(); }
   std::int32_t y() const { return walk_.y(); }
+  // Whether the current cell's tile has been looked up (`ref()` looks it up when not).
+  bool hasTile() const { return tile_ != nullptr; }
   // The current cell (allocating its tile on first touch; the grid's `reserve` covers it).
   [[gnu::always_inline]] Cell& ref() {
     if (!tile_) tile_ = &grid_.cellUnchecked(CellIndex{walk_.x() & ~Grid::kTileMask, walk_.y() & ~Grid::kTileMask});
@@ -209,9 +211,16 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
                                                   const std::vector<StretchT>& stretches, const SlabT& slab,
                                                   F&& on_clear, Run&& on_run) {
   constexpr double kMargin = 1e-6;  // see below
+  auto run_all = [&on_run](Cell & cell) __attribute__((always_inline)) { on_run(cell, true); };
   auto crosses = [](const auto& g, CellIndex c) __attribute__((always_inline)) {
     const double v = g.nx * c.x + g.ny * c.y + g.offset;
     return v + g.corner_min < -kMargin && v + g.corner_max > kMargin;
+  };
+  // The same test as one value (`&`: no branch on either comparison, which the processor
+  // mispredicted often near returns and edges), for the cells that go to on_run.
+  auto crossesNoBranch = [](const auto& g, CellIndex c) __attribute__((always_inline)) {
+    const double v = g.nx * c.x + g.ny * c.y + g.offset;
+    return (v + g.corner_min < -kMargin) & (v + g.corner_max > kMargin);
   };
   if (b.clear_to_end) {
     if (b.own_guard) {
@@ -227,9 +236,24 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
         }
         on_clear(at);
       };
-      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded, on_run);
+      if (slab.axis < 0) {
+        // The whole walk: the last cells too go to on_run, with whether the guard spares them
+        // (computed without a branch on each test).
+        GridWalk<Cell> walk(grid, b.walk);
+        walk.run(b.guard_steps, run_all);
+        for (; !walk.done(); walk.step()) {
+          const CellIndex c = walk.cell();
+          const double dx = c.x + 0.5 - b.guard_return.x(), dy = c.y + 0.5 - b.guard_return.y();
+          const bool spared = crossesNoBranch(g, c) & (dx * dx + dy * dy <= b.guard_reach_sq);
+          // (A spared cell's tile is not looked up, as `guarded` does not: rarely not yet.)
+          if (spared & !walk.hasTile()) continue;
+          on_run(walk.ref(), !spared);
+        }
+      } else {
+        traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
+      }
     } else {
-      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, 0, on_clear, on_clear, on_run);
+      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, 0, on_clear, on_clear, run_all);
     }
     visitCell(grid, slab, cellOfCoords(b.end), on_clear);  // a hit's cell keeps its hit (stamp)
     return;
@@ -258,13 +282,24 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
       const std::int32_t until = st[k].until;
       const std::uint8_t lines = st[k].lines;
       if (lines == 0) {
-        if constexpr (kWhole) walk.run(until, on_run);
+        if constexpr (kWhole) walk.run(until, run_all);
         while (walk.stepsLeft() > until) {
           if (past(walk)) return;
           if (inside(walk)) on_clear(walk);
           walk.step();
         }
       } else {
+        if constexpr (kWhole) {
+          // As in the beams with only their own guard: on_run with whether a line spares the cell.
+          for (; walk.stepsLeft() > until; walk.step()) {
+            const CellIndex c = walk.cell();
+            bool spared = false;
+            for (std::size_t l = 0; l < 3; ++l)  // (`lines` is the stretch's: its bits' branches are predicted)
+              if (lines & (1u << l)) spared |= crossesNoBranch(b.guards[l], c);
+            if (spared & !walk.hasTile()) continue;
+            on_run(walk.ref(), !spared);
+          }
+        }
         while (walk.stepsLeft() > until) {
           if (past(walk)) return;
           if (inside(walk) && !spares(lines, walk.cell())) on_clear(walk);
@@ -325,9 +360,9 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
     if (listed.size() < room) listed.resize(std::max(room, 2 * listed.size()));
     Cell** const list = listed.data();
     forEachCleared(
-        grid, b, stretches, slab, on_clear, [&](Cell & cell) __attribute__((always_inline)) {
+        grid, b, stretches, slab, on_clear, [&](Cell & cell, bool take) __attribute__((always_inline)) {
           list[n] = &cell;
-          n += mark(cell);
+          n += mark(cell, take);
         });
   }
   return n;
@@ -417,10 +452,10 @@ class LogOddsMap final : public OccupancyMap {
     const std::size_t num_listed = clearAndList(
         grid_, beams, clear_stretches_, slab,
         listed, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss); },
-        [scan](LogOddsCell & cell) __attribute__((always_inline)) {
+        [scan](LogOddsCell & cell, bool take) __attribute__((always_inline)) {
           const bool fresh = cell.stamp != scan;
-          cell.stamp = scan;
-          return fresh;
+          cell.stamp = take ? scan : cell.stamp;
+          return fresh & take;
         });
     for (std::size_t i = 0; i < num_listed; ++i) {
       LogOddsCell& cell = *listed[i];
@@ -490,10 +525,10 @@ class CountMap final : public OccupancyMap {
     const std::size_t num_listed = clearAndList(
         grid_, beams, clear_stretches_, slab,
         listed, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), false); },
-        [](HitMiss & h) __attribute__((always_inline)) {
+        [](HitMiss & h, bool take) __attribute__((always_inline)) {
           const bool fresh = (h.misses & kMarker) == 0;
-          h.misses |= kMarker;
-          return fresh;
+          h.misses |= take ? kMarker : 0u;
+          return fresh & take;
         });
     for (HitMiss* h : touched) h->misses &= ~kMarker;
     for (std::size_t i = 0; i < num_listed; ++i) {
