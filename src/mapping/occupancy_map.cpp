@@ -202,9 +202,11 @@ template <typename Cell, typename F>
 // from its start to its end cell inclusive (the stretch ends lie sqrt(2) cells from any guarded
 // surface, so their cells hold none). A beam clearing up to its return (guard off) passes the cells
 // before the return's cell, as `traceRay` does; the return's cell is a hit. `on_clear(at)` gets a
-// GridWalk or a CellAt (see GridWalk). Without a slab, the unguarded runs of cells (all but the
-// last few before a guarded surface) go to on_run(Cell&) instead, by GridWalk::run, which visits at
-// most `b.walk.stepsLeft()` cells.
+// GridWalk or a CellAt (see GridWalk). Without a slab, the passed cells go to on_run(cell, take)
+// instead (all but the end cell of a beam clearing up to its return, and a stretch's last cell):
+// take is false for a cell its guard spares (whose tile may then be left unallocated, as on_clear
+// leaves it); at most `b.walk.stepsLeft()` of them per beam. The unguarded runs are walked by
+// GridWalk::run, the guarded cells with the guard's test computed without a branch.
 // (Templated on the map's protected Beam and Slab types, which it cannot name.)
 template <typename Cell, typename BeamT, typename StretchT, typename SlabT, typename F, typename Run>
 [[gnu::always_inline]] inline void forEachCleared(TiledGrid<Cell>& grid, const BeamT& b,
@@ -344,11 +346,12 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
 }
 
 // forEachCleared over all beams, for the models that update a cell at most once per scan: the
-// cells of the unguarded runs are listed in `listed` as they are walked (its first n entries, n
-// returned), and mark(cell) marks each as updated in this scan and says whether it was not yet
-// (then the list's end moves past it). The caller updates the listed cells after the walks: this
-// way no branch depends on a cell's mark, which the processor mispredicted about once in eight
-// cells (freiburg-079, callgrind). The others go to on_clear(at), as in forEachCleared.
+// cells that go to on_run there are listed in `listed` as they are walked (its first n entries, n
+// returned), and mark(cell, take) marks a taken cell as updated in this scan and says whether it
+// is taken and was not marked yet (then the list's end moves past it). The caller updates the
+// listed cells after the walks: this way no branch depends on a cell's mark, which the processor
+// mispredicted about once in eight cells (freiburg-079, callgrind). The others go to
+// on_clear(at), as in forEachCleared.
 template <typename Cell, typename BeamT, typename StretchT, typename SlabT, typename F, typename Mark>
 [[gnu::always_inline]] inline std::size_t clearAndList(TiledGrid<Cell>& grid, const std::vector<BeamT>& beams,
                                                        const std::vector<StretchT>& stretches, const SlabT& slab,
@@ -446,8 +449,8 @@ class LogOddsMap final : public OccupancyMap {
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), hit);
-    // The unguarded runs' cells (most cells) are stamped as they are walked and updated after the
-    // walks (clearAndList).
+    // Without a slab, the cleared cells are stamped as they are walked and updated after the walks
+    // (clearAndList).
     std::vector<LogOddsCell*>& listed = listed_[static_cast<std::size_t>(part)].cells;
     const std::size_t num_listed = clearAndList(
         grid_, beams, clear_stretches_, slab,
@@ -519,7 +522,7 @@ class CountMap final : public OccupancyMap {
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), true);
-    // The unguarded runs' cells are marked as they are walked and counted after the walks
+    // Without a slab, the cleared cells are marked as they are walked and counted after the walks
     // (clearAndList).
     std::vector<HitMiss*>& listed = touched_[static_cast<std::size_t>(part)].listed;
     const std::size_t num_listed = clearAndList(
