@@ -214,43 +214,35 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
                                                   F&& on_clear, Run&& on_run) {
   constexpr double kMargin = 1e-6;  // see below
   auto run_all = [&on_run](Cell & cell) __attribute__((always_inline)) { on_run(cell, true); };
-  auto crosses = [](const auto& g, CellIndex c) __attribute__((always_inline)) {
-    const double v = g.nx * c.x + g.ny * c.y + g.offset;
-    return v + g.corner_min < -kMargin && v + g.corner_max > kMargin;
-  };
-  // The same test as one value (`&`: no branch on either comparison, which the processor
-  // mispredicted often near returns and edges), for the cells that go to on_run.
-  auto crossesNoBranch = [](const auto& g, CellIndex c) __attribute__((always_inline)) {
+  // (`&`, not `&&`: one value, no branch on either comparison, which the processor mispredicted
+  // often near returns and edges.)
+  auto crosses = [](const auto& g, CellIndex c) __attribute__((always_inline))->bool {
     const double v = g.nx * c.x + g.ny * c.y + g.offset;
     return (v + g.corner_min < -kMargin) & (v + g.corner_max > kMargin);
+  };
+  // A guarded cell of a whole walk goes to on_run with whether the guard spares it; a spared
+  // cell's tile is not looked up, as on_clear's callers do not look it up (rarely not yet).
+  auto runGuarded = [&on_run](GridWalk<Cell> & walk, bool spared) __attribute__((always_inline)) {
+    if (spared & !walk.hasTile()) return;
+    on_run(walk.ref(), !spared);
   };
   if (b.clear_to_end) {
     if (b.own_guard) {
       // One walk: a beam meets its own surface line only at its return, so the cells of the beam
       // that the line passes through all lie near the return; `guard_reach_sq` caps how near.
       // Only the last `guard_steps` cells of the walk can be near the return.
-      const auto& g = b.guards[0];
+      auto ownSpares = [&b, &crosses ](CellIndex c) __attribute__((always_inline))->bool {
+        const double dx = c.x + 0.5 - b.guard_return.x(), dy = c.y + 0.5 - b.guard_return.y();
+        return crosses(b.guards[0], c) & (dx * dx + dy * dy <= b.guard_reach_sq);
+      };
       auto guarded = [&](auto& at) __attribute__((always_inline)) {
-        const CellIndex c = at.cell();
-        if (crosses(g, c)) {
-          const double dx = c.x + 0.5 - b.guard_return.x(), dy = c.y + 0.5 - b.guard_return.y();
-          if (dx * dx + dy * dy <= b.guard_reach_sq) return;
-        }
-        on_clear(at);
+        if (!ownSpares(at.cell())) on_clear(at);
       };
       if (slab.axis < 0) {
-        // The whole walk: the last cells too go to on_run, with whether the guard spares them
-        // (computed without a branch on each test).
+        // The whole walk: the last cells too go to on_run (runGuarded).
         GridWalk<Cell> walk(grid, b.walk);
         walk.run(b.guard_steps, run_all);
-        for (; !walk.done(); walk.step()) {
-          const CellIndex c = walk.cell();
-          const double dx = c.x + 0.5 - b.guard_return.x(), dy = c.y + 0.5 - b.guard_return.y();
-          const bool spared = crossesNoBranch(g, c) & (dx * dx + dy * dy <= b.guard_reach_sq);
-          // (A spared cell's tile is not looked up, as `guarded` does not: rarely not yet.)
-          if (spared & !walk.hasTile()) continue;
-          on_run(walk.ref(), !spared);
-        }
+        for (; !walk.done(); walk.step()) runGuarded(walk, ownSpares(walk.cell()));
       } else {
         traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
       }
@@ -265,11 +257,13 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
   // margin keeps a line along a cell border (a wall at a multiple of the cell size) from catching
   // the cells on both sides through rounding [cells].
   // The stretches are runs of one walk over the beam (ClearStretch), so the beam is walked once.
-  auto spares = [&b, &crosses](std::uint8_t lines, CellIndex c) __attribute__((always_inline)) {
+  // (`lines` is the stretch's, so the branches on its bits are predicted.)
+  auto spares = [&b, &crosses ](std::uint8_t lines, CellIndex c) __attribute__((always_inline))->bool {
     if (lines == 1) return crosses(b.guards[0], c);  // the common case: only the beam's own surface
+    bool spared = false;
     for (std::size_t l = 0; l < 3; ++l)
-      if ((lines & (1u << l)) && crosses(b.guards[l], c)) return true;
-    return false;
+      if (lines & (1u << l)) spared |= crosses(b.guards[l], c);
+    return spared;
   };
   const StretchT* const st = stretches.data() + b.first_clear;
   const std::size_t n = b.num_clear;
@@ -291,17 +285,8 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
           walk.step();
         }
       } else {
-        if constexpr (kWhole) {
-          // As in the beams with only their own guard: on_run with whether a line spares the cell.
-          for (; walk.stepsLeft() > until; walk.step()) {
-            const CellIndex c = walk.cell();
-            bool spared = false;
-            for (std::size_t l = 0; l < 3; ++l)  // (`lines` is the stretch's: its bits' branches are predicted)
-              if (lines & (1u << l)) spared |= crossesNoBranch(b.guards[l], c);
-            if (spared & !walk.hasTile()) continue;
-            on_run(walk.ref(), !spared);
-          }
-        }
+        if constexpr (kWhole)
+          for (; walk.stepsLeft() > until; walk.step()) runGuarded(walk, spares(lines, walk.cell()));
         while (walk.stepsLeft() > until) {
           if (past(walk)) return;
           if (inside(walk) && !spares(lines, walk.cell())) on_clear(walk);
@@ -549,7 +534,7 @@ class CountMap final : public OccupancyMap {
   // once (sharing a line made two threads 50% slower than one, measured on freiburg-079).
   struct alignas(64) Touched {
     std::vector<HitMiss*> cells;
-    std::vector<HitMiss*> listed;  // the unguarded runs' cells (the first `num_listed` of them)
+    std::vector<HitMiss*> listed;  // cells listed by clearAndList (the first `num_listed` of them)
   };
   std::array<Touched, 2> touched_;
 };
