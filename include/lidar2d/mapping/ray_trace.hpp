@@ -91,7 +91,9 @@ class RayWalk {
   /// is followed, after its on_x(), by `on_lap(x, y, visited)` with the new cell's coordinates and
   /// whether it will be visited (false: the run ends in it); the same for y.
   /// (One counter per axis counts the steps to the next lap or to the axis' last step, whichever
-  /// comes first, so that a step makes one test besides the choice of its axis.)
+  /// comes first, so that a step makes one test besides the choice of its axis. That choice stays a
+  /// branch: an integer error term chosen by a conditional move had a third of the simulated
+  /// mispredictions but half again the instructions, and was no faster; BENCHMARK.md, mapping.)
   template <typename Visit, typename OnX, typename OnY, typename OnLap>
   [[gnu::always_inline]] void run(std::int32_t n, std::int32_t first_lap_x, std::int32_t first_lap_y, std::int32_t lap,
                                   Visit&& visit, OnX&& on_x, OnY&& on_y, OnLap&& on_lap) {
