@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -354,17 +355,16 @@ TEST(Insertion, UpdatesExactlyTheTracedCellsAcrossTileBorders) {
 }
 
 // The same with the surface guard on (the default), in a scene full of occluding edges: posts a
-// few beams wide in front of a far wall, so that the beams beside each post clear in stretches
-// guarded by the post's edge line as well as by their own surface's. Whatever the stretches, a
-// beam touches only the cells it passes (and its return's), and spares cells only near a surface
-// (the guarded stretches lie within surface_guard_max_m of a return or an edge); every passed
-// cell farther than that from every return is cleared - in particular the cells where one
-// stretch of the beam's walk ends and the next begins.
-TEST(Insertion, GuardedStretchesClearEveryPassedCellAwayFromSurfaces) {
+// few beams wide in front of a far wall, so that the guard keeps the cells of each post's surface
+// and of its continuation past the post's edges. A beam touches only the cells it passes (and its
+// return's), a kept cell is left untouched, and cells are kept only near a surface (a surface
+// segment lies within surface_guard_max_m of a return): every passed cell farther than that from
+// every return is cleared.
+TEST(Insertion, SurfaceGuardKeepsCellsOnlyNearSurfaces) {
   const std::vector<Eigen::Vector2d> origins = {{0.0123, 0.0371}, {-3.2 + 0.011, 1.613}, {2.3, -3.19}};
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> heading(-std::numbers::pi, std::numbers::pi), post(1.2, 4.0);
-  std::size_t stretched_scenes = 0;
+  std::size_t guarded_scenes = 0;
   for (const MapModel model : {MapModel::kLogOdds, MapModel::kCount}) {
     for (const Eigen::Vector2d& o : origins) {
       MapOptions opt;
@@ -386,8 +386,8 @@ TEST(Insertion, GuardedStretchesClearEveryPassedCellAwayFromSurfaces) {
       map->insert(scan, T);
       const auto [passed, ends, returns, origin] = traceScan(scan, T, opt.resolution_m);
       const double inv_res = 1.0 / opt.resolution_m;
-      // A guarded stretch lies within surface_guard_max_m of its return or edge along the beam,
-      // and a cell it spares within a cell diagonal of it.
+      // A surface segment lies within surface_guard_max_m of a return, and a cell it keeps within a
+      // cell diagonal of it.
       const double near_cells = (opt.insert.surface_guard_max_m + 0.15) * inv_res;
       const int ox = static_cast<int>(std::floor(origin.x())), oy = static_cast<int>(std::floor(origin.y()));
       // Cells whose centre lies within near_cells of a return, over the checked square.
@@ -424,10 +424,73 @@ TEST(Insertion, GuardedStretchesClearEveryPassedCellAwayFromSurfaces) {
       EXPECT_EQ(stray, 0u) << where;
       EXPECT_EQ(spared_far, 0u) << where;
       EXPECT_GT(cleared_far, 5000u) << where;
-      if (spared_near > 0) ++stretched_scenes;
+      if (spared_near > 0) ++guarded_scenes;
     }
   }
-  EXPECT_EQ(stretched_scenes, 6u);  // the guard spared cells in every scene
+  EXPECT_EQ(guarded_scenes, 6u);  // the guard kept cells in every scene
+}
+
+// The surface guard keeps every cell of a wall that the scan saw: a straight wall at an angle to
+// the grid, 1 m from the laser, seen by 720 beams, many of them at grazing incidence, which cross
+// the wall's cells before their returns. Between two returns on the wall (at most
+// surface_neighbor_max_m apart), every cell the wall passes through is hit or untouched by the
+// scan, never cleared; without the guard, grazing beams clear some of them.
+TEST(Insertion, SurfaceGuardKeepsTheWallCellsBetweenReturns) {
+  const double res = 0.05;
+  const Eigen::Vector2d laser(0.0123, 0.0371);
+  // The wall: points q with n . q = c (n a unit normal), 1 m from the laser.
+  const double wall_angle = 0.07;  // [rad] from the x axis
+  const Eigen::Vector2d n(-std::sin(wall_angle), std::cos(wall_angle));
+  const double c = n.dot(laser) + 1.0;
+  LaserScanFields f;
+  f.angle_min = -std::numbers::pi;
+  f.angle_increment = 2 * std::numbers::pi / 720;
+  f.range_max = 30;
+  std::vector<Eigen::Vector2d> wall_returns;
+  for (int i = 0; i < 720; ++i) {
+    const double a = f.angle_min + i * f.angle_increment;
+    const Eigen::Vector2d u(std::cos(a), std::sin(a));
+    const double along = n.dot(u);  // the wall is hit where (laser + r u) . n = c
+    const double r = along > 1e-9 ? (c - n.dot(laser)) / along : 1e9;
+    if (r < 20) {
+      f.ranges.push_back(static_cast<float>(r));
+      wall_returns.push_back(laser + static_cast<double>(f.ranges.back()) * u);
+    } else {
+      f.ranges.push_back(std::numeric_limits<float>::infinity());  // no return
+    }
+  }
+  const LaserScan scan = LaserScan::create(f);
+  ASSERT_GT(wall_returns.size(), 300u);
+  std::size_t checked = 0;
+  std::size_t cleared[2] = {0, 0};  // guard on, off
+  for (const bool guard : {true, false}) {
+    MapOptions opt;
+    opt.resolution_m = res;
+    if (!guard) opt.insert.surface_guard_max_m = 0.0;
+    for (const MapModel model : {MapModel::kLogOdds, MapModel::kCount}) {
+      auto map = makeMap(model, opt);
+      map->insert(scan, SE2(laser.x(), laser.y(), 0.0));
+      const double miss = model == MapModel::kLogOdds ? 0.49 : 0.0;
+      std::set<std::pair<int, int>> seen;
+      for (std::size_t k = 0; k + 1 < wall_returns.size(); ++k) {
+        const Eigen::Vector2d a = wall_returns[k], b = wall_returns[k + 1];
+        if ((b - a).norm() > opt.insert.surface_neighbor_max_m) continue;
+        // The cells the wall passes through between the two returns (sampled every 0.5 mm).
+        const int steps = static_cast<int>(std::ceil((b - a).norm() / 0.0005));
+        for (int s = 0; s <= steps; ++s) {
+          const Eigen::Vector2d q = a + (b - a) * (static_cast<double>(s) / steps);
+          const CellIndex cell{static_cast<int>(std::floor(q.x() / res)), static_cast<int>(std::floor(q.y() / res))};
+          if (!seen.insert({cell.x, cell.y}).second) continue;
+          const auto p = map->probability(cell);
+          if (p && std::abs(*p - miss) < 1e-6) ++cleared[guard ? 0 : 1];
+          if (guard && model == MapModel::kLogOdds) ++checked;
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked, 300u);
+  EXPECT_EQ(cleared[0], 0u) << "wall cells cleared with the guard, of " << checked;
+  EXPECT_GT(cleared[1], 20u) << "the scene does not test the guard";
 }
 
 // Beam directions are reused from the previous scan only when its angles are the same: scans of

@@ -214,8 +214,8 @@ void addMapCommand(CLI::App& app) {
                   "beams without a return clear free space up to this distance [m] (0: ignore them)")
       ->default_val(5.0);
   sub->add_option("--surface-guard", a->options.insert.surface_guard_max_m,
-                  "logodds/count: beams do not clear the cells next to the surfaces the scan saw (grazing beams, "
-                  "edges of obstacles); longest stretch spared [m] (0: off)")
+                  "logodds/count: a scan does not clear the cells of the surfaces it saw (grazing beams, edges of "
+                  "obstacles); longest surface segment between two returns kept [m] (0: off)")
       ->default_val(1.0);
   sub->add_option("--threads", a->options.insert.threads,
                   "insertion threads: 1, or 2 (larger values too) to split each scan between two")

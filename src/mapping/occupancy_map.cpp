@@ -23,9 +23,6 @@ Error badOption(const std::string& field, const std::string& msg) {
   return invalidArgument(msg, ErrorLocation("", 0, field));
 }
 
-// Most beams on each side of an occluding edge that the surface guard spares (InsertOptions).
-constexpr std::size_t kGuardNeighbors = 8;
-
 [[gnu::always_inline]] inline CellIndex cellOfCoords(const Eigen::Vector2d& p) {
   return {floorToInt32(p.x()), floorToInt32(p.y())};
 }
@@ -53,8 +50,6 @@ class GridWalk {
   CellIndex cell() const { return walk_.cell(); }
   std::int32_t x() const { return walk_.x(); }
   std::int32_t y() const { return walk_.y(); }
-  // Whether the current cell's tile has been looked up (`ref()` looks it up when not).
-  bool hasTile() const { return tile_ != nullptr; }
   // The current cell (allocating its tile on first touch; the grid's `reserve` covers it).
   [[gnu::always_inline]] Cell& ref() {
     if (!tile_) tile_ = &grid_.cellUnchecked(CellIndex{walk_.x() & ~Grid::kTileMask, walk_.y() & ~Grid::kTileMask});
@@ -144,9 +139,9 @@ template <typename Cell, typename SlabT, typename F>
 // one run of steps: the steps before it are only walked (no cell access), the walk stops at the exit.
 // (Jumping straight to the entry would recompute t_max differently from the walk's running sums and
 // could pick the other cell at a near-corner crossing.)
-template <int kAxis, typename Cell, typename Far, typename Near>
+template <int kAxis, typename Cell, typename F>
 [[gnu::always_inline]] inline void traceInSlabAlong(TiledGrid<Cell>& grid, const RayWalk& ray, std::int32_t lo,
-                                                    std::int32_t hi, std::int32_t near_steps, Far&& on_far, Near&& on_near) {
+                                                    std::int32_t hi, F&& on_pass) {
   GridWalk<Cell> walk(grid, ray);
   // (kAxis a template parameter: the slab test then reads one coordinate without a branch.)
   auto inside = [&] {
@@ -154,193 +149,50 @@ template <int kAxis, typename Cell, typename Far, typename Near>
     return v >= lo && v < hi;
   };
   while (!walk.done() && !inside()) walk.step();
-  while (!walk.done() && inside()) {
-    if (walk.stepsLeft() > near_steps)
-      on_far(walk);
-    else
-      on_near(walk);
-    walk.step();
-  }
+  for (; !walk.done() && inside(); walk.step()) on_pass(walk);
 }
 
-// As above; the cells at most `near_steps` (>= 0) steps before the end cell go to on_near, the
-// others to on_far (so that a test only the last cells need is not made for every cell).
-// Unless `on_run` is null, the far cells of the whole walk (no slab) go to on_run(Cell&) instead,
-// by GridWalk::run.
-template <typename Cell, typename Far, typename Near, typename Run = std::nullptr_t>
+// As above, for any slab (axis -1: all cells). Unless `on_run` is null, the cells of the whole walk
+// (no slab) go to on_run(Cell&) instead, by GridWalk::run.
+template <typename Cell, typename F, typename Run = std::nullptr_t>
 [[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const RayWalk& ray, int axis, std::int32_t lo,
-                                               std::int32_t hi, std::int32_t near_steps, Far&& on_far, Near&& on_near,
-                                               Run&& on_run = nullptr) {
+                                               std::int32_t hi, F&& on_pass, Run&& on_run = nullptr) {
   if (axis < 0) {
     GridWalk<Cell> walk(grid, ray);  // traceRay
-    if constexpr (!std::is_null_pointer_v<std::remove_cvref_t<Run>>) walk.run(near_steps, on_run);
-    while (walk.stepsLeft() > near_steps) {  // (near_steps >= 0: not done)
-      on_far(walk);
-      walk.step();
-    }
-    while (!walk.done()) {
-      on_near(walk);
-      walk.step();
-    }
+    if constexpr (!std::is_null_pointer_v<std::remove_cvref_t<Run>>) walk.run(0, on_run);
+    for (; !walk.done(); walk.step()) on_pass(walk);
   } else if (axis == 0) {
-    traceInSlabAlong<0>(grid, ray, lo, hi, near_steps, on_far, on_near);
+    traceInSlabAlong<0>(grid, ray, lo, hi, on_pass);
   } else {
-    traceInSlabAlong<1>(grid, ray, lo, hi, near_steps, on_far, on_near);
+    traceInSlabAlong<1>(grid, ray, lo, hi, on_pass);
   }
-}
-
-template <typename Cell, typename F>
-[[gnu::always_inline]] inline void traceInSlab(TiledGrid<Cell>& grid, const RayWalk& ray, int axis, std::int32_t lo,
-                                               std::int32_t hi, F&& on_pass) {
-  traceInSlab(grid, ray, axis, lo, hi, 0, on_pass, on_pass);
 }
 
 // (Beams are walked cell by cell although near the sensor most cells a beam passes were already
 // cleared by a neighbouring beam: clearing row runs per beam and skipping the runs already cleared
 // removed those visits but cost more per row than the walk saves; BENCHMARK.md, mapping.)
-// The cells a beam clears (log-odds, count), restricted to `slab`: each clearing stretch's cells
-// from its start to its end cell inclusive (the stretch ends lie sqrt(2) cells from any guarded
-// surface, so their cells hold none). A beam clearing up to its return (guard off) passes the cells
-// before the return's cell, as `traceRay` does; the return's cell is a hit. `on_clear(at)` gets a
-// GridWalk or a CellAt (see GridWalk). Without a slab, the passed cells go to on_run(cell, take)
-// instead (all but the end cell of a beam clearing up to its return, and a stretch's last cell):
-// take is false for a cell its guard spares (whose tile may then be left unallocated, as on_clear
-// leaves it); at most `b.walk.stepsLeft()` of them per beam. The unguarded runs are walked by
-// GridWalk::run, the guarded cells with the guard's test computed without a branch.
+// The cells a beam clears (log-odds, count), restricted to `slab`: the cells it passes, as
+// `traceRay`, and the end cell of a beam with no return (a return's cell is a hit). `on_clear(at)`
+// gets a GridWalk or a CellAt (see GridWalk). Without a slab, the passed cells go to
+// on_run(Cell&) instead, walked by GridWalk::run: at most `b.walk.stepsLeft()` of them.
 // (Templated on the map's protected Beam and Slab types, which it cannot name.)
-template <typename Cell, typename BeamT, typename StretchT, typename SlabT, typename F, typename Run>
-[[gnu::always_inline]] inline void forEachCleared(TiledGrid<Cell>& grid, const BeamT& b,
-                                                  const std::vector<StretchT>& stretches, const SlabT& slab,
+template <typename Cell, typename BeamT, typename SlabT, typename F, typename Run>
+[[gnu::always_inline]] inline void forEachCleared(TiledGrid<Cell>& grid, const BeamT& b, const SlabT& slab,
                                                   F&& on_clear, Run&& on_run) {
-  constexpr double kMargin = 1e-6;  // see below
-  auto run_all = [&on_run](Cell & cell) __attribute__((always_inline)) { on_run(cell, true); };
-  // (`&`, not `&&`: one value, no branch on either comparison, which the processor mispredicted
-  // often near returns and edges.)
-  auto crosses = [](const auto& g, CellIndex c) __attribute__((always_inline))->bool {
-    const double v = g.nx * c.x + g.ny * c.y + g.offset;
-    return (v + g.corner_min < -kMargin) & (v + g.corner_max > kMargin);
-  };
-  // A guarded cell of a whole walk goes to on_run with whether the guard spares it; a spared
-  // cell's tile is not looked up, as on_clear's callers do not look it up (rarely not yet).
-  auto runGuarded = [&on_run](GridWalk<Cell> & walk, bool spared) __attribute__((always_inline)) {
-    if (spared & !walk.hasTile()) return;
-    on_run(walk.ref(), !spared);
-  };
-  if (b.clear_to_end) {
-    if (b.own_guard) {
-      // One walk: a beam meets its own surface line only at its return, so the cells of the beam
-      // that the line passes through all lie near the return; `guard_reach_sq` caps how near.
-      // Only the last `guard_steps` cells of the walk can be near the return.
-      auto ownSpares = [&b, &crosses ](CellIndex c) __attribute__((always_inline))->bool {
-        const double dx = c.x + 0.5 - b.guard_return.x(), dy = c.y + 0.5 - b.guard_return.y();
-        return crosses(b.guards[0], c) & (dx * dx + dy * dy <= b.guard_reach_sq);
-      };
-      auto guarded = [&](auto& at) __attribute__((always_inline)) {
-        if (!ownSpares(at.cell())) on_clear(at);
-      };
-      if (slab.axis < 0) {
-        // The whole walk: the last cells too go to on_run (runGuarded).
-        GridWalk<Cell> walk(grid, b.walk);
-        walk.run(b.guard_steps, run_all);
-        for (; !walk.done(); walk.step()) runGuarded(walk, ownSpares(walk.cell()));
-      } else {
-        traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, b.guard_steps, on_clear, guarded);
-      }
-    } else {
-      traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, 0, on_clear, on_clear, run_all);
-    }
-    visitCell(grid, slab, cellOfCoords(b.end), on_clear);  // a hit's cell keeps its hit (stamp)
-    return;
-  }
-  // A guarded stretch spares the cells whose open square one of its surface lines passes through:
-  // the cell's corners lie on both sides of the line (n . (corner - p) takes both signs). The
-  // margin keeps a line along a cell border (a wall at a multiple of the cell size) from catching
-  // the cells on both sides through rounding [cells].
-  // The stretches are runs of one walk over the beam (ClearStretch), so the beam is walked once.
-  // (`lines` is the stretch's, so the branches on its bits are predicted.)
-  auto spares = [&b, &crosses ](std::uint8_t lines, CellIndex c) __attribute__((always_inline))->bool {
-    if (lines == 1) return crosses(b.guards[0], c);  // the common case: only the beam's own surface
-    bool spared = false;
-    for (std::size_t l = 0; l < 3; ++l)
-      if (lines & (1u << l)) spared |= crosses(b.guards[l], c);
-    return spared;
-  };
-  const StretchT* const st = stretches.data() + b.first_clear;
-  const std::size_t n = b.num_clear;
-  if (n == 0) return;  // (prepare gives every beam with clear_len > 0 a stretch; kept safe regardless)
-  // inside(walk): the walk's cell is in the slab; past(walk): the walk has left it for good.
-  auto walkStretches = [&](auto inside, auto past, auto whole) __attribute__((always_inline)) {
-    constexpr bool kWhole = decltype(whole)::value;  // no slab: GridWalk::run for the unguarded runs
-    GridWalk<Cell> walk(grid, b.walk);
-    std::size_t k = 0;
-    while (true) {
-      // The cells of stretch k before its last one.
-      const std::int32_t until = st[k].until;
-      const std::uint8_t lines = st[k].lines;
-      if (lines == 0) {
-        if constexpr (kWhole) walk.run(until, run_all);
-        while (walk.stepsLeft() > until) {
-          if (past(walk)) return;
-          if (inside(walk)) on_clear(walk);
-          walk.step();
-        }
-      } else {
-        if constexpr (kWhole)
-          for (; walk.stepsLeft() > until; walk.step()) runGuarded(walk, spares(lines, walk.cell()));
-        while (walk.stepsLeft() > until) {
-          if (past(walk)) return;
-          if (inside(walk) && !spares(lines, walk.cell())) on_clear(walk);
-          walk.step();
-        }
-      }
-      // Its last cell, which the next stretch starts from (and the ones after it that end there).
-      const bool in = inside(walk);
-      bool spared = in && lines != 0 && spares(lines, walk.cell());
-      std::size_t j = k + 1;
-      for (; j < n; ++j) {
-        if (spared) spared = st[j].lines != 0 && spares(st[j].lines, walk.cell());
-        if (st[j].until < until) break;
-      }
-      if (in && !spared) on_clear(walk);
-      if (j == n || walk.done()) return;
-      walk.step();
-      k = j;
-    }
-  };
-  if (slab.axis < 0) {
-    walkStretches(
-        [](const auto&) __attribute__((always_inline)) { return true; },
-        [](const auto&) __attribute__((always_inline)) { return false; }, std::true_type{});
-  } else {
-    // Only the slab's cells are accessed; the walk is monotone along each axis, so once beyond the
-    // slab's far side it stays outside.
-    const int axis = slab.axis;
-    const std::int32_t lo = slab.lo, hi = slab.hi;
-    const bool ascending = (axis == 0 ? b.walk.stepX() : b.walk.stepY()) > 0;
-    walkStretches(
-        [ axis, lo, hi ](const auto& w) __attribute__((always_inline)) {
-          const std::int32_t v = axis == 0 ? w.x() : w.y();
-          return v >= lo && v < hi;
-        },
-        [ axis, lo, hi, ascending ](const auto& w) __attribute__((always_inline)) {
-          const std::int32_t v = axis == 0 ? w.x() : w.y();
-          return ascending ? v >= hi : v < lo;
-        },
-        std::false_type{});
-  }
+  traceInSlab(grid, b.walk, slab.axis, slab.lo, slab.hi, on_clear, on_run);
+  if (!b.hit) visitCell(grid, slab, cellOfCoords(b.end), on_clear);
 }
 
 // forEachCleared over all beams, for the models that update a cell at most once per scan: the
 // cells that go to on_run there are listed in `listed` as they are walked (its first n entries, n
-// returned), and mark(cell, take) marks a taken cell as updated in this scan and says whether it
-// is taken and was not marked yet (then the list's end moves past it). The caller updates the
-// listed cells after the walks: this way no branch depends on a cell's mark, which the processor
-// mispredicted about once in eight cells (freiburg-079, callgrind). The others go to
-// on_clear(at), as in forEachCleared.
-template <typename Cell, typename BeamT, typename StretchT, typename SlabT, typename F, typename Mark>
+// returned), and mark(cell) marks a cell as updated in this scan and says whether it was not marked
+// yet (then the list's end moves past it). The caller updates the listed cells after the walks:
+// this way no branch depends on a cell's mark, which the processor mispredicted about once in
+// eight cells (freiburg-079, callgrind). The others go to on_clear(at), as in forEachCleared.
+template <typename Cell, typename BeamT, typename SlabT, typename F, typename Mark>
 [[gnu::always_inline]] inline std::size_t clearAndList(TiledGrid<Cell>& grid, const std::vector<BeamT>& beams,
-                                                       const std::vector<StretchT>& stretches, const SlabT& slab,
-                                                       std::vector<Cell*>& listed, F&& on_clear, Mark&& mark) {
+                                                       const SlabT& slab, std::vector<Cell*>& listed, F&& on_clear,
+                                                       Mark&& mark) {
   std::size_t n = 0;
   for (const BeamT& b : beams) {
     // (Room for every cell of the beam, so that listing needs no test.)
@@ -348,12 +200,23 @@ template <typename Cell, typename BeamT, typename StretchT, typename SlabT, type
     if (listed.size() < room) listed.resize(std::max(room, 2 * listed.size()));
     Cell** const list = listed.data();
     forEachCleared(
-        grid, b, stretches, slab, on_clear, [&](Cell & cell, bool take) __attribute__((always_inline)) {
+        grid, b, slab, on_clear, [&](Cell & cell) __attribute__((always_inline)) {
           list[n] = &cell;
-          n += mark(cell, take);
+          n += mark(cell);
         });
   }
   return n;
+}
+
+// The surface guard's cells (InsertOptions::surface_guard_max_m) in `slab`: calls on_cell(Cell&)
+// for every cell each segment passes through, its end cells included (a cell may come twice).
+template <typename Cell, typename SurfaceT, typename SlabT, typename F>
+void forEachSurfaceCell(TiledGrid<Cell>& grid, const std::vector<SurfaceT>& surfaces, const SlabT& slab, F&& on_cell) {
+  typename TiledGrid<Cell>::Cursor cursor;
+  auto visit = [&](CellIndex c) {
+    if (slab.contains(c)) on_cell(grid.cellCached(c, cursor));
+  };
+  for (const SurfaceT& s : surfaces) visit(traceRay(s.from, s.to, visit));
 }
 
 CellBox unite(CellBox a, const CellBox& b) {
@@ -434,21 +297,30 @@ class LogOddsMap final : public OccupancyMap {
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), hit);
+    // The surface guard's cells get this scan's stamp, so that no beam clears them, and their own
+    // stamp back after the walks (they are not updated).
+    std::vector<std::pair<LogOddsCell*, std::uint32_t>>& guarded = listed_[static_cast<std::size_t>(part)].guarded;
+    guarded.clear();
+    forEachSurfaceCell(grid_, surfaces_, slab, [&](LogOddsCell& cell) {
+      if (cell.stamp == scan) return;
+      guarded.emplace_back(&cell, cell.stamp);
+      cell.stamp = scan;
+    });
     // Without a slab, the cleared cells are stamped as they are walked and updated after the walks
     // (clearAndList).
     std::vector<LogOddsCell*>& listed = listed_[static_cast<std::size_t>(part)].cells;
     const std::size_t num_listed = clearAndList(
-        grid_, beams, clear_stretches_, slab,
-        listed, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss); },
-        [scan](LogOddsCell & cell, bool take) __attribute__((always_inline)) {
+        grid_, beams, slab, listed, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), miss); },
+        [scan](LogOddsCell & cell) __attribute__((always_inline)) {
           const bool fresh = cell.stamp != scan;
-          cell.stamp = take ? scan : cell.stamp;
-          return fresh & take;
+          cell.stamp = scan;
+          return fresh;
         });
     for (std::size_t i = 0; i < num_listed; ++i) {
       LogOddsCell& cell = *listed[i];
       cell.value = std::clamp(cell.value + miss, lo, hi);
     }
+    for (const auto& [cell, stamp] : guarded) cell->stamp = stamp;
     return updates + num_listed;
   }
 
@@ -457,6 +329,7 @@ class LogOddsMap final : public OccupancyMap {
   // Cells of this scan listed for their update, per part (a cache line each, as for CountMap).
   struct alignas(64) Listed {
     std::vector<LogOddsCell*> cells;
+    std::vector<std::pair<LogOddsCell*, std::uint32_t>> guarded;  // the surface guard's cells, their stamps
   };
   std::array<Listed, 2> listed_;
   std::uint32_t scan_ = 0;  // number of the scan being inserted (stamps start at 0 = none)
@@ -507,16 +380,23 @@ class CountMap final : public OccupancyMap {
     };
     for (const Beam& b : beams)
       if (b.hit && slab.contains(cellOfCoords(b.end))) update(grid_.cellCached(cellOfCoords(b.end), cursor), true);
+    // The surface guard's cells are marked, so that no beam clears them, but not counted.
+    const std::size_t num_counted = touched.size();
+    forEachSurfaceCell(grid_, surfaces_, slab, [&touched](HitMiss& h) {
+      if (h.misses & kMarker) return;
+      h.misses |= kMarker;
+      touched.push_back(&h);
+    });
+    const std::size_t num_guarded = touched.size() - num_counted;
     // Without a slab, the cleared cells are marked as they are walked and counted after the walks
     // (clearAndList).
     std::vector<HitMiss*>& listed = touched_[static_cast<std::size_t>(part)].listed;
     const std::size_t num_listed = clearAndList(
-        grid_, beams, clear_stretches_, slab,
-        listed, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), false); },
-        [](HitMiss & h, bool take) __attribute__((always_inline)) {
+        grid_, beams, slab, listed, [&](auto& at) __attribute__((always_inline)) { update(at.ref(), false); },
+        [](HitMiss & h) __attribute__((always_inline)) {
           const bool fresh = (h.misses & kMarker) == 0;
-          h.misses |= take ? kMarker : 0u;
-          return fresh & take;
+          h.misses |= kMarker;
+          return fresh;
         });
     for (HitMiss* h : touched) h->misses &= ~kMarker;
     for (std::size_t i = 0; i < num_listed; ++i) {
@@ -524,7 +404,7 @@ class CountMap final : public OccupancyMap {
       const std::uint32_t v = h.misses & ~kMarker;
       h.misses = v + (v < kMarker - 1 ? 1u : 0u);
     }
-    return touched.size() + num_listed;
+    return touched.size() - num_guarded + num_listed;
   }
 
  private:
@@ -952,7 +832,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   const double beyond =
       model() == MapModel::kTsdf ? std::min(options_.tsdf.truncation_m, options_.tsdf.behind_surface_m) : 0.0;
   out.beams_.clear();
-  out.clear_stretches_.clear();
+  out.surfaces_.clear();
   CellBox& box = out.box_;
   box = CellBox{geometry_.cellOf(T_world_laser.translation()), geometry_.cellOf(T_world_laser.translation())};
   auto grow = [&box](const Eigen::Vector2d& p) {
@@ -965,10 +845,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   const double c0 = std::cos(T_world_laser.theta()), s0 = std::sin(T_world_laser.theta());
   const double guard_max = model() == MapModel::kTsdf ? 0.0 : options_.insert.surface_guard_max_m;
   const std::size_t n = scan.size();
-  // Beam directions in the laser frame, and for the surface guard (see InsertOptions::
-  // surface_guard_max_m) each return's point and the unit direction of its surface: towards the
-  // nearer neighbouring return within surface_neighbor_max_m (the farther one is more likely across
-  // a depth jump), or else facing the beam.
+  // Beam directions in the laser frame.
   // (The directions depend only on the scan's angles, which a laser keeps from scan to scan: they
   // are computed again only when those change - the sines and cosines were 2% of `lidar2d map`.)
   if (out.units_.size() != n || out.units_angle_min_ != scan.angleMin() ||
@@ -983,72 +860,55 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   }
   out.hits_.assign(n, 0);
   for (std::size_t i = 0; i < n; ++i) out.hits_[i] = scan.isValid(i) && scan.ranges()[i] <= max_range;
+  auto toWorldCells = [&](const Eigen::Vector2d& p) {  // a point in the laser frame [m] -> [cells]
+    return Eigen::Vector2d(origin + inv_res * Eigen::Vector2d(c0 * p.x() - s0 * p.y(), s0 * p.x() + c0 * p.y()));
+  };
   if (guard_max > 0) {
+    // The surface guard's segments (InsertOptions::surface_guard_max_m), in the laser frame first.
     out.points_.resize(n);
-    out.tangents_.resize(n);
     for (std::size_t i = 0; i < n; ++i)
       if (out.hits_[i]) out.points_[i] = scan.ranges()[i] * out.units_[i];
-    const double neighbor_max_sq = options_.insert.surface_neighbor_max_m * options_.insert.surface_neighbor_max_m;
+    // Each return's nearer neighbouring return, if within reach.
+    const double reach = std::min(options_.insert.surface_neighbor_max_m, guard_max);
+    out.neighbors_.assign(n, n);
     for (std::size_t i = 0; i < n; ++i) {
       if (!out.hits_[i]) continue;
-      double best = neighbor_max_sq;
-      out.tangents_[i] = Eigen::Vector2d(-out.units_[i].y(), out.units_[i].x());  // facing the beam
+      double best = reach * reach;
       for (const std::size_t j : {i - 1, i + 1}) {
         if (j >= n || !out.hits_[j]) continue;  // (i - 1 wraps to a huge index for i = 0)
-        const Eigen::Vector2d t = out.points_[j] - out.points_[i];
-        const double sq = t.squaredNorm();
+        const double sq = (out.points_[j] - out.points_[i]).squaredNorm();
         if (sq > 0 && sq <= best) {
           best = sq;
-          out.tangents_[i] = t / std::sqrt(sq);
+          out.neighbors_[i] = j;
         }
       }
     }
-  }
-  auto cross = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); };
-  // A cell holding two lines lies within sqrt(2) cells of each; two lines meeting at angle a are
-  // within d of each other for d / sin(a) either side of their crossing.
-  const double d = std::numbers::sqrt2 * geometry_.resolution();
-  // How far either side of the crossing a beam meeting a line at sin_angle stays within d of it.
-  auto halfWidth = [&](double sin_angle) { return sin_angle * guard_max > d ? d / sin_angle : guard_max; };
-  // Edges of occluding surfaces: a return nearer than its neighbour on one side (by more than
-  // 2 d, or that neighbour has no return) is the edge of a surface that the beams on that side
-  // pass. Those beams, as far as they pass within 2 d of the edge, get a guarded stretch for the
-  // edge's surface line (its own beam's surface): where they come within d of it. A beam keeps the
-  // nearest edge on each side. Along a continuous surface nothing is needed: a beam's own guarded
-  // stretch covers its neighbours' surface.
-  if (guard_max > 0) {
-    out.side_guards_.assign(2 * n, PreparedScan::SideGuard{});  // [2 i + slot]; none when to < from
-    for (std::size_t j = 0; j < n; ++j) {
-      if (!out.hits_[j]) continue;
-      const double rj = scan.ranges()[j];
-      const Eigen::Vector2d& p = out.points_[j];
-      const Eigen::Vector2d& t = out.tangents_[j];
+    auto joined = [&](std::size_t a, std::size_t b) { return out.neighbors_[a] == b || out.neighbors_[b] == a; };
+    auto cross = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); };
+    const double edge_max = 2 * std::numbers::sqrt2 * geometry_.resolution();  // 2 sqrt(2) cells [m]
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!out.hits_[i]) continue;
+      const Eigen::Vector2d& p = out.points_[i];
+      // The surface between this return and the next, when they are one surface.
+      if (i + 1 < n && out.hits_[i + 1] && joined(i, i + 1))
+        out.surfaces_.push_back({toWorldCells(p), toWorldCells(out.points_[i + 1])});
+      // Past an occluding edge towards each side: where the neighbour on that side is not on this
+      // surface and lies farther (by more than edge_max) or has no return, the surface continues
+      // (away from its other neighbour, or across the beam) to where that neighbour's beam passes
+      // it, at most edge_max.
       for (const int side : {-1, 1}) {
-        const std::size_t m = side < 0 ? j - 1 : j + 1;
+        const std::size_t m = side < 0 ? i - 1 : i + 1;
         if (m >= n) continue;  // (wraps below 0)
-        const double rm = scan.ranges()[m];
-        if (out.hits_[m] && !(rm > rj + 2 * d)) continue;  // not an edge towards this side
-        for (std::size_t k = 1; k <= kGuardNeighbors; ++k) {
-          const std::size_t i = side < 0 ? j - k : j + k;
-          if (i >= n) break;
-          const double ri = scan.ranges()[i];
-          if (std::isnan(ri) || ri <= scan.rangeMin()) continue;
-          const Eigen::Vector2d& u = out.units_[i];
-          const double along = p.dot(u), lateral = std::abs(cross(u, p));
-          if (lateral >= 2 * d) break;  // farther beams pass farther from the edge
-          if (out.hits_[i] && ri <= along) continue;  // ends before it passes the edge
-          const double sin_angle = std::abs(cross(u, t));
-          double centre = along;
-          if (sin_angle * guard_max > d) {
-            centre = cross(p, t) / cross(u, t);  // where the beam crosses the edge's surface line
-            if (std::abs(centre - along) > guard_max) continue;
-          } else if (lateral >= d) {
-            continue;  // (nearly) parallel to it and never within d
-          }
-          const double h = halfWidth(sin_angle);
-          PreparedScan::SideGuard& g = out.side_guards_[2 * i + (side > 0 ? 0 : 1)];  // seen from beam i, the edge is on the other side
-          if (g.to < g.from || k < g.beams_away) g = PreparedScan::SideGuard{centre - h, centre + h, j, k};
-        }
+        if (out.hits_[m] && (joined(i, m) || !(scan.ranges()[m] > scan.ranges()[i] + edge_max))) continue;
+        const std::size_t k = out.neighbors_[i];
+        const Eigen::Vector2d along = k < n ? Eigen::Vector2d((p - out.points_[k]).normalized())
+                                            : Eigen::Vector2d(-out.units_[i].y() * side, out.units_[i].x() * side);
+        // p + l along meets beam m where cross(u_m, p + l along) = 0.
+        const double den = cross(out.units_[m], along);
+        const double l = den != 0 ? -cross(out.units_[m], p) / den : edge_max;
+        const Eigen::Vector2d to = toWorldCells(p + (l > 0 ? std::min(l, edge_max) : edge_max) * along);
+        grow(to);
+        out.surfaces_.push_back({toWorldCells(p), to});
       }
     }
   }
@@ -1062,84 +922,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
     const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
     const Eigen::Vector2d end = origin + dir * (len * inv_res);
     grow(end);
-    Beam beam{end, RayWalk(origin, end), 0, 0, true, false, 0.0, 0, Eigen::Vector2d::Zero(), {}, r * inv_res, hit};
-    if (guard_max > 0) {
-      const Eigen::Vector2d u(ca, sa);
-      const double clear_len = hit ? r : len;
-      // Up to three guarded intervals [from, to] (metres from the laser), each with its surface
-      // line: the beam's own surface (from where the beam comes within d of it to the return) and
-      // the nearest occluding edge on each side (see above).
-      std::array<std::array<double, 2>, 3> spans{};
-      std::uint8_t lines = 0;
-      auto setLine = [&](int k, std::size_t j, double from, double to) {
-        const Eigen::Vector2d& t = out.tangents_[j];  // laser frame
-        const Eigen::Vector2d point =
-            origin + inv_res * Eigen::Vector2d(c0 * out.points_[j].x() - s0 * out.points_[j].y(), s0 * out.points_[j].x() + c0 * out.points_[j].y());
-        const Eigen::Vector2d normal(-(s0 * t.x() + c0 * t.y()), c0 * t.x() - s0 * t.y());  // world, unit
-        beam.guards[static_cast<std::size_t>(k)] =
-            GuardLine{normal.x(), normal.y(), -normal.dot(point), std::min(normal.x(), 0.0) + std::min(normal.y(), 0.0),
-                      std::max(normal.x(), 0.0) + std::max(normal.y(), 0.0)};
-        spans[static_cast<std::size_t>(k)] = {std::max(from, 0.0), std::min(to, clear_len)};
-        if (spans[static_cast<std::size_t>(k)][1] > spans[static_cast<std::size_t>(k)][0]) lines |= std::uint8_t(1u << k);
-      };
-      if (hit) {
-        const double sin_incidence = std::abs(cross(out.tangents_[i], u));
-        setLine(0, i, r - halfWidth(sin_incidence), r);
-      }
-      for (int k = 0; k < 2; ++k) {
-        const PreparedScan::SideGuard& g = out.side_guards_[2 * i + static_cast<std::size_t>(k)];
-        if (g.from <= g.to) setLine(1 + k, g.edge, g.from, g.to);
-      }
-      if (lines == 1) {  // only its own surface (no edge nearby): one walk, see forEachCleared
-        beam.own_guard = true;
-        beam.guard_return = origin + dir * (r * inv_res);
-        const double reach = (r - spans[0][0]) * inv_res + 1.0;  // (+1: the cell centre may lie ahead of the walk)
-        beam.guard_reach_sq = reach * reach;
-        // A walk over a distance L takes at most |L dx| + |L dy| + 2 steps.
-        beam.guard_steps = static_cast<std::int32_t>(std::ceil(reach * (std::abs(dir.x()) + std::abs(dir.y())))) + 2;
-      } else if (lines != 0) {
-        // Stretches between consecutive interval ends, each guarded by the lines covering it.
-        std::array<double, 8> cuts{};
-        std::size_t num_cuts = 0;
-        cuts[num_cuts++] = 0.0;
-        cuts[num_cuts++] = clear_len;
-        for (std::size_t k = 0; k < 3; ++k)
-          if (lines & (1u << k)) {
-            cuts[num_cuts++] = spans[k][0];
-            cuts[num_cuts++] = spans[k][1];
-          }
-        std::sort(cuts.begin(), cuts.begin() + static_cast<std::ptrdiff_t>(num_cuts));
-        beam.clear_to_end = false;
-        // Where a stretch ending `to` metres out ends on the beam's walk, as steps left (at most
-        // `at_most`, the previous stretch's): the walk is monotone along each axis, so it reaches a
-        // cell after as many steps as the cell lies from its first one, |dx| + |dy|.
-        const CellIndex first = beam.walk.cell();
-        const std::int32_t total = beam.walk.stepsLeft();
-        auto untilAt = [&](double to, std::int32_t at_most) {
-          const CellIndex c = cellOfCoords(origin + dir * (to * inv_res));
-          const std::int64_t steps = std::abs(std::int64_t{c.x} - first.x) + std::abs(std::int64_t{c.y} - first.y);
-          return static_cast<std::int32_t>(std::clamp<std::int64_t>(total - steps, 0, at_most));
-        };
-        for (std::size_t c = 0; c + 1 < num_cuts; ++c) {
-          const double from = cuts[c], to = cuts[c + 1];
-          if (!(to > from)) continue;
-          const double mid = 0.5 * (from + to);
-          std::uint8_t mask = 0;
-          for (std::size_t k = 0; k < 3; ++k)
-            if ((lines & (1u << k)) && spans[k][0] <= mid && mid <= spans[k][1]) mask |= std::uint8_t(1u << k);
-          if (beam.num_clear > 0 && out.clear_stretches_.back().lines == mask) {  // continues the previous stretch
-            const std::int32_t at_most =
-                beam.num_clear > 1 ? out.clear_stretches_[out.clear_stretches_.size() - 2].until : total;
-            out.clear_stretches_.back().until = untilAt(to, at_most);
-            continue;
-          }
-          const std::int32_t at_most = beam.num_clear > 0 ? out.clear_stretches_.back().until : total;
-          if (beam.num_clear++ == 0) beam.first_clear = static_cast<std::uint32_t>(out.clear_stretches_.size());
-          out.clear_stretches_.push_back({untilAt(to, at_most), mask});
-        }
-      }
-    }
-    out.beams_.push_back(beam);
+    out.beams_.push_back(Beam{end, RayWalk(origin, end), r * inv_res, hit});
   }
   out.ready_ = true;
 }
@@ -1151,7 +934,7 @@ void OccupancyMap::insert(PreparedScan& prepared) {
   // The prepared beams become the current scan's (swapped, not copied: the caller gets the old
   // buffers back to prepare the next scan into).
   std::swap(beams_, prepared.beams_);
-  std::swap(clear_stretches_, prepared.clear_stretches_);
+  std::swap(surfaces_, prepared.surfaces_);
   const Eigen::Vector2d origin = prepared.origin_;
   const CellBox box = prepared.box_;
   if (beams_.empty()) return;

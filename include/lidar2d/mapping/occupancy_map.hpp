@@ -33,18 +33,18 @@ struct InsertOptions {
   /// Beams without a return (>= range_max, +inf, or beyond max_range_m) clear free space up to
   /// this distance and mark nothing occupied; 0 ignores them [m].
   double no_return_clear_m = 5.0;
-  /// Surface guard (log-odds and count): free-space clearing spares the cells that a surface the
-  /// scan saw passes through. For each return the surface is the line through it along the nearer
-  /// neighbouring return. Near its return - from sqrt(2) * resolution / sin(a) before it (a = the
-  /// incidence angle, 90 deg = head-on), at most this far [m] - a beam clears only the cells its
-  /// own surface line does not pass through; beams passing the edge of an occluding surface (a
-  /// return much nearer than its neighbour) likewise spare the cells of that edge's line. Without
-  /// the guard, beams that graze a wall and end further along it, or pass the edge of an obstacle,
-  /// clear the cells the surface passes through (BENCHMARK.md, simulated office; docs/mapping.md).
-  /// 0 disables the guard.
+  /// Surface guard (log-odds and count): a scan does not clear the cells that a surface it saw
+  /// passes through. Its surfaces are the segments between neighbouring returns that belong to one
+  /// surface (one is the other's nearer neighbour, see surface_neighbor_max_m), at most this long
+  /// [m]; and past the edge of an occluding surface (a return nearer than its neighbour by more than
+  /// 2 sqrt(2) cells, or beside a beam with no return), the surface's continuation to where the
+  /// next beam passes it, at most 2 sqrt(2) cells. A cell those segments pass through and no beam
+  /// of the scan ends in is left as it was by that scan (neither hit nor cleared). Without the
+  /// guard, beams that graze a wall, or pass the edge of an obstacle, clear the cells the surface
+  /// passes through (BENCHMARK.md, simulated office; docs/mapping.md). 0 disables the guard.
   double surface_guard_max_m = 1.0;
-  /// Neighbouring returns farther apart than this are not taken as one surface by the surface guard;
-  /// a return with no such neighbour is taken as a surface facing the beam [m].
+  /// The surface guard takes a return and its nearer neighbouring return as one surface when they
+  /// lie at most this far apart [m] (the farther neighbour is more likely across a depth jump).
   double surface_neighbor_max_m = 1.0;
   std::size_t cell_budget = 1'000'000'000;  ///< most cells the map may span [cells]
   /// Threads inserting one scan: 1 = the calling thread only; 2 = the calling thread and one
@@ -159,31 +159,10 @@ class OccupancyMap {
 
  protected:
   explicit OccupancyMap(const MapOptions& options);
-  /// Model-specific insertion of prepared beams (all in continuous cell coordinates).
-  /// A surface line n . x + offset = 0 [cells], n a unit normal, and the extremes of n . (corner -
-  /// lower-left corner) over a cell's corners: a cell's open square holds the line when
-  /// n . c + offset + corner_min < 0 < n . c + offset + corner_max (c its lower-left corner).
-  struct GuardLine {
-    double nx = 1.0, ny = 0.0, offset = 0.0;
-    double corner_min = 0.0, corner_max = 1.0;
-  };
+  /// A beam of the scan being inserted (continuous cell coordinates).
   struct Beam {
     Eigen::Vector2d end;  ///< end of the traced segment [cells]
     RayWalk walk;         ///< the traversal from the origin to `end`, set up by `prepare`
-    /// Stretches of the beam that clear free space (log-odds, count): `clear_stretches_`
-    /// [first_clear, first_clear + num_clear), in order. Unused when `clear_to_end`.
-    std::uint32_t first_clear = 0;
-    std::uint32_t num_clear = 0;
-    bool clear_to_end = true;  ///< the only stretch runs from the origin to `end` (traced exactly so)
-    /// With `clear_to_end`: spares the cells that guards[0] (its own surface line) passes through
-    /// within `guard_reach_sq` (squared, [cells^2]) of the return at `guard_return` [cells].
-    bool own_guard = false;
-    double guard_reach_sq = 0.0;
-    std::int32_t guard_steps = 0;  ///< walk steps before the return's cell within which they lie
-    Eigen::Vector2d guard_return = Eigen::Vector2d::Zero();
-    /// Surface lines guarding its stretches (surface guard): its own return's, and the nearest
-    /// occluding edge's on each side (see `ClearStretch::lines`).
-    std::array<GuardLine, 3> guards;
     double range_cells;   ///< length of the beam up to the return [cells]
     bool hit;             ///< true: a return at `end`; false: no return (clear only)
   };
@@ -210,15 +189,13 @@ class OccupancyMap {
 
   const MapOptions options_;
   const GridGeometry geometry_;
-  /// The clearing stretches of the current scan's beams (see Beam), in order along the beam, each
-  /// a run of the cells of the beam's walk: from the previous stretch's last cell (the first
-  /// stretch: from the walk's first cell) to its own last cell, the cell of its far end, both
-  /// inclusive. A cell where stretches meet is cleared unless each of them spares it.
-  struct ClearStretch {
-    std::int32_t until;   ///< the walk's steps left in the last cell (set up by `prepare`)
-    std::uint8_t lines;   ///< bit k: spares the cells that Beam::guards[k] passes through (0: clears all)
+  /// The surface guard's segments of the current scan [cells] (see InsertOptions::
+  /// surface_guard_max_m): log-odds and count leave the cells they pass through, end cells
+  /// included, as they were unless a beam of the scan ends in them.
+  struct Surface {
+    Eigen::Vector2d from, to;
   };
-  std::vector<ClearStretch> clear_stretches_;
+  std::vector<Surface> surfaces_;
 
  private:
   struct Worker;
@@ -250,19 +227,13 @@ class OccupancyMap::PreparedScan {
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();  // the laser [cells]
   CellBox box_;                                       // every cell the beams touch
   std::vector<Beam> beams_;
-  std::vector<ClearStretch> clear_stretches_;
-  // Scratch: beam directions, returns and surface directions (laser frame; the last two for the
-  // surface guard), and which beams have a return.
-  std::vector<Eigen::Vector2d> units_, points_, tangents_;
+  std::vector<Surface> surfaces_;
+  // Scratch: beam directions and returns (laser frame; the returns for the surface guard), which
+  // beams have a return, and each return's nearer neighbour on its surface (n: none).
+  std::vector<Eigen::Vector2d> units_, points_;
   double units_angle_min_ = 0.0, units_angle_increment_ = 0.0;  // the angles `units_` was computed for
   std::vector<std::uint8_t> hits_;
-  // Surface guard: per beam and side, the nearest occluding edge it passes (a guarded interval
-  // [from, to] in metres from the laser, none when to < from; the edge's beam; how many beams away).
-  struct SideGuard {
-    double from = 0.0, to = -1.0;
-    std::size_t edge = 0, beams_away = 0;
-  };
-  std::vector<SideGuard> side_guards_;
+  std::vector<std::size_t> neighbors_;
 };
 
 /// Creates a map of the given model. Throws `lidar2d::Error` (kInvalidArgument, naming the field)
