@@ -860,6 +860,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   }
   out.hits_.assign(n, 0);
   for (std::size_t i = 0; i < n; ++i) out.hits_[i] = scan.isValid(i) && scan.ranges()[i] <= max_range;
+  out.reserve_ = CellBox{};                            // (empty)
   auto toWorldCells = [&](const Eigen::Vector2d& p) {  // a point in the laser frame [m] -> [cells]
     return Eigen::Vector2d(origin + inv_res * Eigen::Vector2d(c0 * p.x() - s0 * p.y(), s0 * p.x() + c0 * p.y()));
   };
@@ -907,7 +908,8 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
         const double den = cross(out.units_[m], along);
         const double l = den != 0 ? -cross(out.units_[m], p) / den : edge_max;
         const Eigen::Vector2d to = toWorldCells(p + (l > 0 ? std::min(l, edge_max) : edge_max) * along);
-        grow(to);
+        const CellIndex c = cellOfCoords(to);
+        out.reserve_ = unite(out.reserve_, CellBox{c, c});
         out.surfaces_.push_back({toWorldCells(p), to});
       }
     }
@@ -938,7 +940,7 @@ void OccupancyMap::insert(PreparedScan& prepared) {
   const Eigen::Vector2d origin = prepared.origin_;
   const CellBox box = prepared.box_;
   if (beams_.empty()) return;
-  beginScan(box);
+  beginScan(unite(prepared.reserve_, box));
   std::optional<std::pair<Slab, Slab>> split;
   if (options_.insert.threads >= 2) {
     if (single_left_ > 0)
