@@ -226,7 +226,7 @@ class OccupancyMap::PreparedScan {
   bool ready_ = false;                   // prepared and not yet inserted
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();  // the laser [cells]
   CellBox box_;                                       // every cell the beams touch
-  CellBox reserve_;  // box_ and every cell of the surface guard's segments (which they may leave)
+  CellBox reserve_;  // the surface guard's edge segment ends, which may lie outside box_ (reserved with it)
   std::vector<Beam> beams_;
   std::vector<Surface> surfaces_;
   // Scratch: beam directions and returns (laser frame; the returns for the surface guard), which
