@@ -357,9 +357,9 @@ TEST(Insertion, UpdatesExactlyTheTracedCellsAcrossTileBorders) {
 // The same with the surface guard on (the default), in a scene full of occluding edges: posts a
 // few beams wide in front of a far wall, so that the guard keeps the cells of each post's surface
 // and of its continuation past the post's edges. A beam touches only the cells it passes (and its
-// return's), a kept cell is left untouched, and cells are kept only near a surface (a surface
-// segment lies within surface_guard_max_m of a return): every passed cell farther than that from
-// every return is cleared.
+// return's), a kept cell is left untouched, and cells are kept only near a surface (a point of a
+// surface segment lies within half of surface_guard_max_m of a return): every passed cell farther
+// than that from every return is cleared.
 TEST(Insertion, SurfaceGuardKeepsCellsOnlyNearSurfaces) {
   const std::vector<Eigen::Vector2d> origins = {{0.0123, 0.0371}, {-3.2 + 0.011, 1.613}, {2.3, -3.19}};
   std::mt19937 rng(11);
@@ -386,9 +386,10 @@ TEST(Insertion, SurfaceGuardKeepsCellsOnlyNearSurfaces) {
       map->insert(scan, T);
       const auto [passed, ends, returns, origin] = traceScan(scan, T, opt.resolution_m);
       const double inv_res = 1.0 / opt.resolution_m;
-      // A surface segment lies within surface_guard_max_m of a return, and a cell it keeps within a
-      // cell diagonal of it.
-      const double near_cells = (opt.insert.surface_guard_max_m + 0.15) * inv_res;
+      // A segment between two returns is at most surface_guard_max_m long, so each of its points
+      // lies within half that of a return (an edge's segment: within 2 sqrt(2) cells); a cell it
+      // keeps has its centre within half a cell diagonal of such a point.
+      const double near_cells = (0.5 * opt.insert.surface_guard_max_m + 0.05) * inv_res;
       const int ox = static_cast<int>(std::floor(origin.x())), oy = static_cast<int>(std::floor(origin.y()));
       // Cells whose centre lies within near_cells of a return, over the checked square.
       constexpr int kHalf = 200, kSide = 2 * kHalf + 1;
