@@ -66,14 +66,14 @@ class GridWalk {
     }
   }
 
-  // Calls on_cell(Cell&) for each cell the walk leaves until `stop_at` steps are left (stop_at <=
-  // stepsLeft()): the loop of `ref()` and `step()` in fewer instructions per cell (a pointer
+  // Calls on_cell(Cell&) for each cell the walk leaves, up to the end cell (which it is left in):
+  // the loop of `ref()` and `step()` in fewer instructions per cell (a pointer
   // follows the walk; the tile is looked up at each tile entry instead of testing every step for
   // one). For a walk whose every cell is accessed (no slab): it looks up the tile of each cell it
   // visits, as `ref()`, and no other.
   template <typename F>
-  [[gnu::always_inline]] void run(std::int32_t stop_at, F&& on_cell) {
-    const std::int32_t n = walk_.stepsLeft() - stop_at;
+  [[gnu::always_inline]] void run(F&& on_cell) {
+    const std::int32_t n = walk_.stepsLeft();
     if (n <= 0) return;
     Cell* p = &ref();
     // x (y) steps to the next tile: the first of the next tile along the step's direction.
@@ -159,7 +159,7 @@ template <typename Cell, typename F, typename Run = std::nullptr_t>
                                                std::int32_t hi, F&& on_pass, Run&& on_run = nullptr) {
   if (axis < 0) {
     GridWalk<Cell> walk(grid, ray);  // traceRay
-    if constexpr (!std::is_null_pointer_v<std::remove_cvref_t<Run>>) walk.run(0, on_run);
+    if constexpr (!std::is_null_pointer_v<std::remove_cvref_t<Run>>) walk.run(on_run);
     for (; !walk.done(); walk.step()) on_pass(walk);
   } else if (axis == 0) {
     traceInSlabAlong<0>(grid, ray, lo, hi, on_pass);
@@ -890,9 +890,10 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
     for (std::size_t i = 0; i < n; ++i) {
       if (!out.hits_[i]) continue;
       const Eigen::Vector2d& p = out.points_[i];
+      const Eigen::Vector2d from = toWorldCells(p);
       // The surface between this return and the next, when they are one surface.
       if (i + 1 < n && out.hits_[i + 1] && joined(i, i + 1))
-        out.surfaces_.push_back({toWorldCells(p), toWorldCells(out.points_[i + 1])});
+        out.surfaces_.push_back({from, toWorldCells(out.points_[i + 1])});
       // Past an occluding edge towards each side: where the neighbour on that side is not on this
       // surface and lies farther (by more than edge_max) or has no return, the surface continues
       // (away from its other neighbour, or across the beam) to where that neighbour's beam passes
@@ -910,7 +911,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
         const Eigen::Vector2d to = toWorldCells(p + (l > 0 ? std::min(l, edge_max) : edge_max) * along);
         const CellIndex c = cellOfCoords(to);
         out.reserve_ = unite(out.reserve_, CellBox{c, c});
-        out.surfaces_.push_back({toWorldCells(p), to});
+        out.surfaces_.push_back({from, to});
       }
     }
   }
