@@ -149,8 +149,9 @@ class OccupancyMap {
   /// Total cell updates so far, for benchmarks. Log-odds and count update a cell at most once per
   /// scan (hits first); the TSDF once per beam.
   std::uint64_t cellUpdates() const { return cell_updates_; }
-  /// Total cells traversed by beams so far (each beam's cells, counted once per beam): the work
-  /// measure of the ray tracing, for benchmarks.
+  /// Total cells visited by the beams' walks so far (each beam's walked cells, counted once per
+  /// beam): the work measure of the ray tracing, for benchmarks. Log-odds and count do not walk the
+  /// cells near the laser that neighbouring beams certainly pass (see `prepare`).
   std::uint64_t cellVisits() const { return cell_visits_; }
   /// Scans inserted by two threads so far (see `InsertOptions::threads`), for benchmarks and tests.
   std::uint64_t parallelScans() const { return parallel_scans_; }
@@ -162,7 +163,9 @@ class OccupancyMap {
   /// A beam of the scan being inserted (continuous cell coordinates).
   struct Beam {
     Eigen::Vector2d end;  ///< end of the traced segment [cells]
-    RayWalk walk;         ///< the traversal from the origin to `end`, set up by `prepare`
+    /// The traversal to `end`, set up by `prepare`: from the origin, or for log-odds and count from
+    /// where the beams around it stop covering its cells (see `prepare`).
+    RayWalk walk;
     double range_cells;   ///< length of the beam up to the return [cells]
     bool hit;             ///< true: a return at `end`; false: no return (clear only)
   };
@@ -235,6 +238,7 @@ class OccupancyMap::PreparedScan {
   double units_angle_min_ = 0.0, units_angle_increment_ = 0.0;  // the angles `units_` was computed for
   std::vector<std::uint8_t> hits_;
   std::vector<std::size_t> neighbors_;
+  std::vector<double> lengths_;  // each beam's length [cells] (0: not traced)
 };
 
 /// Creates a map of the given model. Throws `lidar2d::Error` (kInvalidArgument, naming the field)
