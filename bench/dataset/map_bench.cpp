@@ -76,7 +76,7 @@ Consistency consistency(const io::OccupancyImage& map, const std::vector<Frame>&
 void runMapBenchmark(const std::string& data_dir) {
   const std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz",
                                       "corrected/infinite-corridor.log.gz"};
-  std::cout << "| dataset | model | threads | scans | split scans | ms/scan | M cells traversed/s | M cell updates/s | "
+  std::cout << "| dataset | model | threads | scans | split scans | ms/scan | M cells walked/s | M cell updates/s | "
                "map cells | odd endpoints explained | odd free space occupied |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|---|---|\n";
   std::vector<std::string> prepare_rows;
