@@ -142,7 +142,9 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Values(
         BadMapCase{"ZeroResolution", {"LOG", "--resolution", "0"}, "resolution"},
         BadMapCase{"NegativeResolution", {"LOG", "--resolution", "-0.05"}, "resolution"},
-        BadMapCase{"AbsurdResolution", {"LOG", "--resolution", "1e-9"}, "resolution"},
+        BadMapCase{"AbsurdResolution",
+                   {"LOG", "--resolution", "1e-9"},
+                   "resolution: must be between 0.0001 and 100 m (got 1e-09)"},
         BadMapCase{"OverCellBudget", {"LOG", "--resolution", "0.001", "--cell-budget", "1000000"}, "budget"},
         BadMapCase{"NegativeSurfaceGuard", {"LOG", "--surface-guard", "-1"}, "surface_guard"},
         BadMapCase{"ZeroThreads", {"LOG", "--threads", "0"}, "threads"},

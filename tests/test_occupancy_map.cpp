@@ -632,6 +632,7 @@ TEST(Insertion, WalksStartingAwayFromTheLaserUpdateTheSameCells) {
               for (int dy = -1; dy <= 1; ++dy)
                 for (int dx = -1; dx <= 1; ++dx) {
                   const CellIndex d{c.x + dx, c.y + dy};
+                  if ((at(d) & 4) != 0) continue;                    // (crossed already, by this or another beam)
                   if (!clipToCell(origin, end, d, -1e-6)) continue;  // (touched, give or take rounding)
                   const auto inner = clipToCell(origin, end, d, 1e-6);
                   const bool crossed = inner && (inner->second - inner->first) * (end - origin).norm() > 1e-6;

@@ -1,5 +1,7 @@
 #include "lidar2d/mapping/export.hpp"
 
+#include <fmt/format.h>
+
 #include <cmath>
 
 #include "lidar2d/core/error.hpp"
@@ -18,8 +20,7 @@ io::OccupancyImage toOccupancyImage(const OccupancyMap& map, int pad_cells) {
 
 std::size_t applyPrior(io::OccupancyImage& map, const io::OccupancyImage& prior) {
   if (std::abs(prior.resolution() - map.resolution()) > 1e-9 * map.resolution())
-    throw badInput("prior has resolution " + std::to_string(prior.resolution()) + " m, the map " +
-                       std::to_string(map.resolution()) + " m",
+    throw badInput(fmt::format("prior has resolution {:g} m, the map {:g} m", prior.resolution(), map.resolution()),
                    ErrorLocation("", 0, "resolution"));
   std::size_t n = 0;
   for (int row = 0; row < map.height(); ++row)

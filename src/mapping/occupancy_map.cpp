@@ -1,5 +1,7 @@
 #include "lidar2d/mapping/occupancy_map.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -1076,7 +1078,7 @@ ClassifiedGrid classify(const OccupancyMap& map, int pad_cells) {
 
 GridGeometry::GridGeometry(double resolution_m) : resolution_(resolution_m), inv_resolution_(1.0 / resolution_m) {
   if (!std::isfinite(resolution_m) || resolution_m < 1e-4 || resolution_m > 100.0)
-    throw invalidArgument("must be between 0.0001 and 100 m (got " + std::to_string(resolution_m) + ")",
+    throw invalidArgument(fmt::format("must be between 0.0001 and 100 m (got {:g})", resolution_m),
                           ErrorLocation("", 0, "resolution"));
 }
 
