@@ -287,8 +287,27 @@ TEST(LogOdds, CartographerDefaultsAndCellUpdatedOncePerBeam) {
   EXPECT_EQ(map->cellUpdates(), 21u);  // cells 0..20 along the beam, each once
 }
 
+// Beam i of `scan` from a laser at T as insertion computes it (OccupancyMap::prepare) [cells]: from
+// `laserCells(T)` to the return, or, for a beam with no return (an infinite range), `clear_m` long;
+// none for a NaN range.
+Eigen::Vector2d laserCells(const SE2& T, double resolution_m) { return T.translation() * (1.0 / resolution_m); }
+struct BeamSegment {
+  Eigen::Vector2d end;
+  bool hit;
+};
+std::optional<BeamSegment> beamSegment(const LaserScan& scan, std::size_t i, const SE2& T, double resolution_m,
+                                       double clear_m = 0.0) {
+  const double range = scan.ranges()[i];
+  if (std::isnan(range)) return std::nullopt;
+  const bool hit = std::isfinite(range);
+  const double c0 = std::cos(T.theta()), s0 = std::sin(T.theta());
+  const double a = scan.angle(i), ca = std::cos(a), sa = std::sin(a);
+  const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
+  return BeamSegment{laserCells(T, resolution_m) + dir * ((hit ? range : clear_m) * (1.0 / resolution_m)), hit};
+}
+
 // The cells the beams of `scan` pass (all but their end cells) and their end cells, from segments
-// computed as insertion computes them (OccupancyMap::prepare), and the returns [cells].
+// computed as insertion computes them (beamSegment; finite ranges), and the returns [cells].
 struct TracedScan {
   std::set<std::pair<int, int>> passed, ends;
   std::vector<Eigen::Vector2d> returns;
@@ -296,13 +315,9 @@ struct TracedScan {
 };
 TracedScan traceScan(const LaserScan& scan, const SE2& T, double resolution_m) {
   TracedScan t;
-  const double inv_res = 1.0 / resolution_m;
-  t.origin = T.translation() * inv_res;
-  const double c0 = std::cos(T.theta()), s0 = std::sin(T.theta());
+  t.origin = laserCells(T, resolution_m);
   for (std::size_t i = 0; i < scan.size(); ++i) {
-    const double a = scan.angle(i), ca = std::cos(a), sa = std::sin(a);
-    const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
-    const Eigen::Vector2d end = t.origin + dir * (scan.ranges()[i] * inv_res);
+    const Eigen::Vector2d end = beamSegment(scan, i, T, resolution_m)->end;
     const CellIndex e = traceRay(t.origin, end, [&](CellIndex c) { t.passed.insert({c.x, c.y}); });
     t.ends.insert({e.x, e.y});
     t.returns.push_back(end);
@@ -610,21 +625,18 @@ TEST(Insertion, WalksStartingAwayFromTheLaserUpdateTheSameCells) {
           map->insert(scan, T);
           // Per cell around the laser: 1 passed by a full walk (a miss), 2 a return's cell (a hit,
           // which wins); and, for the poses on corners, whether a beam crosses it (4) or touches it (8).
-          const Eigen::Vector2d origin = T.translation() / kRes;
+          const Eigen::Vector2d origin = laserCells(T, kRes);
           const int ox = static_cast<int>(std::floor(origin.x())), oy = static_cast<int>(std::floor(origin.y()));
           std::vector<int> expected((2 * kHalf + 1) * (2 * kHalf + 1), 0);
           auto at = [&](CellIndex c) -> int& {
             return expected[(c.y - oy + kHalf) * (2 * kHalf + 1) + (c.x - ox + kHalf)];
           };
-          const double c0 = std::cos(T.theta()), s0 = std::sin(T.theta());
           std::uint64_t full_walks = 0;
           for (std::size_t i = 0; i < scan.size(); ++i) {
-            const double range = scan.ranges()[i];
-            if (std::isnan(range)) continue;
-            const bool hit = std::isfinite(range);
-            const double a = scan.angle(i), ca = std::cos(a), sa = std::sin(a);
-            const Eigen::Vector2d dir(c0 * ca - s0 * sa, s0 * ca + c0 * sa);
-            const Eigen::Vector2d end = origin + dir * ((hit ? range : kClear) / kRes);
+            const auto segment = beamSegment(scan, i, T, kRes, kClear);
+            if (!segment) continue;
+            const Eigen::Vector2d end = segment->end;
+            const bool hit = segment->hit;
             const CellIndex e = traceRay(origin, end, [&](CellIndex c) {
               at(c) |= 1;
               ++full_walks;

@@ -855,7 +855,8 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   const double c0 = std::cos(T_world_laser.theta()), s0 = std::sin(T_world_laser.theta());
   const double guard_max = model() == MapModel::kTsdf ? 0.0 : options_.insert.surface_guard_max_m;
   const std::size_t n = scan.size();
-  // Beam directions in the laser frame.
+  // Beam directions in the laser frame, and how far each level of covering beams reaches per unit
+  // of a cell's width (see below).
   // (The directions depend only on the scan's angles, which a laser keeps from scan to scan: they
   // are computed again only when those change - the sines and cosines were 2% of `lidar2d map`.)
   if (out.units_.size() != n || out.units_angle_min_ != scan.angleMin() ||
@@ -865,6 +866,12 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
       const double a = scan.angle(i);
       out.units_[i] = Eigen::Vector2d(std::cos(a), std::sin(a));
     }
+    // kCoverWidth / (2 sin(h inc)) for h = 2^z, while the wedge (2 h inc) is well under a half turn.
+    // (inc is finite and non-zero: LaserScan checks it.)
+    const double inc = std::abs(scan.angleIncrement());
+    out.reach_per_width_.clear();
+    for (int z = 0; z < 63 && std::ldexp(inc, z) < 1.5; ++z)
+      out.reach_per_width_.push_back(kCoverWidth / (2.0 * std::sin(std::ldexp(inc, z))));
     out.units_angle_min_ = scan.angleMin();
     out.units_angle_increment_ = scan.angleIncrement();
   }
@@ -950,14 +957,8 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   // cell as with every walk starting at the laser (tests; BENCHMARK.md, mapping). The TSDF updates
   // each cell once per beam and walks every beam from the laser.
   const bool cover = model() != MapModel::kTsdf;
-  const double inc = std::abs(scan.angleIncrement());  // (finite and non-zero: LaserScan checks it)
-  // kCoverWidth / (2 sin(h inc)) for h = 2^z, while the wedge is well under a half turn.
-  std::array<double, 64> reach_per_width{};
-  std::size_t levels = 0;
-  while (levels < 63 && std::ldexp(inc, static_cast<int>(levels)) < 1.5) {
-    reach_per_width[levels] = kCoverWidth / (2.0 * std::sin(std::ldexp(inc, static_cast<int>(levels))));
-    ++levels;
-  }
+  const std::vector<double>& reach_per_width = out.reach_per_width_;
+  const std::size_t levels = reach_per_width.size();
   for (std::size_t i = 0; i < n; ++i) {
     const double len = out.lengths_[i];
     if (len <= 0) continue;

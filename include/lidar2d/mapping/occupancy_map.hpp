@@ -236,6 +236,7 @@ class OccupancyMap::PreparedScan {
   // beams have a return, and each return's nearer neighbour on its surface (n: none).
   std::vector<Eigen::Vector2d> units_, points_;
   double units_angle_min_ = 0.0, units_angle_increment_ = 0.0;  // the angles `units_` was computed for
+  std::vector<double> reach_per_width_;  // per level of covering beams, with `units_` (see `prepare`)
   std::vector<std::uint8_t> hits_;
   std::vector<std::size_t> neighbors_;
   std::vector<double> lengths_;  // each beam's length [cells] (0: not traced)
