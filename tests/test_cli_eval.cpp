@@ -27,8 +27,8 @@ using test::writeFile;
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-io::Trajectory path(std::size_t n, double dt = 0.2) {
-  io::Trajectory t;
+Trajectory path(std::size_t n, double dt = 0.2) {
+  Trajectory t;
   SE2 T;
   for (std::size_t i = 0; i < n; ++i) {
     t.push_back({1000.0 + dt * static_cast<double>(i), T});
@@ -66,8 +66,8 @@ TEST(CliEval, TruthAgainstItselfIsZeroAndOutputFileMatchesStdout) {
 
 TEST(CliEval, RigidTransformIsAlignedAway) {
   TempDir tmp;
-  const io::Trajectory truth = path(60);
-  io::Trajectory est = truth;
+  const Trajectory truth = path(60);
+  Trajectory est = truth;
   const SE2 T(4.0, -1.0, 0.8);
   for (auto& p : est) p.pose = T * p.pose;
   io::writeTrajectory((tmp / "truth.txt").string(), truth);
@@ -82,8 +82,8 @@ TEST(CliEval, RigidTransformIsAlignedAway) {
 
 TEST(CliEval, TimeToleranceDecidesMatching) {
   TempDir tmp;
-  const io::Trajectory truth = path(20, 1.0);  // poses 1 s apart
-  io::Trajectory est = truth;
+  const Trajectory truth = path(20, 1.0);  // poses 1 s apart
+  Trajectory est = truth;
   for (auto& p : est) p.time += 0.15;
   io::writeTrajectory((tmp / "truth.txt").string(), truth);
   io::writeTrajectory((tmp / "est.txt").string(), est);

@@ -49,8 +49,8 @@ TEST_F(CliMap, WritesMapServerFilesForEveryModel) {
     EXPECT_LT(m.map.width() * 0.05, 32.0);
     std::size_t occ = 0, free_cells = 0;
     for (auto v : m.map.cells()) {
-      occ += v == io::OccupancyImage::kOccupied;
-      free_cells += v == io::OccupancyImage::kFree;
+      occ += v == OccupancyImage::kOccupied;
+      free_cells += v == OccupancyImage::kFree;
     }
     EXPECT_GT(occ, 1000u) << model;
     EXPECT_GT(free_cells, 20 * occ) << model;
@@ -60,7 +60,7 @@ TEST_F(CliMap, WritesMapServerFilesForEveryModel) {
 }
 
 TEST_F(CliMap, PosesFileGivesTheSameMapAsTheLogsTruth) {
-  io::Trajectory traj;
+  Trajectory traj;
   auto src = io::openLog(log());
   while (auto f = src->next()) traj.push_back({f->time, *f->T_world_robot});
   io::writeTrajectory(path("truth.txt"), traj);
@@ -76,17 +76,17 @@ TEST_F(CliMap, PriorOverridesTheSensor) {
   ASSERT_EQ(runCli({"map", log(), "-o", path("base")}).exit_code, 0);
   const io::MapFile base = io::readMap(path("base.yaml"));
   // A prior map of the same geometry: a 10 x 10 cell occupied block in the middle, the rest no-opinion.
-  io::OccupancyImage prior = io::OccupancyImage::filled(base.map.width(), base.map.height(), base.map.resolution(),
-                                                        base.map.origin(), io::OccupancyImage::kUnknown);
+  OccupancyImage prior = OccupancyImage::filled(base.map.width(), base.map.height(), base.map.resolution(),
+                                                        base.map.origin(), OccupancyImage::kUnknown);
   const int c0 = base.map.width() / 2, r0 = base.map.height() / 2;
   for (int r = r0; r < r0 + 10; ++r)
-    for (int c = c0; c < c0 + 10; ++c) prior.set(c, r, io::OccupancyImage::kOccupied);
+    for (int c = c0; c < c0 + 10; ++c) prior.set(c, r, OccupancyImage::kOccupied);
   io::writeMap(path("prior.yaml"), prior);
   const auto r = runCli({"map", log(), "--prior", path("prior.yaml"), "-o", path("with-prior")});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const io::MapFile out = io::readMap(path("with-prior.yaml"));
   for (int rr = r0; rr < r0 + 10; ++rr)
-    for (int c = c0; c < c0 + 10; ++c) EXPECT_EQ(out.map.at(c, rr), io::OccupancyImage::kOccupied);
+    for (int c = c0; c < c0 + 10; ++c) EXPECT_EQ(out.map.at(c, rr), OccupancyImage::kOccupied);
   // Elsewhere the sensor's verdict stands.
   EXPECT_EQ(out.map.at(0, 0), base.map.at(0, 0));
   // The YAML says so in a comment (which map_server ignores; readMap just did too).

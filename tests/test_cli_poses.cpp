@@ -24,7 +24,7 @@ TEST(CliPoses, TruthAndOdometryInBothFormatsReadBackEqual) {
       const std::string out = (dir / (source + "-" + format + ".txt")).string();
       const auto r = test::runCli({"poses", log, "--source", source, "--format", format, "-o", out});
       ASSERT_EQ(r.exit_code, 0) << r.err;
-      const io::Trajectory t = io::readTrajectory(out);
+      const Trajectory t = io::readTrajectory(out);
       ASSERT_EQ(t.size(), frames.size());
       for (std::size_t i = 0; i < t.size(); ++i) {
         const SE2& expected = source == "truth" ? *frames[i].T_world_robot : *frames[i].T_odom_robot;

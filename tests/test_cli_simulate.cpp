@@ -104,7 +104,7 @@ TEST(Simulate, NoiseFreeLogReadsBackToTheSimulatedFrames) {
 TEST(Simulate, MapWorldAndPathFile) {
   TempDir tmp;
   // A 8 x 6 m room with a wall stub, 5 cm cells.
-  auto map = io::OccupancyImage::filled(160, 120, 0.05, SE2(-2, -1, 0), 0);
+  auto map = OccupancyImage::filled(160, 120, 0.05, SE2(-2, -1, 0), 0);
   for (int r = 0; r < 120; ++r)
     for (int c = 0; c < 160; ++c)
       if (r == 0 || c == 0 || r == 119 || c == 159 || (c == 80 && r < 60)) map.set(c, r, 100);

@@ -15,10 +15,10 @@
 namespace lidar2d::eval {
 namespace {
 
-using io::RelativePose;
-using io::Relation;
-using io::Relations;
-using io::Trajectory;
+using RelativePose;
+using Relation;
+using Relations;
+using Trajectory;
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;

@@ -58,8 +58,8 @@ const SimScans& office() {
 }
 
 // A map built by the mapping module from noise-free scans at every 5th pose of the route.
-const io::OccupancyImage& officeMap() {
-  static const io::OccupancyImage image = [] {
+const OccupancyImage& officeMap() {
+  static const OccupancyImage image = [] {
     const auto& sim = office();
     mapping::MapOptions mo;
     mo.resolution_m = 0.05;

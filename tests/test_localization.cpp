@@ -103,7 +103,7 @@ TEST(LocalizationLines, DescriptorIsRotationInvariant) {
 struct SimMap {
   sim::Scenario scenario;
   std::vector<Frame> frames;
-  io::OccupancyImage map;
+  OccupancyImage map;
 };
 
 SimMap simMap(const std::string& world, std::size_t scans) {
@@ -248,8 +248,8 @@ TEST(Localization, ScanWithNoValidBeamsIsUnknown) {
 }
 
 TEST(Localization, MapWithoutFreeSpaceIsRefused) {
-  const auto all_occupied = io::OccupancyImage::filled(40, 40, 0.05, SE2(), io::OccupancyImage::kOccupied);
-  const auto all_unknown = io::OccupancyImage::filled(40, 40, 0.05, SE2(), io::OccupancyImage::kUnknown);
+  const auto all_occupied = OccupancyImage::filled(40, 40, 0.05, SE2(), OccupancyImage::kOccupied);
+  const auto all_unknown = OccupancyImage::filled(40, 40, 0.05, SE2(), OccupancyImage::kUnknown);
   for (const auto* m : {&all_occupied, &all_unknown}) {
     try {
       (void)Database::build(*m, fastDb());
@@ -264,7 +264,7 @@ TEST(Localization, MapWithoutFreeSpaceIsRefused) {
 TEST(Localization, AbsurdGridIsRefusedUpFront) {
   // 100 m cells: a 4 km square, 4 * 10^8 positions at the 0.2 m step (the build used to run out of
   // memory); the error names the step that would do.
-  const auto huge = io::OccupancyImage::filled(40, 40, 100.0, SE2(), io::OccupancyImage::kFree);
+  const auto huge = OccupancyImage::filled(40, 40, 100.0, SE2(), OccupancyImage::kFree);
   DatabaseOptions o = fastDb();
   o.step_m = 0.2;
   try {
@@ -280,7 +280,7 @@ TEST(Localization, AbsurdGridIsRefusedUpFront) {
 TEST(Localization, AbsurdClearanceIsRefused) {
   // 1e9 m overflowed the clearance's cell count (UBSan: negation of INT_MIN; found by fuzzing the
   // options); 30 m is legal but 600 cells of a 5 cm map.
-  const auto map = io::OccupancyImage::filled(40, 40, 0.05, SE2(), io::OccupancyImage::kFree);
+  const auto map = OccupancyImage::filled(40, 40, 0.05, SE2(), OccupancyImage::kFree);
   DatabaseOptions o = fastDb();
   o.clearance_m = 1e9;
   EXPECT_TRUE(test::throwsError([&] { (void)Database::build(map, o); }, ErrorKind::kInvalidArgument, {"clearance_m"}));
@@ -325,11 +325,11 @@ TEST(LocalizationDatabase, RoundTripKeepsEverythingAndTheAnswers) {
 TEST(LocalizationDatabase, AnotherMapIsRefused) {
   const SimMap& s = office();
   Database db = Database::build(s.map, fastDb());
-  io::OccupancyImage other = s.map;
+  OccupancyImage other = s.map;
   other.set(other.width() / 2, other.height() / 2,
-            other.at(other.width() / 2, other.height() / 2) == io::OccupancyImage::kOccupied
-                ? io::OccupancyImage::kFree
-                : io::OccupancyImage::kOccupied);
+            other.at(other.width() / 2, other.height() / 2) == OccupancyImage::kOccupied
+                ? OccupancyImage::kFree
+                : OccupancyImage::kOccupied);
   try {
     Localizer loc(other, std::move(db));
     FAIL() << "no error";
@@ -396,7 +396,7 @@ TEST(LocalizationReal, IntelOddScansInEvenMapSubset) {
   auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
   for (std::size_t i = 0; i < frames.size(); i += 2)
     m->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
-  const io::OccupancyImage map = mapping::toOccupancyImage(*m);
+  const OccupancyImage map = mapping::toOccupancyImage(*m);
   DatabaseOptions o;
   o.step_m = 0.25;
   const Localizer loc(map, {}, o);

@@ -90,7 +90,7 @@ struct OfficeRoute {
   sim::Scenario scenario = sim::builtinScenario("office");
   std::vector<sim::TimedPose> route = sim::samplePath(scenario.waypoints, sim::PathOptions{});
   std::unique_ptr<sim::Simulator> simulator;  // noise-free 360 beams over 360 deg, laser at the robot's centre
-  io::OccupancyImage map;
+  OccupancyImage map;
 
   LaserScan scanAt(const SE2& T_world_robot) const { return simulator->exactScan(T_world_robot); }
 };

@@ -169,7 +169,7 @@ TEST(BuiltinWorlds, DistanceToNearestPrimitive) {
 // ---- worlds from occupancy maps ----
 
 // Reference: the ray's entry parameter into every obstacle cell (slab test), minimum over cells.
-double perCellReference(const io::OccupancyImage& m, const V& o, const V& d, double max_range) {
+double perCellReference(const OccupancyImage& m, const V& o, const V& d, double max_range) {
   double best = kInf;
   for (int r = 0; r < m.height(); ++r)
     for (int c = 0; c < m.width(); ++c) {
@@ -202,7 +202,7 @@ TEST(MapWorld, RayCastEqualsPerCellReference) {
     c = u < 0.08 ? 100 : (u < 0.12 ? -1 : (u < 0.15 ? 50 : 0));
   }
   for (int c = 0; c < w; ++c) cells[c] = 100;  // a wall along the bottom row
-  const auto map = io::OccupancyImage::create(w, h, 0.1, SE2(-1.0, 2.0, 0.0), cells);
+  const auto map = OccupancyImage::create(w, h, 0.1, SE2(-1.0, 2.0, 0.0), cells);
   const World world = worldFromMap(map);
   int compared = 0;
   for (int i = 0; i < 3000; ++i) {
@@ -223,7 +223,7 @@ TEST(MapWorld, RayCastEqualsPerCellReference) {
 
 TEST(MapWorld, EdgesAreMergedIntoRuns) {
   // A 3 x 3 block of occupied cells: four edges only.
-  auto map = io::OccupancyImage::filled(5, 5, 1.0, SE2(), 0);
+  auto map = OccupancyImage::filled(5, 5, 1.0, SE2(), 0);
   for (int r = 1; r <= 3; ++r)
     for (int c = 1; c <= 3; ++c) map.set(c, r, 100);
   const World world = worldFromMap(map);
@@ -233,7 +233,7 @@ TEST(MapWorld, EdgesAreMergedIntoRuns) {
 
 TEST(MapWorld, RandomWalkKeepsClearance) {
   // A 10 x 6 m room with a 2 m pillar block in the middle, 5 cm cells.
-  auto map = io::OccupancyImage::filled(200, 120, 0.05, SE2(1.0, -2.0, 0.0), 0);
+  auto map = OccupancyImage::filled(200, 120, 0.05, SE2(1.0, -2.0, 0.0), 0);
   for (int r = 0; r < 120; ++r)
     for (int c = 0; c < 200; ++c)
       if (r == 0 || c == 0 || r == 119 || c == 199 || (c >= 80 && c < 120 && r >= 40 && r < 80)) map.set(c, r, 100);

@@ -69,7 +69,7 @@ std::vector<SE2> odometryInTruthFrame(const std::vector<Frame>& frames) {
 /// `skip` (none when empty).
 eval::AteResult ateAgainstTruth(const std::vector<SE2>& est, const std::vector<Frame>& frames,
                                 const std::vector<bool>& skip = {}) {
-  io::Trajectory e, t;
+  Trajectory e, t;
   for (std::size_t i = 0; i < frames.size(); ++i) {
     if (!skip.empty() && skip[i]) continue;
     e.push_back({frames[i].time, est[i]});

@@ -69,7 +69,7 @@ RunResult runSlam(const std::vector<Frame>& frames, const SlamOptions& o) {
   for (const auto& f : frames) slam.add(f);
   slam.finish();
   const auto traj = slam.trajectory();
-  io::Trajectory est, truth;
+  Trajectory est, truth;
   for (std::size_t i = 0; i < frames.size(); ++i) {
     est.push_back({frames[i].time, traj[i].T_world_robot});
     truth.push_back({frames[i].time, *frames[i].T_world_robot});

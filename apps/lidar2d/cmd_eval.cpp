@@ -53,10 +53,10 @@ const char* toString(io::PoseFileKind k) {
 
 /// The poses of a log's frames, keyed by the frames' times. `required`: a frame lacking the pose is
 /// an error naming it; otherwise such frames are left out (and counted in `missing`).
-io::Trajectory logPoses(const std::string& path, const io::ReaderOptions& reader, PoseSource from, bool required,
+Trajectory logPoses(const std::string& path, const io::ReaderOptions& reader, PoseSource from, bool required,
                         std::size_t& missing) {
   auto source = io::openLog(path, reader);
-  io::Trajectory out;
+  Trajectory out;
   missing = 0;
   const char* what = from == PoseSource::kOdometry ? "odometry" : "ground-truth";
   while (auto f = source->next()) {
@@ -75,12 +75,12 @@ io::Trajectory logPoses(const std::string& path, const io::ReaderOptions& reader
   return out;
 }
 
-double minTime(const io::Trajectory& t) {
+double minTime(const Trajectory& t) {
   double v = t.front().time;
   for (const auto& p : t) v = std::min(v, p.time);
   return v;
 }
-double maxTime(const io::Trajectory& t) {
+double maxTime(const Trajectory& t) {
   double v = t.front().time;
   for (const auto& p : t) v = std::max(v, p.time);
   return v;
@@ -100,7 +100,7 @@ void run(const EvalArgs& args) {
     throw CLI::ValidationError("--pairs", "needs truth poses (a trajectory or a log), not a relations file");
 
   // ---- estimate ----
-  io::Trajectory est;
+  Trajectory est;
   Json je{{"file", args.est}, {"kind", toString(est_kind)}};
   switch (est_kind) {
     case io::PoseFileKind::kRelations:
@@ -120,8 +120,8 @@ void run(const EvalArgs& args) {
 
   // ---- truth ----
   Json jt{{"file", args.truth}, {"kind", toString(truth_kind)}};
-  io::Trajectory ref;
-  io::Relations relations;
+  Trajectory ref;
+  Relations relations;
   switch (truth_kind) {
     case io::PoseFileKind::kRelations:
       relations = io::readRelations(args.truth);

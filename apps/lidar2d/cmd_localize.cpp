@@ -50,7 +50,7 @@ io::MapFile readMapChecked(const std::string& path) { return io::readMap(path); 
 
 // Builds the database of `map`, with its progress on a terminal unless `quiet` (a large map's
 // positions take minutes); errors name `map_path`.
-localization::Database buildDatabase(const io::OccupancyImage& map, const localization::DatabaseOptions& o, bool quiet,
+localization::Database buildDatabase(const OccupancyImage& map, const localization::DatabaseOptions& o, bool quiet,
                                      const std::string& map_path) {
   ProgressLine line(quiet);
   auto report = [](std::size_t done, std::size_t total, void* user) {

@@ -58,13 +58,13 @@ class TrajectoryPoses {
 
  private:
   std::string path_;
-  io::Trajectory traj_;
+  Trajectory traj_;
   eval::TimeIndex index_;
   double max_dt_;
 };
 
-io::OccupancyImage readPriorImage(const std::string& path, const io::OccupancyImage& map, std::size_t& overridden) {
-  io::OccupancyImage out = map;
+OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map, std::size_t& overridden) {
+  OccupancyImage out = map;
   const std::string ext = std::filesystem::path(path).extension().string();
   try {
     if (ext == ".yaml" || ext == ".yml") {
@@ -80,7 +80,7 @@ io::OccupancyImage readPriorImage(const std::string& path, const io::OccupancyIm
       for (int c = 0; c < img.width; ++c) {
         const std::uint8_t v = img.value[static_cast<std::size_t>(img.height - 1 - r) * w + static_cast<std::size_t>(c)];
         cells[static_cast<std::size_t>(r) * w + static_cast<std::size_t>(c)] =
-            v < 50 ? io::OccupancyImage::kOccupied : (v > 250 ? io::OccupancyImage::kFree : io::OccupancyImage::kUnknown);
+            v < 50 ? OccupancyImage::kOccupied : (v > 250 ? OccupancyImage::kFree : OccupancyImage::kUnknown);
       }
     overridden = mapping::applyPriorSameSize(out, cells, img.width, img.height);
     return out;
@@ -164,7 +164,7 @@ void run(const MapArgs& a) {
   }
   if (progress) std::cerr << "\r";
   if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
-  io::OccupancyImage image = mapping::toOccupancyImage(*map);
+  OccupancyImage image = mapping::toOccupancyImage(*map);
   std::size_t overridden = 0;
   if (!a.prior.empty()) image = readPriorImage(a.prior, image, overridden);
   std::string comment = fmt::format("lidar2d map: {} model, {} scans of {}", mapping::toString(a.model), scans,

@@ -112,8 +112,8 @@ void run(const MatchArgs& a) {
   constexpr std::size_t kChunk = 128;
   std::optional<registration::PreparedTarget> prev, prev_then;  // the last frame of the previous chunk
   std::optional<Frame> prev_frame;
-  std::vector<io::RelativePose> pairs;
-  io::Trajectory truth;
+  std::vector<RelativePose> pairs;
+  Trajectory truth;
   double match_s = 0.0;  // preparation and matching, summed over the threads
   std::size_t scans = 0, converged = 0;
   std::vector<Frame> chunk;

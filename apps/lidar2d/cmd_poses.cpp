@@ -27,7 +27,7 @@ struct PosesArgs {
 
 void run(const PosesArgs& a) {
   auto src = io::openLog(a.log, a.reader);
-  io::Trajectory traj;
+  Trajectory traj;
   const char* what = a.source == PoseKind::kTruth ? "truth" : "odometry";
   while (auto f = src->next()) {
     const std::optional<SE2>& pose = a.source == PoseKind::kTruth ? f->T_world_robot : f->T_odom_robot;

@@ -126,7 +126,7 @@ void run(const SimulateArgs& a) {
     }
   }
   if (!a.path.empty()) {
-    for (const io::StampedPose& p : io::readTrajectory(a.path)) truth.push_back({p.time, p.pose});
+    for (const StampedPose& p : io::readTrajectory(a.path)) truth.push_back({p.time, p.pose});
     if (truth.empty()) throw badInput("trajectory has no poses", ErrorLocation(a.path));
     if (a.scans > 0 && a.scans < truth.size()) truth.resize(a.scans);
   }

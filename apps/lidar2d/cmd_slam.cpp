@@ -248,13 +248,13 @@ void run(const SlamArgs& a) {
   auto map = mapping::makeMap(a.model, mo);
   for (std::size_t i = 0; i < frames.size(); ++i)
     map->insert(frames[i].scan, trajectory[i].T_world_robot * frames[i].T_robot_laser);
-  const io::OccupancyImage image = mapping::toOccupancyImage(*map);
+  const OccupancyImage image = mapping::toOccupancyImage(*map);
   const double map_seconds = secondsSince(t_map);
 
   fs::create_directories(a.dir, ec);
   if (ec) throw ioError(fmt::format("cannot create the output folder: {}", ec.message()), ErrorLocation(a.dir));
   const std::string dir = a.dir;
-  io::Trajectory traj;
+  Trajectory traj;
   traj.reserve(trajectory.size());
   for (std::size_t i = 0; i < trajectory.size(); ++i) {
     const auto& e = trajectory[i];

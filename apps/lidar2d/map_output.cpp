@@ -6,19 +6,19 @@
 
 namespace lidar2d::cli {
 
-std::vector<std::uint8_t> encodeMapPng(const io::OccupancyImage& map, const std::string& path) {
+std::vector<std::uint8_t> encodeMapPng(const OccupancyImage& map, const std::string& path) {
   const auto w = static_cast<std::size_t>(map.width());
   std::vector<std::uint8_t> img(w * static_cast<std::size_t>(map.height()));
   for (int row = 0; row < map.height(); ++row)
     for (int col = 0; col < map.width(); ++col) {
       const std::int8_t v = map.at(col, row);
       img[static_cast<std::size_t>(map.height() - 1 - row) * w + static_cast<std::size_t>(col)] =
-          v == io::OccupancyImage::kOccupied ? 0 : (v == io::OccupancyImage::kFree ? 255 : 160);
+          v == OccupancyImage::kOccupied ? 0 : (v == OccupancyImage::kFree ? 255 : 160);
     }
   return io::encodePng(img.data(), map.width(), map.height(), 1, w, path);
 }
 
-std::vector<std::string> writeMapFiles(const std::string& prefix, const io::OccupancyImage& map,
+std::vector<std::string> writeMapFiles(const std::string& prefix, const OccupancyImage& map,
                                        const std::string& yaml_comment) {
   const std::string yaml = prefix + ".yaml";
   const std::string pgm = prefix + ".pgm";

@@ -63,7 +63,7 @@ std::string escape(const std::string& s) {
 }  // namespace
 
 std::string slamReportHtml(const ReportInput& in) {
-  const io::OccupancyImage& map = in.map;
+  const OccupancyImage& map = in.map;
   const double res = map.resolution();
   const SE2 T_map_world = map.origin().inverse();
   const int W = map.width(), H = map.height();

@@ -15,7 +15,7 @@ struct ReportInput {
   const std::string& log;
   const slam::Slam& slam;
   const std::vector<slam::ScanEstimate>& trajectory;
-  const io::OccupancyImage& map;
+  const OccupancyImage& map;
   const nlohmann::ordered_json& summary;
 };
 

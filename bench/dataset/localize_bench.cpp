@@ -43,7 +43,7 @@ bool near(const SE2& a, const SE2& b, double m = 0.3, double deg = 5.0) {
   return e.translation().norm() <= m && std::abs(e.theta()) <= deg * kDeg;
 }
 
-io::OccupancyImage evenMap(const std::vector<Frame>& frames) {
+OccupancyImage evenMap(const std::vector<Frame>& frames) {
   mapping::MapOptions o;
   auto m = mapping::makeMap(mapping::MapModel::kLogOdds, o);
   for (std::size_t i = 0; i < frames.size(); i += 2)
@@ -74,7 +74,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     }
     const std::vector<Frame> frames = loadFrames(path);
     const std::string name = std::filesystem::path(log).stem().stem().string();
-    const io::OccupancyImage map = evenMap(frames);
+    const OccupancyImage map = evenMap(frames);
     if (!bo.save_maps.empty()) {
       std::filesystem::create_directories(bo.save_maps);
       io::writeMap((std::filesystem::path(bo.save_maps) / (name + "-even.yaml")).string(), map);
@@ -149,7 +149,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     const auto truth = sim::samplePath(sc.waypoints, {});
     sim::SimulatorOptions so;
     const std::vector<Frame> frames = sim::simulate(sc.world, truth, so.noiseFree());
-    const io::OccupancyImage map = evenMap(frames);
+    const OccupancyImage map = evenMap(frames);
     localization::Localizer loc(map, bo.loc, bo.db);
     std::size_t n = 0, declined = 0, all_listed = 0, answered_one = 0;
     std::vector<double> ms;

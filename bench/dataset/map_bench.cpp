@@ -38,11 +38,11 @@ struct Consistency {
                              // return, every 0.25 m) that fall in occupied cells
 };
 
-Consistency consistency(const io::OccupancyImage& map, const std::vector<Frame>& frames, std::size_t first,
+Consistency consistency(const OccupancyImage& map, const std::vector<Frame>& frames, std::size_t first,
                         double max_range) {
   std::size_t n = 0, ok = 0, free_n = 0, free_occ = 0;
   auto occupied = [&map](int col, int row) {
-    return map.contains(col, row) && map.at(col, row) == io::OccupancyImage::kOccupied;
+    return map.contains(col, row) && map.at(col, row) == OccupancyImage::kOccupied;
   };
   for (std::size_t i = first; i < frames.size(); i += 2) {
     const Frame& f = frames[i];
@@ -112,7 +112,7 @@ void runMapBenchmark(const std::string& data_dir) {
       auto even = mapping::makeMap(model, o);
       for (std::size_t i = 0; i < frames.size(); i += 2)
         even->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
-      const io::OccupancyImage image = mapping::toOccupancyImage(*even);
+      const OccupancyImage image = mapping::toOccupancyImage(*even);
       const Consistency c = consistency(image, frames, 1, 20.0);
       // Threads 2 twice: with the adaptive back-off (default) and splitting every scan worth it.
       for (const auto& [threads, adaptive] : {std::pair{1u, true}, std::pair{2u, true}, std::pair{2u, false}}) {

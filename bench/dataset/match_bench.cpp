@@ -47,11 +47,11 @@ bool withinBar(const SE2& error) { return error.translation().norm() < 0.1 && st
 
 // `then`: when given, a second matcher refines each result of the first (for example correlative
 // search, then point-to-line ICP from its winner); its target preparation is timed too.
-Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, const io::Trajectory& truth,
+Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, const Trajectory& truth,
              const registration::MatcherOptions& options,
              const std::optional<registration::MatcherOptions>& then = std::nullopt) {
   Row row;
-  std::vector<io::RelativePose> pairs;
+  std::vector<RelativePose> pairs;
   std::vector<double> ms;
   pairs.reserve(points.size());
   ms.reserve(points.size());
@@ -152,7 +152,7 @@ FromTruth matchFromTruth(const Points2& target, const Points2& source, const SE2
 // different costs (p2p, p2l, lf). Where all three miss the bar (10 cm, 2 deg) yet agree with each
 // other (within 3 cm and 0.5 deg), the scans themselves support a relative pose the corrected poses
 // do not: those pairs bound the success rate any scan matcher can reach against this truth.
-void runTruthCheck(const std::string& name, const std::vector<Points2>& points, const io::Trajectory& truth) {
+void runTruthCheck(const std::string& name, const std::vector<Points2>& points, const Trajectory& truth) {
   std::size_t any_fail = 0, all_fail = 0, all_fail_agree = 0;
   std::vector<std::string> listed;
   for (std::size_t k = 1; k < points.size(); ++k) {
@@ -217,7 +217,7 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
     };
     std::vector<Case> cases;
     std::size_t far = 0, unmatched = 0;
-    for (const io::Relation& r : io::readRelations(rel_path)) {
+    for (const Relation& r : io::readRelations(rel_path)) {
       if (r.T_1_2.translation().norm() > bo.relation_max_m || std::abs(r.T_1_2.theta()) > bo.relation_max_deg * kDeg) {
         ++far;
         continue;
@@ -331,7 +331,7 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
     }
     const std::vector<Frame> frames = loadFrames(path);
     std::vector<Points2> points;
-    io::Trajectory truth;
+    Trajectory truth;
     for (const Frame& f : frames) {
       points.push_back(f.scan.toPoints(f.T_robot_laser));
       truth.push_back({f.time, *f.T_world_robot});

@@ -52,7 +52,7 @@ void runMatchMapBenchmark(const std::string& data_dir, const MatchMapBenchOption
       if (!frames[i].T_world_robot) throw badInput("scan without a truth pose", ErrorLocation(path));
       map->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
     }
-    const io::OccupancyImage image = mapping::toOccupancyImage(*map);
+    const OccupancyImage image = mapping::toOccupancyImage(*map);
     // The odd scans (robot frame) and their perturbed guesses, the same for every row.
     std::vector<Points2> points;
     std::vector<SE2> truth, guess;

@@ -9,7 +9,7 @@
 #include <numbers>
 #include <numeric>
 
-#include "../registration/internal/kdtree2.hpp"
+#include "src/geometry/kdtree2.hpp"
 #include "lidar2d/core/error.hpp"
 
 namespace lidar2d::degeneracy {
@@ -122,8 +122,8 @@ Prepared prepare(const Points2& input, const InputOptions& o, Radius radius) {
     return p;
   }
   const std::size_t n = p.pts.size();
-  registration::internal::Points2Adaptor adaptor{&p.pts};
-  registration::internal::KdTree2::Tree tree(2, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(8));
+  geometry::Points2Adaptor adaptor{&p.pts};
+  geometry::KdTree2::Tree tree(2, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(8));
   p.start.resize(n + 1);
   p.idx.reserve(n * 16);
   p.d2.reserve(n * 16);

@@ -21,7 +21,7 @@ PoseError relativeError(const SE2& T_est, const SE2& T_ref) {
   return {(T_est.translation() - T_ref.translation()).norm(), std::abs(angleDiff(T_est.theta(), T_ref.theta()))};
 }
 
-bool sameTimes(const io::Trajectory& a, const io::Trajectory& b, double tol) {
+bool sameTimes(const Trajectory& a, const Trajectory& b, double tol) {
   if (a.size() != b.size()) return false;
   for (std::size_t i = 0; i < a.size(); ++i)
     if (!(std::abs(a[i].time - b[i].time) <= tol)) return false;
@@ -75,7 +75,7 @@ double percentile(std::vector<double> values, double q) {
   return values[lo] + (pos - static_cast<double>(lo)) * (values[hi] - values[lo]);
 }
 
-TimeIndex::TimeIndex(const io::Trajectory& trajectory) {
+TimeIndex::TimeIndex(const Trajectory& trajectory) {
   std::vector<double> times;
   times.reserve(trajectory.size());
   for (const auto& p : trajectory) times.push_back(p.time);
@@ -113,7 +113,7 @@ std::optional<std::size_t> TimeIndex::nearest(double t, double max_dt) const {
   return order_[best];
 }
 
-Association associate(const io::Trajectory& est, const io::Trajectory& ref, const Options& options) {
+Association associate(const Trajectory& est, const Trajectory& ref, const Options& options) {
   Association a;
   AssociationMode mode = options.association;
   if (mode == AssociationMode::kAuto)
@@ -147,7 +147,7 @@ Association associate(const io::Trajectory& est, const io::Trajectory& ref, cons
   return a;
 }
 
-AteResult computeAte(const io::Trajectory& est, const io::Trajectory& ref, const Association& association,
+AteResult computeAte(const Trajectory& est, const Trajectory& ref, const Association& association,
                      const Options& options) {
   if (association.matches.empty())
     throw badInput("no estimated pose is within " + std::to_string(options.max_dt_s) +
@@ -175,7 +175,7 @@ AteResult computeAte(const io::Trajectory& est, const io::Trajectory& ref, const
   return r;
 }
 
-RpeResult computeRpe(const io::Trajectory& est, const io::Trajectory& ref, const Association& association,
+RpeResult computeRpe(const Trajectory& est, const Trajectory& ref, const Association& association,
                      const Options& options) {
   RpeResult r;
   r.distance_m = options.rpe_distance_m;
@@ -217,7 +217,7 @@ RpeResult computeRpe(const io::Trajectory& est, const io::Trajectory& ref, const
   return r;
 }
 
-TrajectoryResult evaluateTrajectory(const io::Trajectory& est, const io::Trajectory& ref, const Options& options) {
+TrajectoryResult evaluateTrajectory(const Trajectory& est, const Trajectory& ref, const Options& options) {
   TrajectoryResult r;
   r.association = associate(est, ref, options);
   r.ate = computeAte(est, ref, r.association, options);
@@ -225,13 +225,13 @@ TrajectoryResult evaluateTrajectory(const io::Trajectory& est, const io::Traject
   return r;
 }
 
-RelationsResult evaluateRelations(const io::Trajectory& est, const io::Relations& relations, const Options& options) {
+RelationsResult evaluateRelations(const Trajectory& est, const Relations& relations, const Options& options) {
   RelationsResult r;
   const TimeIndex index(est);
   r.ambiguous_times = index.hasRepeatedTimes();
   std::vector<double> trans, rot;
   for (std::size_t i = 0; i < relations.size(); ++i) {
-    const io::Relation& rel = relations[i];
+    const Relation& rel = relations[i];
     const auto i1 = index.nearest(rel.t1, options.max_dt_s);
     const auto i2 = index.nearest(rel.t2, options.max_dt_s);
     if (!i1 || !i2) {
@@ -250,7 +250,7 @@ RelationsResult evaluateRelations(const io::Trajectory& est, const io::Relations
   return r;
 }
 
-PairsResult evaluatePairs(const std::vector<io::RelativePose>& pairs, const io::Trajectory& ref,
+PairsResult evaluatePairs(const std::vector<RelativePose>& pairs, const Trajectory& ref,
                           const Options& options) {
   PairsResult r;
   bool by_index = false;

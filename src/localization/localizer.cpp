@@ -198,7 +198,7 @@ std::size_t Database::memoryBytes() const {
          (d.profiles.capacity() + d.doubled.capacity() + d.coarse_doubled.capacity()) * sizeof(float);
 }
 
-std::uint64_t mapChecksum(const io::OccupancyImage& map) {
+std::uint64_t mapChecksum(const OccupancyImage& map) {
   std::uint64_t h = 1469598103934665603ULL;
   auto mix = [&h](const void* data, std::size_t n) {
     const auto* b = static_cast<const unsigned char*>(data);
@@ -252,7 +252,7 @@ double castRay(const std::vector<std::uint8_t>& obstacle, int width, int height,
 
 }  // namespace
 
-Database Database::build(const io::OccupancyImage& map, const DatabaseOptions& options, unsigned threads,
+Database Database::build(const OccupancyImage& map, const DatabaseOptions& options, unsigned threads,
                          ProgressCallback progress, void* progress_user) {
   options.validate();
   const int W = map.width(), H = map.height();
@@ -449,14 +449,14 @@ struct Localizer::State {
   registration::LikelihoodFieldOptions lf_options;
   registration::LikelihoodField field;
   std::optional<registration::CorrelativeGrid> grid;
-  io::OccupancyImage map;  // for the free-space check
+  OccupancyImage map;  // for the free-space check
   SE2 T_map_world;
   registration::CorrelativeOptions corr_options;
 };
 
 namespace {
 
-std::unique_ptr<Localizer::State> makeState(const io::OccupancyImage& map, Database db,
+std::unique_ptr<Localizer::State> makeState(const OccupancyImage& map, Database db,
                                             const LocalizerOptions& options) {
   options.validate();
   auto s = std::make_unique<Localizer::State>();
@@ -484,10 +484,10 @@ std::unique_ptr<Localizer::State> makeState(const io::OccupancyImage& map, Datab
 
 }  // namespace
 
-Localizer::Localizer(const io::OccupancyImage& map, const LocalizerOptions& options, const DatabaseOptions& db_options)
+Localizer::Localizer(const OccupancyImage& map, const LocalizerOptions& options, const DatabaseOptions& db_options)
     : s_(makeState(map, Database::build(map, db_options), options)) {}
 
-Localizer::Localizer(const io::OccupancyImage& map, Database database, const LocalizerOptions& options) {
+Localizer::Localizer(const OccupancyImage& map, Database database, const LocalizerOptions& options) {
   const std::uint64_t sum = mapChecksum(map);
   if (database.mapChecksum() != sum)
     throw badInput(fmt::format("the localization database was built from another map (map checksum {:016x}, this map "
@@ -503,7 +503,7 @@ const LocalizerOptions& Localizer::options() const { return s_->options; }
 
 double Localizer::score(const Points2& points_robot, const SE2& T_world_robot,
                         const Eigen::Vector2d& sensor_robot) const {
-  const io::OccupancyImage& map = s_->map;
+  const OccupancyImage& map = s_->map;
   const double res = map.resolution();
   const int occ = s_->db.options().occupied_min;
   const SE2 T_map_robot = s_->T_map_world * T_world_robot;

@@ -263,7 +263,7 @@ CorrelativeGrid CorrelativeGrid::fromPoints(const Points2& target, const Correla
   return CorrelativeGridBuilder::build(internal::makePolyline(target, options.connect_max_gap_m), target, options);
 }
 
-CorrelativeGrid CorrelativeGrid::fromMap(const io::OccupancyImage& map, const CorrelativeOptions& options) {
+CorrelativeGrid CorrelativeGrid::fromMap(const OccupancyImage& map, const CorrelativeOptions& options) {
   options.validate();
   internal::Polyline poly;
   for (int row = 0; row < map.height(); ++row)

@@ -13,9 +13,9 @@
 #include <type_traits>
 #include <vector>
 
-#include "internal/bearing_index.hpp"
-#include "internal/ceres_common.hpp"
-#include "internal/kdtree2.hpp"
+#include "src/registration/internal/bearing_index.hpp"
+#include "src/registration/internal/ceres_common.hpp"
+#include "src/geometry/kdtree2.hpp"
 
 namespace lidar2d::registration {
 
@@ -139,7 +139,7 @@ struct IcpTarget::Impl {
   Points2 points;
   Points2 normals;
   bool identical = false;
-  std::unique_ptr<internal::KdTree2> tree;         // NeighborSearch::kKdTree
+  std::unique_ptr<geometry::KdTree2> tree;         // NeighborSearch::kKdTree
   std::unique_ptr<internal::BearingIndex> bearing;  // NeighborSearch::kBearingWalk
   // Point-to-line's two-point lines (IcpOptions::two_point_lines): for each point whose
   // neighbourhood fits no line, the line through it and each of its fitted neighbours (those
@@ -156,7 +156,7 @@ struct IcpTarget::Impl {
 
   Impl(Points2 pts, const IcpOptions& o) : points(std::move(pts)), identical(allSame(points)) {
     if (o.neighbor_search == NeighborSearch::kKdTree)
-      tree = std::make_unique<internal::KdTree2>(points);
+      tree = std::make_unique<geometry::KdTree2>(points);
     else
       bearing = std::make_unique<internal::BearingIndex>(points);
     computeNormals(o);

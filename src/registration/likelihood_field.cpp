@@ -309,7 +309,7 @@ LikelihoodField LikelihoodField::fromPoints(const Points2& target, const Likelih
   return f;
 }
 
-LikelihoodField LikelihoodField::fromMap(const io::OccupancyImage& map, const LikelihoodFieldOptions& options) {
+LikelihoodField LikelihoodField::fromMap(const OccupancyImage& map, const LikelihoodFieldOptions& options) {
   options.validate();
   Points2 obstacles;
   for (int row = 0; row < map.height(); ++row)

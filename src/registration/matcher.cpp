@@ -93,7 +93,7 @@ PreparedTarget::PreparedTarget(const Points2& points_target, const MatcherOption
   }
 }
 
-PreparedTarget PreparedTarget::fromMap(const io::OccupancyImage& map, const MatcherOptions& options) {
+PreparedTarget PreparedTarget::fromMap(const OccupancyImage& map, const MatcherOptions& options) {
   PreparedTarget t(options.method);
   t.from_map_ = true;
   const int occupied_min = options.map_occupied_min;

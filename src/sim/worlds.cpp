@@ -206,7 +206,7 @@ Scenario builtinScenario(const std::string& name) {
                         ErrorLocation({}, 0, "world"));
 }
 
-World worldFromMap(const io::OccupancyImage& map, int occupied_min, const std::string& name) {
+World worldFromMap(const OccupancyImage& map, int occupied_min, const std::string& name) {
   const int w = map.width(), h = map.height();
   auto obstacle = [&](int c, int r) { return c >= 0 && r >= 0 && c < w && r < h && map.at(c, r) >= occupied_min; };
   const double res = map.resolution();
@@ -248,7 +248,7 @@ World worldFromMap(const io::OccupancyImage& map, int occupied_min, const std::s
 // A route of 1000 km: the walk's steps are planned one by one, so a longer one would take hours.
 constexpr double kMaxRandomWalkLength = 1e6;
 
-std::vector<Eigen::Vector2d> randomWalk(const io::OccupancyImage& map, const RandomWalkOptions& o) {
+std::vector<Eigen::Vector2d> randomWalk(const OccupancyImage& map, const RandomWalkOptions& o) {
   if (!(o.length_m > 0) || !(o.clearance_m >= 0) || !(o.min_step_m > 0) || !(o.max_step_m >= o.min_step_m) ||
       !(o.heading_sigma_rad >= 0))
     throw invalidArgument("random walk: length, clearance and steps must be positive", ErrorLocation({}, 0, "path"));

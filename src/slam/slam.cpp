@@ -856,7 +856,7 @@ struct Slam::Impl {
     const SE2 T_anchor_local = nodes[sm.anchor].T_local_robot.inverse();
     for (const std::size_t n : sm.nodes)
       map->insert(node_scans[n].first, T_anchor_local * nodes[n].T_local_robot * node_scans[n].second);
-    const io::OccupancyImage image = mapping::toOccupancyImage(*map);
+    const OccupancyImage image = mapping::toOccupancyImage(*map);
     if (image.width() == 0) return CorrelativeGrid::fromPoints(sm.points_anchor, loop_search);
     return CorrelativeGrid::fromMap(image, loop_search);
   }

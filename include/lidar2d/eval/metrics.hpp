@@ -24,7 +24,7 @@
 #include <vector>
 
 #include "lidar2d/core/se2.hpp"
-#include "lidar2d/io/trajectory.hpp"
+#include "lidar2d/core/trajectory.hpp"
 
 namespace lidar2d::eval {
 
@@ -72,7 +72,7 @@ double percentile(std::vector<double> values, double q);
 /// Nearest-timestamp lookup by binary search over sorted times; indices refer to the original order.
 class TimeIndex {
  public:
-  explicit TimeIndex(const io::Trajectory& trajectory);
+  explicit TimeIndex(const Trajectory& trajectory);
   explicit TimeIndex(const std::vector<double>& times);
 
   /// Original index of the pose whose time is nearest to `t` with |time - t| <= max_dt, or nullopt.
@@ -107,7 +107,7 @@ struct Association {
 
 /// Associates poses (see AssociationMode). Throws `lidar2d::Error` (kInvalidArgument) for kIndex
 /// with trajectories of different lengths. Never throws for an empty result: check `matches`.
-Association associate(const io::Trajectory& est, const io::Trajectory& ref, const Options& options = {});
+Association associate(const Trajectory& est, const Trajectory& ref, const Options& options = {});
 
 /// Absolute trajectory error.
 struct AteResult {
@@ -140,13 +140,13 @@ struct TrajectoryResult {
 };
 
 /// ATE over the matches. Throws `lidar2d::Error` (kBadInput) when there is no match.
-AteResult computeAte(const io::Trajectory& est, const io::Trajectory& ref, const Association& association,
+AteResult computeAte(const Trajectory& est, const Trajectory& ref, const Association& association,
                      const Options& options = {});
 /// RPE over the matches (empty statistics with fewer than two matches).
-RpeResult computeRpe(const io::Trajectory& est, const io::Trajectory& ref, const Association& association,
+RpeResult computeRpe(const Trajectory& est, const Trajectory& ref, const Association& association,
                      const Options& options = {});
 /// associate + computeAte + computeRpe. Throws `lidar2d::Error` (kBadInput) when no pose matches.
-TrajectoryResult evaluateTrajectory(const io::Trajectory& est, const io::Trajectory& ref,
+TrajectoryResult evaluateTrajectory(const Trajectory& est, const Trajectory& ref,
                                     const Options& options = {});
 
 /// Error of one relation.
@@ -169,7 +169,7 @@ struct RelationsResult {
 /// For each relation (t1, t2, T_1_2): the estimated poses at the nearest estimated times within
 /// max_dt_s of t1 and of t2 (a relation lacking either is skipped and counted), T_rel_est =
 /// T_t1^-1 * T_t2, compared with T_1_2. Never throws; count may be 0.
-RelationsResult evaluateRelations(const io::Trajectory& est, const io::Relations& relations,
+RelationsResult evaluateRelations(const Trajectory& est, const Relations& relations,
                                   const Options& options = {});
 
 /// Error of one estimated relative pose (scan matching pair).
@@ -197,7 +197,7 @@ struct PairsResult {
 /// found by index when (kAuto) the pairs are exactly the consecutive reference poses (pairs.size()
 /// == ref.size() - 1 and pair k has the times of reference poses k and k + 1), which handles logs
 /// whose times repeat; otherwise by nearest time within max_dt_s. Never throws; count may be 0.
-PairsResult evaluatePairs(const std::vector<io::RelativePose>& pairs, const io::Trajectory& ref,
+PairsResult evaluatePairs(const std::vector<RelativePose>& pairs, const Trajectory& ref,
                           const Options& options = {});
 
 /// Printable name of a mode ("auto", "index", "time").

@@ -18,16 +18,9 @@
 #include <string>
 #include <vector>
 
-#include "lidar2d/core/se2.hpp"
+#include "lidar2d/core/trajectory.hpp"
 
 namespace lidar2d::io {
-
-/// A pose with its timestamp.
-struct StampedPose {
-  double time = 0.0;  ///< [s]
-  SE2 pose;           ///< e.g. T_world_robot
-};
-using Trajectory = std::vector<StampedPose>;
 
 enum class TrajectoryFormat { kPlain, kTum };
 
@@ -46,27 +39,9 @@ Trajectory readTrajectory(const std::string& path);
 void writeTrajectory(const std::string& path, const Trajectory& trajectory,
                      TrajectoryFormat format = TrajectoryFormat::kPlain);
 
-/// One ground-truth relation (Kuemmerle et al. 2009): the pose of the robot at `t2` in the frame of
-/// the robot at `t1`. dz, roll and pitch of the file are ignored (they are 0 in every 2D data set).
-struct Relation {
-  double t1 = 0.0;  ///< [s]
-  double t2 = 0.0;  ///< [s]
-  SE2 T_1_2;        ///< (dx, dy, dyaw) [m, m, rad]
-};
-using Relations = std::vector<Relation>;
-
 /// Reads a relations file: exactly 8 numeric fields per line. Throws `lidar2d::Error` naming file,
 /// line and field on malformed values, a wrong field count, or a file without relations.
 Relations readRelations(const std::string& path);
-
-/// One relative pose estimated between two scans, as written by `lidar2d match`.
-struct RelativePose {
-  double t_prev = 0.0;  ///< time of the previous (target) scan [s]
-  double t_cur = 0.0;   ///< time of the current (source) scan [s]
-  SE2 T_prev_cur;       ///< pose of the current scan's robot in the previous one's frame
-  bool converged = true;    ///< the matcher's convergence flag (true when the file has no such column)
-  int iterations = 0;       ///< iterations the matcher used (0 when the file has no such column)
-};
 
 /// Reads a `match` output file: `t_prev t_cur dx dy dtheta converged iterations` per line (the last
 /// two columns may be left out on every line). `converged` must be 0 or 1, `iterations` a

@@ -37,7 +37,7 @@
 
 #include "lidar2d/core/laser_scan.hpp"
 #include "lidar2d/core/se2.hpp"
-#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/core/occupancy_image.hpp"
 #include "lidar2d/localization/lines.hpp"
 
 namespace lidar2d::localization {
@@ -105,7 +105,7 @@ class Database {
   /// "free space") when the map has no free cell with the clearance, kBadInput (field "step") when
   /// the grid of positions over the map would exceed 10^7 (the message names a step that fits).
   /// `progress(done, total, user)` is called from the calling thread as positions are indexed.
-  static Database build(const io::OccupancyImage& map, const DatabaseOptions& options = {}, unsigned threads = 0,
+  static Database build(const OccupancyImage& map, const DatabaseOptions& options = {}, unsigned threads = 0,
                         ProgressCallback progress = nullptr, void* progress_user = nullptr);
   /// Assembles a database from stored parts (what a reader loaded) and builds its index.
   /// `profiles`: empty (no range profiles), or options.profile_bins ranges [m] per position,
@@ -137,7 +137,7 @@ class Database {
 
 /// FNV-1a 64 over the map's size, resolution, origin and cells: identifies the map a database
 /// belongs to.
-std::uint64_t mapChecksum(const io::OccupancyImage& map);
+std::uint64_t mapChecksum(const OccupancyImage& map);
 
 /// Options of the query. `validate()` throws `lidar2d::Error` (kInvalidArgument).
 struct LocalizerOptions {
@@ -219,11 +219,11 @@ struct LocalizationResult {
 class Localizer {
  public:
   /// Builds the database in memory (DatabaseOptions) and the likelihood field of `map`.
-  explicit Localizer(const io::OccupancyImage& map, const LocalizerOptions& options = {},
+  explicit Localizer(const OccupancyImage& map, const LocalizerOptions& options = {},
                      const DatabaseOptions& db_options = {});
   /// Uses a prebuilt database. Throws `lidar2d::Error` (kBadInput, field "map checksum") when it was
   /// built from another map.
-  Localizer(const io::OccupancyImage& map, Database database, const LocalizerOptions& options = {});
+  Localizer(const OccupancyImage& map, Database database, const LocalizerOptions& options = {});
   ~Localizer();
   Localizer(const Localizer&) = delete;
   Localizer& operator=(const Localizer&) = delete;

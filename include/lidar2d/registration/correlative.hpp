@@ -18,7 +18,7 @@
 
 #include "lidar2d/core/laser_scan.hpp"
 #include "lidar2d/core/se2.hpp"
-#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/core/occupancy_image.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
 #include "lidar2d/registration/result.hpp"
 
@@ -65,7 +65,7 @@ class CorrelativeGrid {
   /// Grid of a scan's points (beam order, target frame), blurred; non-finite points are skipped.
   static CorrelativeGrid fromPoints(const Points2& target, const CorrelativeOptions& options = {});
   /// Grid of an occupancy map (world frame): obstacle cells score 1, blurred onto their neighbours.
-  static CorrelativeGrid fromMap(const io::OccupancyImage& map, const CorrelativeOptions& options = {});
+  static CorrelativeGrid fromMap(const OccupancyImage& map, const CorrelativeOptions& options = {});
 
   bool empty() const { return width_ == 0; }
   int width() const { return width_; }

@@ -25,7 +25,7 @@
 
 #include "lidar2d/core/laser_scan.hpp"
 #include "lidar2d/core/se2.hpp"
-#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/core/occupancy_image.hpp"
 #include "lidar2d/registration/result.hpp"
 
 namespace lidar2d::registration {
@@ -118,7 +118,7 @@ class LikelihoodField {
                                     const Eigen::Vector2d& sensor_origin = Eigen::Vector2d::Zero());
   /// Field of an occupancy map's obstacle cells (value >= options.occupied_min), in the world
   /// frame of the map (the image origin applied). Unsigned distance to the cell centres.
-  static LikelihoodField fromMap(const io::OccupancyImage& map, const LikelihoodFieldOptions& options = {});
+  static LikelihoodField fromMap(const OccupancyImage& map, const LikelihoodFieldOptions& options = {});
 
   bool empty() const { return levels_.empty(); }
   int numLevels() const { return static_cast<int>(levels_.size()); }

@@ -13,7 +13,7 @@
 
 #include "lidar2d/core/laser_scan.hpp"
 #include "lidar2d/core/se2.hpp"
-#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/core/occupancy_image.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
@@ -75,7 +75,7 @@ class PreparedTarget {
   /// scan-to-map matches a point map instead: an `IcpTarget` (k-d tree search) over the scan points
   /// of a local map, as the SLAM front end does.
   /// Never throws: out-of-domain options are reported by matchScans, like the constructor's.
-  static PreparedTarget fromMap(const io::OccupancyImage& map, const MatcherOptions& options);
+  static PreparedTarget fromMap(const OccupancyImage& map, const MatcherOptions& options);
   ~PreparedTarget();
   PreparedTarget(PreparedTarget&&) noexcept;
   PreparedTarget& operator=(PreparedTarget&&) noexcept;

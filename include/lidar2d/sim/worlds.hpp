@@ -23,7 +23,7 @@
 #include <string>
 #include <vector>
 
-#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/core/occupancy_image.hpp"
 #include "lidar2d/sim/world.hpp"
 
 namespace lidar2d::sim {
@@ -47,7 +47,7 @@ Scenario builtinScenario(const std::string& name);
 /// obstacle and non-obstacle cells (merged into maximal straight runs), so ray casting traverses
 /// exactly the occupied cells. Cells on the map's border that are obstacles also get their outer
 /// edges.
-World worldFromMap(const io::OccupancyImage& map, int occupied_min = 65, const std::string& name = "map");
+World worldFromMap(const OccupancyImage& map, int occupied_min = 65, const std::string& name = "map");
 
 struct RandomWalkOptions {
   double length_m = 50.0;       ///< stop once the route is at least this long [m]
@@ -63,6 +63,6 @@ struct RandomWalkOptions {
 /// every point keeps `clearance_m` from non-free cells. Starts at a random cell with that
 /// clearance. May return a shorter route when the walk gets stuck (at least two waypoints).
 /// Throws `lidar2d::Error` (kBadInput) when no free cell has the clearance.
-std::vector<Eigen::Vector2d> randomWalk(const io::OccupancyImage& map, const RandomWalkOptions& options);
+std::vector<Eigen::Vector2d> randomWalk(const OccupancyImage& map, const RandomWalkOptions& options);
 
 }  // namespace lidar2d::sim

@@ -1,6 +1,7 @@
 #pragma once
-// A nanoflann k-d tree over a Points2 (2D, squared Euclidean distance). Internal: nanoflann is a
-// private dependency of the library and never appears in public headers.
+// A nanoflann k-d tree over a Points2 (2D, squared Euclidean distance). Library-private: modules that
+// may use geometry include it as "src/geometry/kdtree2.hpp"; it is never installed, because nanoflann
+// is a private dependency of the library and never appears in public headers.
 
 #include <nanoflann.hpp>
 
@@ -10,7 +11,7 @@
 
 #include "lidar2d/core/laser_scan.hpp"
 
-namespace lidar2d::registration::internal {
+namespace lidar2d::geometry {
 
 // nanoflann's dataset interface over a vector of Eigen 2D points (which must outlive the adaptor
 // and stay unchanged while the tree is used).
@@ -62,4 +63,4 @@ class KdTree2 {
   Tree tree_;
 };
 
-}  // namespace lidar2d::registration::internal
+}  // namespace lidar2d::geometry

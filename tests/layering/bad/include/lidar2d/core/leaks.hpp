@@ -1,0 +1,3 @@
+// Fixture: a public header including a library-private one.
+#pragma once
+#include "src/core/internal/detail.hpp"

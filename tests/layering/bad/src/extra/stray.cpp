@@ -1,0 +1,1 @@
+// Fixture: a folder that is no declared module.
