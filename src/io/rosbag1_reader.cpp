@@ -111,26 +111,16 @@ class Ros1Source final : public FrameSource {
 
   void setUp(const ReaderOptions& options) {
     const std::vector<Topic> topics = listTopics();
-    std::vector<RosTopicInfo> infos;
-    for (const auto& t : topics) infos.push_back(t.info);
-    auto find = [&](const std::string& name) -> const Topic& {
-      for (const auto& t : topics)
-        if (t.info.name == name) return t;
-      throw badInput("internal: topic vanished", {path_});
-    };
-
-    const RosTopicChoice choice =
-        chooseScanAndOdometry(infos, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
-    const Topic& scan = find(choice.scan.name);
+    const auto pick = pickScanAndOdometry(topics, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
+    const Topic& scan = *pick.scan;
     checkMd5(scan, kLaserScanMd5);
     scan_topic_ = scan.info.name;
     size_hint_ = static_cast<std::size_t>(scan.info.count);
     std::vector<std::uint32_t> wanted = scan.connections;
     scan_connections_ = scan.connections;
 
-    const Topic* odom = nullptr;
-    if (choice.odom) {
-      odom = &find(choice.odom->name);
+    const Topic* odom = pick.odom;
+    if (odom) {
       checkMd5(*odom, kOdometryMd5);
       odom_topic_ = odom->info.name;
       wanted.insert(wanted.end(), odom->connections.begin(), odom->connections.end());
@@ -150,11 +140,8 @@ class Ros1Source final : public FrameSource {
     }
     const RosMount mount = findMount(topics, robot_frames, laser_frame);
 
-    notes_.scan_source = fmt::format("{} ({}, frame '{}'{})", scan_topic_, kLaserScanType, laser_frame,
-                                     mount.found ? fmt::format(", mounting {}", mount.description) : std::string());
-    if (odom)
-      notes_.odom_source =
-          fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic_, kOdometryType, robot_frames.front());
+    describeRosSources(notes_, scan_topic_, kLaserScanType, laser_frame, mount, odom ? odom_topic_ : std::string(),
+                       kOdometryType, robot_frames.front());
     assembler_ = RosFrameAssembler(mount.T_robot_laser, odom != nullptr);
   }
 

@@ -233,25 +233,13 @@ class Ros2Source final : public FrameSource {
 
   void setUp(const ReaderOptions& options) {
     const std::vector<Topic> topics = listTopics();
-    std::vector<RosTopicInfo> infos;
-    for (const auto& t : topics) infos.push_back(t.info);
-    auto find = [&](const std::string& name) -> const Topic& {
-      for (const auto& t : topics)
-        if (t.info.name == name) return t;
-      throw badInput("internal: topic vanished", {db_file_});
-    };
-
-    const RosTopicChoice choice =
-        chooseScanAndOdometry(infos, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
-    const RosTopicInfo* scan = &choice.scan;
-    const std::optional<RosTopicInfo>& odom = choice.odom;
-    const Topic& scan_topic = find(scan->name);
-    checkCdr(scan_topic);
-    scan_topic_ = scan_topic;
-    size_hint_ = static_cast<std::size_t>(scan->count);
-    if (odom) {
-      checkCdr(find(odom->name));
-      odom_topic_ = find(odom->name);
+    const auto pick = pickScanAndOdometry(topics, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
+    checkCdr(*pick.scan);
+    scan_topic_ = *pick.scan;
+    size_hint_ = static_cast<std::size_t>(pick.scan->info.count);
+    if (pick.odom) {
+      checkCdr(*pick.odom);
+      odom_topic_ = *pick.odom;
     }
 
     std::string laser_frame;
@@ -268,11 +256,8 @@ class Ros2Source final : public FrameSource {
       });
     }
     const RosMount mount = findMount(topics, robot_frames, laser_frame);
-    notes_.scan_source = fmt::format("{} ({}, frame '{}'{})", scan_topic_.info.name, kLaserScanType, laser_frame,
-                                     mount.found ? fmt::format(", mounting {}", mount.description) : std::string());
-    if (odom_topic_)
-      notes_.odom_source = fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic_->info.name,
-                                       kOdometryType, robot_frames.front());
+    describeRosSources(notes_, scan_topic_.info.name, kLaserScanType, laser_frame, mount,
+                       odom_topic_ ? odom_topic_->info.name : std::string(), kOdometryType, robot_frames.front());
     assembler_ = RosFrameAssembler(mount.T_robot_laser, odom_topic_.has_value());
 
     // The recorder's index on timestamp (timestamp_idx) lets SQLite stream this in order without

@@ -288,4 +288,14 @@ SourceNotes rosNotes(SourceNotes base, std::vector<std::string> assembler_warnin
   return base;
 }
 
+void describeRosSources(SourceNotes& notes, const std::string& scan_topic, const std::string& scan_type,
+                        const std::string& laser_frame, const RosMount& mount, const std::string& odom_topic,
+                        const std::string& odom_type, const std::string& robot_frame) {
+  notes.scan_source = fmt::format("{} ({}, frame '{}'{})", scan_topic, scan_type, laser_frame,
+                                  mount.found ? fmt::format(", mounting {}", mount.description) : std::string());
+  if (!odom_topic.empty())
+    notes.odom_source =
+        fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic, odom_type, robot_frame);
+}
+
 }  // namespace lidar2d::io::internal

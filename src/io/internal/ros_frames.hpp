@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "lidar2d/core/error.hpp"
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/core/se2.hpp"
 #include "lidar2d/io/frame_source.hpp"
@@ -56,6 +57,32 @@ RosTopicChoice chooseScanAndOdometry(const std::vector<RosTopicInfo>& topics, co
                                      const std::string& odom_type, const ReaderOptions& options,
                                      const std::string& path, std::vector<std::string>& warnings);
 
+/// `chooseScanAndOdometry` over a reader's own topic records (each with an `info` member): the
+/// chosen scan topic's record and the odometry topic's, or nullptr when there is none. The records
+/// must outlive the returned pointers.
+template <class Topic>
+struct RosTopicPick {
+  const Topic* scan = nullptr;
+  const Topic* odom = nullptr;
+};
+template <class Topic>
+RosTopicPick<Topic> pickScanAndOdometry(const std::vector<Topic>& topics, const std::string& scan_type,
+                                        const std::string& odom_type, const ReaderOptions& options,
+                                        const std::string& path, std::vector<std::string>& warnings) {
+  std::vector<RosTopicInfo> infos;
+  infos.reserve(topics.size());
+  for (const auto& t : topics) infos.push_back(t.info);
+  const RosTopicChoice choice = chooseScanAndOdometry(infos, scan_type, odom_type, options, path, warnings);
+  auto find = [&](const std::string& name) {
+    for (const auto& t : topics)
+      if (t.info.name == name) return &t;
+    return static_cast<const Topic*>(nullptr);
+  };
+  RosTopicPick<Topic> pick{find(choice.scan.name), choice.odom ? find(choice.odom->name) : nullptr};
+  if (!pick.scan || (choice.odom && !pick.odom)) throw badInput("internal: topic vanished", {path});
+  return pick;
+}
+
 /// Planar projection of a 3D transform: (x, y, yaw), yaw from the quaternion (ZYX convention).
 SE2 projectToPlane(const RosTransform3& t);
 /// Angle between the transform's z axis and the parent's z axis [rad] (0 for a planar transform).
@@ -98,6 +125,12 @@ struct RosMount {
 };
 RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& robot_frames,
                       const std::string& laser_frame);
+
+/// Fills `notes.scan_source` and, when `odom_topic` is not empty, `notes.odom_source` with the
+/// topics, their message types, frames and mounting the reader found (shared by the ROS1 and ROS2 readers).
+void describeRosSources(SourceNotes& notes, const std::string& scan_topic, const std::string& scan_type,
+                        const std::string& laser_frame, const RosMount& mount, const std::string& odom_topic,
+                        const std::string& odom_type, const std::string& robot_frame);
 /// Completes `mount.description` with the topic it came from (`source`, e.g. "/tf_static") and
 /// appends to `warnings` what the user should know: a chain tilted out of the plane (only its yaw
 /// is used), or no mounting found (identity used).

@@ -54,6 +54,13 @@ class Cursor {
   /// Names the field the following reads belong to (for error messages).
   void field(const char* name) { field_ = name; }
 
+  /// Reads field `name`, a number of type T (errors name the field).
+  template <typename T>
+  T read(const char* name) {
+    field(name);
+    return read<T>();
+  }
+
   template <typename T>
   T read() {
     static_assert(std::is_arithmetic_v<T>);
@@ -173,20 +180,13 @@ RosLaserScanMsg decodeLaserScan(std::span<const std::uint8_t> bytes, RosWire wir
   Cursor c(bytes, wire, ref, "LaserScan");
   RosLaserScanMsg m;
   m.stamp = c.readHeader(m.frame_id);
-  c.field("angle_min");
-  m.angle_min = c.read<float>();
-  c.field("angle_max");
-  m.angle_max = c.read<float>();
-  c.field("angle_increment");
-  m.angle_increment = c.read<float>();
-  c.field("time_increment");
-  m.time_increment = c.read<float>();
-  c.field("scan_time");
-  m.scan_time = c.read<float>();
-  c.field("range_min");
-  m.range_min = c.read<float>();
-  c.field("range_max");
-  m.range_max = c.read<float>();
+  m.angle_min = c.read<float>("angle_min");
+  m.angle_max = c.read<float>("angle_max");
+  m.angle_increment = c.read<float>("angle_increment");
+  m.time_increment = c.read<float>("time_increment");
+  m.scan_time = c.read<float>("scan_time");
+  m.range_min = c.read<float>("range_min");
+  m.range_max = c.read<float>("range_max");
   c.field("ranges");
   m.ranges = c.readFloatSequence();
   c.field("intensities");
