@@ -24,6 +24,7 @@
 #include "commands.hpp"
 #include "progress_line.hpp"
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/eval/localization_score.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/localization_db.hpp"
@@ -121,12 +122,9 @@ void runLocalize(const LocArgs& a) {
   out.stream() << "# lidar2d localize: t x y theta score (nan nan nan 0 = declined)\n";
 
   std::vector<double> times_ms;
-  std::size_t scans = 0, answered = 0, declined = 0, with_truth = 0, correct = 0, correct_answered = 0;
   std::map<std::string, std::size_t> reasons;
-  // Odometry consistency: consecutive processed scans both answered.
-  SE2 prev_pose, prev_odom;
-  bool have_prev_pose = false, have_prev_odom = false;
-  std::size_t odo_pairs = 0, odo_consistent = 0;
+  eval::LocalizationTally tally;
+  tally.tolerance = {a.success_m, a.success_deg * kDeg};
   // Progress on a terminal (a long log takes minutes at tens of milliseconds per scan).
   ProgressLine line(a.quiet);
   const std::optional<std::size_t> total = source->sizeHint();
@@ -136,44 +134,24 @@ void runLocalize(const LocArgs& a) {
                    : fmt::format("localizing: scan {}", f->index + 1);
     });
     if ((a.scans == Scans::kEven && f->index % 2 != 0) || (a.scans == Scans::kOdd && f->index % 2 != 1)) continue;
-    ++scans;
     const localization::LocalizationResult r = loc->localize(f->scan, f->T_robot_laser);
     times_ms.push_back(r.total_ms);
     if (r.declined) {
-      ++declined;
       ++reasons[r.reason];
       out.stream() << fmt::format("{:.9f} nan nan nan 0\n", f->time);
     } else {
-      ++answered;
       const SE2& T = r.T_world_robot;
       out.stream() << fmt::format("{:.9f} {:.6f} {:.6f} {:.6f} {:.4f}\n", f->time, T.x(), T.y(), T.theta(), r.score);
     }
-    if (a.eval) {
-      if (!f->T_world_robot)
-        throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
-                                   f->index, f->time),
-                       ErrorLocation(a.log));
-      ++with_truth;
-      if (!r.declined) {
-        const SE2 e = f->T_world_robot->inverse() * r.T_world_robot;
-        const bool ok = e.translation().norm() <= a.success_m && std::abs(e.theta()) <= a.success_deg * kDeg;
-        correct += ok;
-        correct_answered += ok;
-      }
-    }
-    if (f->T_odom_robot && !r.declined && have_prev_pose && have_prev_odom) {
-      const SE2 d_odo = prev_odom.inverse() * *f->T_odom_robot;
-      const SE2 d_loc = prev_pose.inverse() * r.T_world_robot;
-      const SE2 e = d_odo.inverse() * d_loc;
-      ++odo_pairs;
-      odo_consistent += e.translation().norm() <= a.success_m && std::abs(e.theta()) <= a.success_deg * kDeg;
-    }
-    have_prev_pose = !r.declined;
-    if (have_prev_pose) prev_pose = r.T_world_robot;
-    have_prev_odom = f->T_odom_robot.has_value();
-    if (have_prev_odom) prev_odom = *f->T_odom_robot;
+    if (a.eval && !f->T_world_robot)
+      throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
+                                 f->index, f->time),
+                     ErrorLocation(a.log));
+    tally.add(r.declined ? std::nullopt : std::optional<SE2>(r.T_world_robot),
+              a.eval ? f->T_world_robot : std::nullopt, f->T_odom_robot);
   }
   line.clear();
+  const std::size_t scans = tally.scans;
   if (scans == 0) throw badInput("the log has no scan to localize", ErrorLocation(a.log));
   out.commit();
   const double total_s = seconds(t0);
@@ -186,9 +164,9 @@ void runLocalize(const LocArgs& a) {
   j["database_pairs"] = loc->database().numPairs();
   j["database_mb"] = loc->database().memoryBytes() / 1e6;
   j["scans"] = scans;
-  j["answered"] = answered;
-  j["declined"] = declined;
-  j["decline_rate"] = static_cast<double>(declined) / static_cast<double>(scans);
+  j["answered"] = tally.answered;
+  j["declined"] = tally.declined;
+  j["decline_rate"] = static_cast<double>(tally.declined) / static_cast<double>(scans);
   j["decline_reasons"] = reasons;
   j["query_ms"] = {{"median", eval::percentile(times_ms, 0.5)},
                    {"p95", eval::percentile(times_ms, 0.95)},
@@ -196,16 +174,15 @@ void runLocalize(const LocArgs& a) {
                    {"mean", std::accumulate(times_ms.begin(), times_ms.end(), 0.0) / static_cast<double>(scans)}};
   j["total_s"] = total_s;
   if (a.eval) {
-    j["success_rate"] = static_cast<double>(correct) / static_cast<double>(with_truth);
-    j["precision"] = answered ? nlohmann::json(static_cast<double>(correct_answered) / static_cast<double>(answered))
-                              : nlohmann::json(nullptr);
+    j["success_rate"] = tally.successRate();
+    j["precision"] = tally.answered ? nlohmann::json(tally.precision()) : nlohmann::json(nullptr);
     j["success_definition"] = fmt::format("within {} m and {} deg of the truth", a.success_m, a.success_deg);
   }
-  if (odo_pairs) {
+  if (tally.odometry_pairs) {
     j["odometry_consistency"] = {
-        {"pairs", odo_pairs},
-        {"consistent", odo_consistent},
-        {"rate", static_cast<double>(odo_consistent) / static_cast<double>(odo_pairs)},
+        {"pairs", tally.odometry_pairs},
+        {"consistent", tally.odometry_consistent},
+        {"rate", tally.odometryConsistency()},
         {"definition", fmt::format("consecutive answered scans whose relative pose agrees with odometry within {} m "
                                    "and {} deg",
                                    a.success_m, a.success_deg)}};
@@ -213,12 +190,11 @@ void runLocalize(const LocArgs& a) {
   if (!a.json.empty()) io::writeFileAtomically(a.json, j.dump(2) + "\n");
   if (!a.quiet) {
     std::cerr << fmt::format("localized {} scans: {} answered, {} declined; median {:.1f} ms, p95 {:.1f} ms per scan",
-                             scans, answered, declined, eval::percentile(times_ms, 0.5), eval::percentile(times_ms, 0.95));
+                             scans, tally.answered, tally.declined, eval::percentile(times_ms, 0.5), eval::percentile(times_ms, 0.95));
     if (a.eval)
       std::cerr << fmt::format(
           "; success {:.1f}%, precision {:.1f}%",
-          100.0 * static_cast<double>(correct) / static_cast<double>(with_truth),
-          answered ? 100.0 * static_cast<double>(correct_answered) / static_cast<double>(answered) : 0.0);
+          100.0 * tally.successRate(), tally.answered ? 100.0 * tally.precision() : 0.0);
     std::cerr << fmt::format(" -> {}\n", a.output);
   }
 }
