@@ -1,0 +1,375 @@
+#include "lidar2d/sim/log_perturbation.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <numeric>
+#include <utility>
+
+#include "lidar2d/core/error.hpp"
+
+namespace lidar2d::sim {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// The truth that odometry is made from; the same message from both passes.
+const SE2& requireTruth(const Frame& f) {
+  if (!f.T_world_robot)
+    throw badInput(
+        fmt::format("scan {} (time {:.6f}) has no ground-truth pose; odometry made from the truth needs a "
+                    "log with truth (TRUEPOS lines, or a SLAM-corrected CARMEN log)",
+                    f.index, f.time));
+  return *f.T_world_robot;
+}
+
+// The reference pose of step 3 (truth, or the log's odometry), or an error naming what needs it.
+const SE2& requireReference(const Frame& f, bool use_truth, const char* needed_by) {
+  const std::optional<SE2>& ref = use_truth ? f.T_world_robot : f.T_odom_robot;
+  if (!ref)
+    throw badInput(fmt::format("scan {} (time {:.6f}) has no {} pose, which {} need", f.index, f.time,
+                               use_truth ? "ground-truth" : "odometry", needed_by));
+  return *ref;
+}
+
+// A heading change in integer nanoradians: sums of them are exact and independent of the order of
+// summation, so equal turns compare equal and ties go to the earliest window (1e-9 rad per pair of
+// frames is far below any turn that matters; 1e6 frames of pi each stay below 2^63).
+std::int64_t nanoRadians(double a) { return std::llround(a * 1e9); }
+
+// A Fenwick tree (Fenwick 1994) of integer weights: prefix sums in O(log n).
+class Fenwick {
+ public:
+  explicit Fenwick(std::size_t n) : tree_(n + 1, 0) {}
+  void add(std::size_t i, std::int64_t w) {
+    for (++i; i < tree_.size(); i += i & (~i + 1)) tree_[i] += w;
+  }
+  // Sum of the weights at positions [0, n).
+  std::int64_t prefix(std::size_t n) const {
+    std::int64_t s = 0;
+    for (; n > 0; n -= n & (~n + 1)) s += tree_[n];
+    return s;
+  }
+
+ private:
+  std::vector<std::int64_t> tree_;
+};
+
+struct Window {
+  double begin_s, end_s;
+};
+
+bool overlaps(const Window& a, const GapWindow& b) { return a.end_s > b.begin_s && a.begin_s < b.end_s; }
+
+// The kLargestTurn placement: among the candidate windows that fit, the one with the largest turn.
+// turn(w) = sum of w_j over pairs j with lo_j >= begin and hi_j < end, computed for all candidates
+// at once: candidates by decreasing begin, pairs inserted once their lo reaches the begin, the hi
+// condition a prefix sum over the pairs' his in increasing order.
+std::optional<Window> largestTurnWindow(const std::vector<TimedPose>& samples, double duration_s,
+                                        const std::vector<GapWindow>& placed) {
+  const double t_first = samples.front().time_s, t_last = samples.back().time_s;
+  std::vector<Window> candidates;
+  auto consider = [&](Window w) {
+    if (!(w.begin_s >= t_first && w.end_s <= t_last)) return;
+    for (const GapWindow& p : placed)
+      if (overlaps(w, p)) return;
+    candidates.push_back(w);
+  };
+  for (const TimedPose& s : samples) consider({s.time_s, s.time_s + duration_s});
+  consider({t_last - duration_s, t_last});
+  for (const GapWindow& p : placed) consider({p.begin_s - duration_s, p.begin_s});
+  if (candidates.empty()) return std::nullopt;
+
+  struct Pair {
+    double lo, hi;
+    std::int64_t w;
+  };
+  std::vector<Pair> pairs;
+  pairs.reserve(samples.size());
+  for (std::size_t j = 0; j + 1 < samples.size(); ++j) {
+    const double a = samples[j].time_s, b = samples[j + 1].time_s;
+    const double turn = std::abs(angleDiff(samples[j + 1].T_world_robot.theta(), samples[j].T_world_robot.theta()));
+    pairs.push_back({std::min(a, b), std::max(a, b), nanoRadians(turn)});
+  }
+  std::vector<double> his(pairs.size());
+  std::transform(pairs.begin(), pairs.end(), his.begin(), [](const Pair& p) { return p.hi; });
+  std::sort(his.begin(), his.end());
+  std::sort(pairs.begin(), pairs.end(), [](const Pair& a, const Pair& b) { return a.lo > b.lo; });
+  std::vector<std::size_t> order(candidates.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return candidates[a].begin_s > candidates[b].begin_s ||
+           (candidates[a].begin_s == candidates[b].begin_s && candidates[a].end_s > candidates[b].end_s);
+  });
+
+  Fenwick tree(his.size());
+  std::size_t next_pair = 0;
+  std::int64_t best_turn = -1;
+  Window best{};
+  for (std::size_t c : order) {
+    const Window& w = candidates[c];
+    for (; next_pair < pairs.size() && pairs[next_pair].lo >= w.begin_s; ++next_pair) {
+      const auto rank = std::lower_bound(his.begin(), his.end(), pairs[next_pair].hi) - his.begin();
+      tree.add(static_cast<std::size_t>(rank), pairs[next_pair].w);
+    }
+    const auto below = std::lower_bound(his.begin(), his.end(), w.end_s) - his.begin();  // his < end
+    const std::int64_t turn = tree.prefix(static_cast<std::size_t>(below));
+    // Candidates come latest first: >= lets an equal turn move the choice to the earlier window.
+    if (turn >= best_turn) {
+      best_turn = turn;
+      best = w;
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+OdometryNoise realisticOdometryNoise() {
+  OdometryNoise n = OdometryNoise::none();
+  n.sigma_x_m = 0.005;
+  n.sigma_y_m = 0.005;
+  n.trans_sigma_per_m = 0.03;
+  n.rot_sigma_per_rad = 0.03;
+  n.rot_sigma_per_m = std::numbers::pi / 180.0;
+  n.scale_bias = 0.02;
+  return n;
+}
+
+void KeyframeOptions::validate() const {
+  if (!std::isfinite(min_distance_m) || min_distance_m < 0)
+    throw invalidArgument(fmt::format("keyframe distance must be finite and >= 0, got {}", min_distance_m),
+                          ErrorLocation({}, 0, "min_distance_m"));
+  if (!std::isfinite(min_turn_rad) || min_turn_rad < 0 || min_turn_rad > std::numbers::pi)
+    throw invalidArgument(fmt::format("keyframe turn must be in [0, pi] rad, got {}", min_turn_rad),
+                          ErrorLocation({}, 0, "min_turn_rad"));
+}
+
+void GapRequest::validate() const {
+  if (!std::isfinite(duration_s) || duration_s <= 0)
+    throw invalidArgument(fmt::format("gap duration must be finite and > 0, got {}", duration_s),
+                          ErrorLocation({}, 0, "duration_s"));
+  if (placement == GapPlacement::kAtOffset && (!std::isfinite(offset_s) || offset_s < 0))
+    throw invalidArgument(fmt::format("gap start must be finite and >= 0, got {}", offset_s),
+                          ErrorLocation({}, 0, "offset_s"));
+}
+
+void TimeFaults::validate() const {
+  if (!std::isfinite(synthesize_rate_hz) || synthesize_rate_hz < 0)
+    throw invalidArgument(fmt::format("synthesized rate must be finite and >= 0, got {}", synthesize_rate_hz),
+                          ErrorLocation({}, 0, "synthesize_rate_hz"));
+  if (!std::isfinite(jitter_sigma_s) || jitter_sigma_s < 0)
+    throw invalidArgument(fmt::format("time jitter must be finite and >= 0, got {}", jitter_sigma_s),
+                          ErrorLocation({}, 0, "jitter_sigma_s"));
+  if (burst_size == 0) throw invalidArgument("burst size must be >= 1", ErrorLocation({}, 0, "burst_size"));
+}
+
+void LogPerturbationOptions::validate() const {
+  if (odometry_source == OdometrySource::kNoisyFromTruth) odometry.validate();
+  keyframes.validate();
+  time.validate();
+  for (const GapWindow& g : gaps)
+    if (!(std::isfinite(g.begin_s) && std::isfinite(g.end_s) && g.begin_s <= g.end_s))
+      throw invalidArgument(fmt::format("gap window [{}, {}) is not a finite interval", g.begin_s, g.end_s),
+                            ErrorLocation({}, 0, "gaps"));
+}
+
+double clockTime(const TimeFaults& time, double first_stamp_s, std::size_t index, double stamp_s) {
+  if (time.synthesize_rate_hz > 0) return first_stamp_s + static_cast<double>(index) / time.synthesize_rate_hz;
+  return stamp_s;
+}
+
+double turnInWindow(const std::vector<TimedPose>& samples, double begin_s, double end_s) {
+  auto inside = [&](double t) { return t >= begin_s && t < end_s; };
+  double turn = 0.0;
+  for (std::size_t j = 0; j + 1 < samples.size(); ++j)
+    if (inside(samples[j].time_s) && inside(samples[j + 1].time_s))
+      turn += std::abs(angleDiff(samples[j + 1].T_world_robot.theta(), samples[j].T_world_robot.theta()));
+  return turn;
+}
+
+std::vector<GapWindow> planGaps(const std::vector<GapRequest>& requests, const std::vector<TimedPose>& samples) {
+  for (const GapRequest& r : requests) r.validate();
+  if (requests.empty()) return {};
+  if (samples.empty()) throw badInput("cannot place gaps in a log without scans");
+  const double t_first = samples.front().time_s, t_last = samples.back().time_s;
+  const double span = t_last - t_first;
+  auto noRoom = [&](const GapRequest& r) {
+    return badInput(
+        fmt::format("a gap of {} s does not fit in the log, which spans {} s from its first to its last "
+                    "scan{}",
+                    r.duration_s, span, span <= 0 ? " (its timestamps do not advance)" : ""));
+  };
+
+  std::vector<std::optional<GapWindow>> placed(requests.size());
+  std::vector<GapWindow> so_far;
+  // Fixed windows first, so that the largest-turn ones avoid them.
+  for (std::size_t k = 0; k < requests.size(); ++k) {
+    const GapRequest& r = requests[k];
+    if (r.placement == GapPlacement::kLargestTurn) continue;
+    if (r.duration_s > span) throw noRoom(r);
+    GapWindow w;
+    w.request = r;
+    w.begin_s = t_first + (r.placement == GapPlacement::kMiddle ? (span - r.duration_s) / 2 : r.offset_s);
+    w.end_s = w.begin_s + r.duration_s;
+    if (w.end_s > t_last)
+      throw badInput(
+          fmt::format("a gap from {} s to {} s after the first scan ends after the last scan, {} s after "
+                      "the first",
+                      w.begin_s - t_first, w.end_s - t_first, span));
+    placed[k] = w;
+    so_far.push_back(w);
+  }
+  for (std::size_t k = 0; k < requests.size(); ++k) {
+    const GapRequest& r = requests[k];
+    if (r.placement != GapPlacement::kLargestTurn) continue;
+    if (r.duration_s > span) throw noRoom(r);
+    const std::optional<Window> w = largestTurnWindow(samples, r.duration_s, so_far);
+    if (!w)
+      throw badInput(fmt::format("no room for a gap of {} s at a turn beside the other gaps (the log spans {} s)",
+                                 r.duration_s, span));
+    GapWindow g;
+    g.request = r;
+    g.begin_s = w->begin_s;
+    g.end_s = w->end_s;
+    placed[k] = g;
+    so_far.push_back(g);
+  }
+  std::vector<GapWindow> out;
+  out.reserve(requests.size());
+  for (auto& w : placed) {
+    w->turn_rad = turnInWindow(samples, w->begin_s, w->end_s);
+    out.push_back(*w);
+  }
+  return out;
+}
+
+GapPlanner::GapPlanner(std::vector<GapRequest> requests, OdometrySource source, TimeFaults time)
+    : requests_(std::move(requests)), source_(source), time_(time) {
+  for (const GapRequest& r : requests_) {
+    r.validate();
+    if (r.placement == GapPlacement::kLargestTurn) need_poses_ = true;
+  }
+  time_.validate();
+}
+
+void GapPlanner::add(const Frame& frame) {
+  const std::size_t i = samples_.size();
+  if (i == 0) {
+    first_stamp_s_ = frame.time;
+    use_truth_ = source_ == OdometrySource::kNoisyFromTruth || frame.T_world_robot.has_value();
+  }
+  if (source_ == OdometrySource::kNoisyFromTruth) requireTruth(frame);
+  const std::optional<SE2>& ref = use_truth_ ? frame.T_world_robot : frame.T_odom_robot;
+  if (!ref) {
+    if (need_poses_) requireReference(frame, use_truth_, "gaps placed at the largest turn");
+    poses_complete_ = false;
+  }
+  samples_.push_back({clockTime(time_, first_stamp_s_, i, frame.time), ref.value_or(SE2())});
+}
+
+std::vector<GapWindow> GapPlanner::plan() const {
+  std::vector<GapWindow> windows = planGaps(requests_, samples_);
+  if (!poses_complete_)
+    for (GapWindow& w : windows) w.turn_rad = kNaN;
+  return windows;
+}
+
+LogPerturber::LogPerturber(LogPerturbationOptions options)
+    : options_(std::move(options)), odom_rng_(options_.seed), jitter_rng_(options_.seed ^ kJitterSeedSalt) {
+  options_.validate();
+  stats_.dropped_per_gap.assign(options_.gaps.size(), 0);
+}
+
+std::vector<Frame> LogPerturber::push(Frame f) {
+  const std::size_t i = stats_.scans_read++;
+  const bool from_truth = options_.odometry_source == OdometrySource::kNoisyFromTruth;
+  if (i == 0) {
+    first_stamp_s_ = f.time;
+    use_truth_ = from_truth || f.T_world_robot.has_value();
+  }
+  if (from_truth) {
+    const SE2& truth = requireTruth(f);
+    if (i == 0) prev_truth_ = odom_ = truth;  // odom_0 = truth_0, whether frame 0 is kept or not
+  }
+  const double t = clockTime(options_.time, first_stamp_s_, i, f.time);
+
+  bool in_gap = false;
+  for (std::size_t k = 0; k < options_.gaps.size(); ++k)
+    if (options_.gaps[k].contains(t)) {
+      ++stats_.dropped_per_gap[k];
+      in_gap = true;
+    }
+  if (in_gap) {
+    ++stats_.dropped_by_gaps;
+    return {};
+  }
+
+  const KeyframeOptions& kf = options_.keyframes;
+  if (kf.enabled()) {
+    const SE2& ref = requireReference(f, use_truth_, "keyframes");
+    if (last_kept_reference_) {
+      const double moved = (ref.translation() - last_kept_reference_->translation()).norm();
+      const double turned = std::abs(angleDiff(ref.theta(), last_kept_reference_->theta()));
+      const bool keep =
+          (kf.min_distance_m > 0 && moved >= kf.min_distance_m) || (kf.min_turn_rad > 0 && turned >= kf.min_turn_rad);
+      if (!keep) {
+        ++stats_.dropped_by_keyframes;
+        return {};
+      }
+    }
+    last_kept_reference_ = ref;
+  }
+
+  if (from_truth) {
+    const SE2 truth = *f.T_world_robot;
+    // One noisy step from the last integration point: across dropped frames, the whole motion.
+    if (i > 0) odom_ = odom_ * noisyOdometryStep(prev_truth_.inverse() * truth, options_.odometry, odom_rng_);
+    prev_truth_ = truth;
+    f.T_odom_robot = odom_;
+  }
+  f.time = t;
+  if (options_.time.jitter_sigma_s > 0) f.time += jitter_rng_.gaussian(options_.time.jitter_sigma_s);
+  ++stats_.scans_kept;
+  stats_.last_T_odom_robot = f.T_odom_robot;
+  stats_.last_T_world_robot = f.T_world_robot;
+  burst_.push_back(std::move(f));
+  if (burst_.size() >= options_.time.burst_size) return flush();
+  return {};
+}
+
+std::vector<Frame> LogPerturber::finish() { return flush(); }
+
+std::vector<Frame> LogPerturber::flush() {
+  if (!burst_.empty()) {
+    // A burst is delivered at once: every frame carries the time of the last one.
+    const double t = burst_.back().time;
+    for (Frame& f : burst_) f.time = t;
+  }
+  std::vector<Frame> out;
+  out.swap(burst_);
+  return out;
+}
+
+std::vector<Frame> perturbLog(const std::vector<Frame>& frames, LogPerturbationOptions options,
+                              const std::vector<GapRequest>& gaps, PerturbationStats* stats) {
+  if (!gaps.empty()) {
+    GapPlanner planner(gaps, options.odometry_source, options.time);
+    for (const Frame& f : frames) planner.add(f);
+    for (const GapWindow& w : planner.plan()) options.gaps.push_back(w);
+  }
+  LogPerturber perturber(std::move(options));
+  std::vector<Frame> out;
+  auto append = [&out](std::vector<Frame> ready) {
+    for (Frame& f : ready) out.push_back(std::move(f));
+  };
+  for (const Frame& f : frames) append(perturber.push(f));
+  append(perturber.finish());
+  if (stats) *stats = perturber.stats();
+  return out;
+}
+
+}  // namespace lidar2d::sim
