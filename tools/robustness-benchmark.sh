@@ -1,0 +1,171 @@
+#!/bin/bash
+# The SLAM robustness benchmark of issue 29: lidar2d slam with its default parameters on logs it was
+# not tuned on, made by `lidar2d perturb` (docs/perturb.md). Prints a markdown table, one row per run,
+# and writes it to OUT_DIR/robustness.md.
+#
+#   tools/robustness-benchmark.sh [--quick] [--part corrected|raw|sim]... [--logs NAME,...] [BUILD_DIR] [OUT_DIR]
+#
+# Parts (all by default; --part may be repeated):
+#   corrected  every log in ../shared/data/corrected, with realistic odometry (--odom-model realistic)
+#              made from its truth, dense and as keyframes (--keyframes 1,30), seeds 1 2 3; logs whose
+#              stamps repeat (`lidar2d info`: time_repeats > 0) get --synthesize-times 1 (they hold
+#              keyframes 0.5-3 m apart: 1 Hz is a robot at walking pace). Error: ATE against the
+#              log's truth.
+#   raw        the three raw bags as they are, with a 10 s gap at their largest turn (perturb
+#              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), and with
+#              slam --no-odometry. Error: Kuemmerle relations (mean +- std).
+#   sim        the simulator's worlds (office, corridor, symmetric, open) as simulated (seed 1), and
+#              with realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3. Error: ATE.
+# --quick uses seed 1 only; --logs keeps only the logs / worlds named (e.g. --logs intel,orebro).
+#
+# Columns: the SLAM trajectory's error, the log's own odometry's error beside it (`lidar2d eval LOG
+# --truth T --estimate-from odometry`; "not used" for --no-odometry), loop closures accepted, wall
+# time of the slam process, p99 and max milliseconds per scan from summary.json (p99 empty when the
+# summary has none), peak memory of the slam process (/usr/bin/time). A run whose slam or eval fails
+# gets a row saying so; the others still run.
+#
+# Data from ../shared/data (or $LIDAR2D_DATA_DIR); LIDAR2D_SLAM_CONFIG=FILE.yaml passes --config.
+set -euo pipefail
+
+QUICK=0
+PARTS=()
+LOGS=""
+POSITIONAL=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) QUICK=1 ;;
+    --part)
+      shift
+      case "${1:-}" in corrected | raw | sim) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, raw, sim)" >&2; exit 2 ;; esac ;;
+    --logs) shift; LOGS=",${1:-},";;
+    -h | --help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    -*) echo "unknown option $1" >&2; exit 2 ;;
+    *) POSITIONAL+=("$1") ;;
+  esac
+  shift
+done
+BUILD=${POSITIONAL[0]:-build}
+OUT=${POSITIONAL[1]:-bench-out/robustness}
+BIN=$BUILD/lidar2d
+DATA=${LIDAR2D_DATA_DIR:-$(cd "$(dirname "$0")/.." && pwd)/../shared/data}
+[ ${#PARTS[@]} -eq 0 ] && PARTS=(corrected raw sim)
+SEEDS=(1 2 3)
+[ "$QUICK" = 1 ] && SEEDS=(1)
+[ -x "$BIN" ] || { echo "no lidar2d binary at $BIN (build the lidar2d_cli target)" >&2; exit 2; }
+mkdir -p "$OUT"
+TABLE=$OUT/robustness.md
+
+want_part() { [[ " ${PARTS[*]} " == *" $1 "* ]]; }
+want_log() { [ -z "$LOGS" ] || [[ "$LOGS" == *",$1,"* ]]; }
+emit() { echo "$1"; echo "$1" >>"$TABLE"; }
+
+# run NAME LOG TRUTH ODOM [slam args...]: slam on LOG, its trajectory evaluated against TRUTH (a log
+# with truth or a relations file); the odometry of ODOM (a log, or "-" when slam does not use it)
+# evaluated against TRUTH too.
+run() {
+  local name=$1 log=$2 truth=$3 odom=$4
+  shift 4
+  local dir=$OUT/runs/${name//[ \/]/_}
+  local config=()
+  if [ -n "${LIDAR2D_SLAM_CONFIG:-}" ]; then config=(--config "$LIDAR2D_SLAM_CONFIG"); fi
+  rm -rf "$dir" && mkdir -p "$dir"
+  local rc=0
+  /usr/bin/time -f "%e %U %M" -o "$dir/time.txt" "$BIN" slam "$log" -o "$dir/slam" -q "${config[@]}" "$@" \
+    >"$dir/slam.out" 2>"$dir/slam.err" || rc=$?
+  if [ "$rc" != 0 ]; then
+    emit "| $name | slam failed (exit $rc): $(head -c 200 "$dir/slam.err" | tr '\n|' '  ') | | | | | | |"
+    return 0
+  fi
+  "$BIN" eval "$dir/slam/trajectory.txt" --truth "$truth" >"$dir/eval.json" 2>"$dir/eval.err" || rc=$?
+  if [ "$odom" != "-" ]; then
+    "$BIN" eval "$odom" --truth "$truth" --estimate-from odometry >"$dir/odom.json" 2>"$dir/odom.err" || true
+  fi
+  python3 - "$dir" "$name" <<'PY' | tee -a "$TABLE"
+import json, os, sys
+d, name = sys.argv[1], sys.argv[2]
+def load(f):
+    try:
+        return json.load(open(os.path.join(d, f)))
+    except (OSError, ValueError):
+        return None
+def err(e):
+    if e is None:
+        return ""
+    if "relations" in e:
+        r = e["relations"]
+        return "%.3f +- %.3f m, %.2f +- %.2f deg" % (r["trans_mean_m"], r["trans_std_m"], r["rot_mean_deg"], r["rot_std_deg"])
+    return "ATE %.3f m, %.2f deg" % (e["ate_rmse_m"], e["ate_rot_rmse_deg"])
+e, o, s = load("eval.json"), load("odom.json"), load("slam/summary.json") or {}
+slam_err = err(e) if e is not None else "eval failed: " + open(os.path.join(d, "eval.err")).read().strip()[:150]
+odom_err = err(o) if os.path.exists(os.path.join(d, "odom.json")) else "not used"
+if o is None and os.path.exists(os.path.join(d, "odom.json")):
+    odom_err = "eval failed: " + open(os.path.join(d, "odom.err")).read().strip()[:150]
+wall, user, kb = open(os.path.join(d, "time.txt")).read().split()[-3:]
+p99 = s.get("ms_per_scan_p99")
+mx = s.get("ms_per_scan_max")
+print("| %s | %s | %s | %s | %s | %s | %s | %s | %d |" % (
+    name, s.get("scans", ""), slam_err, odom_err, s.get("loop_closures_accepted", ""), wall,
+    "" if p99 is None else "%.1f" % p99, "" if mx is None else "%.1f" % mx, int(kb) // 1024))
+PY
+}
+
+# perturb ARGS...: one perturb run, its summary line kept beside the log.
+perturb() {
+  local out=${*: -1}
+  "$BIN" perturb "$@" >"$out.summary" 2>"$out.err" || { echo "perturb failed: $(cat "$out.err")" >&2; return 1; }
+}
+
+: >"$TABLE"
+emit "| run | scans | SLAM error | odometry error | loops accepted | wall [s] | p99 [ms/scan] | max [ms/scan] | peak MB |"
+emit "|---|---|---|---|---|---|---|---|---|"
+
+if want_part corrected; then
+  mkdir -p "$OUT/logs"
+  for log in "$DATA"/corrected/*.log.gz; do
+    base=$(basename "$log" .log.gz)
+    want_log "$base" || continue
+    clock=()
+    repeats=$("$BIN" info --json "$log" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("time_repeats", 0))')
+    [ "$repeats" -gt 0 ] && clock=(--synthesize-times 1)
+    tag=${clock:+ synth1Hz}
+    for seed in "${SEEDS[@]}"; do
+      for variant in dense kf; do
+        kf=()
+        [ "$variant" = kf ] && kf=(--keyframes 1,30)
+        p=$OUT/logs/$base-$variant-s$seed.log
+        perturb "$log" --odom-model realistic "${kf[@]}" "${clock[@]}" --seed "$seed" -o "$p" || continue
+        run "$base $variant$tag s$seed" "$p" "$p" "$p"
+      done
+    done
+  done
+fi
+
+if want_part raw; then
+  mkdir -p "$OUT/logs"
+  for d in intel fr079 mit-csail; do
+    want_log "$d" || continue
+    bag=$DATA/raw/$d.orig.bag
+    rel=$DATA/raw/$d.relations
+    run "$d bag" "$bag" "$rel" "$bag"
+    p=$OUT/logs/$d-gap10-turn.log
+    if perturb "$bag" --keep-odometry --gap 10@turn -o "$p"; then
+      run "$d bag gap10@turn" "$p" "$rel" "$p"
+    fi
+    run "$d bag no-odometry" "$bag" "$rel" - --no-odometry
+  done
+fi
+
+if want_part sim; then
+  mkdir -p "$OUT/logs"
+  for w in office corridor symmetric open; do
+    want_log "$w" || continue
+    s=$OUT/logs/sim-$w.log
+    "$BIN" simulate --world "$w" --seed 1 -o "$s" >/dev/null
+    run "sim $w" "$s" "$s" "$s"
+    for seed in "${SEEDS[@]}"; do
+      p=$OUT/logs/sim-$w-kf-s$seed.log
+      perturb "$s" --odom-model realistic --keyframes 1,30 --seed "$seed" -o "$p" || continue
+      run "sim $w kf s$seed" "$p" "$p" "$p"
+    done
+  done
+fi
