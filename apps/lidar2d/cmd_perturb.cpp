@@ -52,10 +52,14 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <functional>
 #include <iostream>
 #include <memory>
 #include <numbers>
+#include <optional>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
@@ -305,9 +309,9 @@ void run(const PerturbArgs& a) {
   std::string gaps_summary;
   for (std::size_t k = 0; k < o.gaps.size(); ++k) {
     const sim::GapWindow& g = o.gaps[k];
-    gaps_summary += fmt::format("{}{:.1f}-{:.1f} s{}: {}", k == 0 ? " (" : "; ", g.begin_s - t_first, g.end_s - t_first,
-                                std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg),
-                                st.dropped_per_gap[k]);
+    gaps_summary += fmt::format(
+        "{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ", g.begin_s - t_first, g.end_s - t_first,
+        std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg), st.dropped_per_gap[k]);
   }
   if (!gaps_summary.empty()) gaps_summary += ")";
   std::string odometry = "odometry kept from the log";
