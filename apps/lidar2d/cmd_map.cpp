@@ -16,7 +16,6 @@
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/core/read_ahead.hpp"
-#include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/image.hpp"
 #include "lidar2d/io/map_file.hpp"
@@ -59,7 +58,7 @@ class TrajectoryPoses {
  private:
   std::string path_;
   Trajectory traj_;
-  eval::TimeIndex index_;
+  TimeIndex index_;
   double max_dt_;
 };
 
