@@ -89,7 +89,7 @@ class CountMap final : public OccupancyMap {
   static constexpr std::uint32_t kMarker = 0x80000000u;
   TiledGrid<HitMiss> grid_;
   // Cells updated in the current scan, per part; a cache line each, as both parts push_back at
-  // once (sharing a line made two threads 50% slower than one, measured on freiburg-079).
+  // once (sharing a line would make the two threads contend for it).
   struct alignas(64) Touched {
     std::vector<HitMiss*> cells;
     std::vector<HitMiss*> listed;  // cells listed by clearAndList (the first `num_listed` of them)

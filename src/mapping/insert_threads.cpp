@@ -51,8 +51,8 @@ std::uint32_t waitChange(const std::atomic<std::uint32_t>& a, std::uint32_t old,
   }
 }
 
-// Handshake spin times, measured on freiburg-079 (2 cores, reader thread running): long enough to
-// cover the gap between consecutive scans when the reader keeps up, short enough not to starve it.
+// Handshake spin times: long enough to cover the gap between consecutive scans when the log reader
+// keeps up, short enough not to starve it.
 constexpr std::chrono::microseconds kWorkerSpin{50};
 constexpr std::chrono::microseconds kCallerSpin{200};
 
@@ -122,7 +122,7 @@ std::optional<std::pair<OccupancyMap::Slab, OccupancyMap::Slab>> OccupancyMap::c
   // Below this much work (cells traversed) the handshake (a few microseconds) does not pay.
   constexpr double kMinWork = 3000;
   // Walking a far part's cells before the split line without touching them costs about this
-  // fraction of visiting a cell (measured with bench_mapping).
+  // fraction of visiting a cell.
   constexpr double kSkipCost = 0.25;
   // Split only when the smaller part has at least this share of the work.
   constexpr double kMinShare = 0.2;

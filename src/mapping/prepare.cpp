@@ -60,7 +60,7 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   // Beam directions in the laser frame, and how far each level of covering beams reaches per unit
   // of a cell's width (see below).
   // (The directions depend only on the scan's angles, which a laser keeps from scan to scan: they
-  // are computed again only when those change - the sines and cosines were 2% of `lidar2d map`.)
+  // are computed again only when those change.)
   if (out.units_.size() != n || out.units_angle_min_ != scan.angleMin() ||
       out.units_angle_increment_ != scan.angleIncrement()) {
     out.units_.resize(n);
@@ -146,9 +146,9 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   // Where each beam's walk starts. Log-odds and count update a cell at most once per scan, so only
   // the set of cells that the scan's beams pass matters, not which beam passes them. Near the laser
   // the beams are closer together than a cell and most cells a beam passes are passed by its
-  // neighbours too (freiburg-079: 24 k steps per scan for 7.5 k cells). Beam i's covering beams are
-  // i - h and i + h, h the largest power of two dividing i (beam 0 has none). A cell that beam i
-  // passes and that neither covering beam passes through lies inside the wedge between them; within
+  // neighbours too. Beam i's covering beams are i - h and i + h, h the largest power of two
+  // dividing i (beam 0 has none). A cell that beam i passes and that neither covering beam passes
+  // through lies inside the wedge between them; within
   // distance rho of the laser that wedge is 2 rho sin(h inc) wide across beam i, and the cell is at
   // least |cos| + |sin| of the beam's direction wide in that direction (a unit square). So while
   // the wedge is narrower than the cell, and both covering beams pass more than 1.5 cells beyond
@@ -156,8 +156,8 @@ void OccupancyMap::prepare(const LaserScan& scan, const SE2& T_world_laser, Prep
   // by a covering beam: by its walk, or, where that walk starts later, by the covering beams of a
   // coarser level still (the induction ends at beams that start at the laser). Beam i's walk starts
   // at distance rho - 1.5 (the cells before lie wholly within rho). The maps are the same cell for
-  // cell as with every walk starting at the laser (tests; BENCHMARK.md, mapping). The TSDF updates
-  // each cell once per beam and walks every beam from the laser.
+  // cell as with every walk starting at the laser (Insertion.WalksStartingAwayFromTheLaserUpdateTheSameCells
+  // in test_occupancy_map). The TSDF updates each cell once per beam and walks every beam from the laser.
   const bool cover = model() != MapModel::kTsdf;
   const std::vector<double>& reach_per_width = out.reach_per_width_;
   const std::size_t levels = reach_per_width.size();

@@ -173,9 +173,7 @@ template <typename Cell, typename F, typename Run = std::nullptr_t>
 }
 
 // (Near the sensor most cells a beam passes are passed by its neighbours too: a beam's walk starts
-// where its covering beams stop passing all its cells, see OccupancyMap::prepare. Clearing row runs
-// per beam and skipping the runs already cleared, tried before, cost more per row than the walk
-// saved; BENCHMARK.md, mapping.)
+// where its covering beams stop passing all its cells, see OccupancyMap::prepare.)
 // The cells a beam clears (log-odds, count), restricted to `slab`: the cells its walk passes, as
 // `traceRay`, and the end cell of a beam with no return (a return's cell is a hit). `on_clear(at)`
 // gets a GridWalk or a CellAt (see GridWalk). Without a slab, the passed cells go to
@@ -192,8 +190,8 @@ template <typename Cell, typename BeamT, typename SlabT, typename F, typename Ru
 // cells that go to on_run there are listed in `listed` as they are walked (its first n entries, n
 // returned), and mark(cell) marks a cell as updated in this scan and says whether it was not marked
 // yet (then the list's end moves past it). The caller updates the listed cells after the walks:
-// this way no branch depends on a cell's mark, which the processor mispredicted about once in
-// eight cells (freiburg-079, callgrind). The others go to on_clear(at), as in forEachCleared.
+// this way no branch depends on a cell's mark, which the processor predicts poorly. The others go
+// to on_clear(at), as in forEachCleared.
 template <typename Cell, typename BeamT, typename SlabT, typename F, typename Mark>
 [[gnu::always_inline]] inline std::size_t clearAndList(TiledGrid<Cell>& grid, const std::vector<BeamT>& beams,
                                                        const SlabT& slab, std::vector<Cell*>& listed, F&& on_clear,
