@@ -4,31 +4,26 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <vector>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
-#include "lidar2d/core/read_ahead.hpp"
-#include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/image.hpp"
 #include "lidar2d/io/map_file.hpp"
 #include "lidar2d/io/trajectory.hpp"
 #include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/map_builder.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "map_output.hpp"
 
 namespace lidar2d::cli {
 namespace {
-
-enum class PoseSource { kAuto, kTruth, kOdometry };
 
 struct MapArgs {
   std::string log;
@@ -36,31 +31,11 @@ struct MapArgs {
   std::string poses_file;
   std::string prior;
   mapping::MapModel model = mapping::MapModel::kLogOdds;
-  PoseSource pose_source = PoseSource::kAuto;
+  mapping::PoseSource pose_source = mapping::PoseSource::kAuto;
   mapping::MapOptions options;
   double max_dt = 0.001;
   bool quiet = false;
   io::ReaderOptions reader;
-};
-
-// Pose of each frame from a trajectory file: the pose with the same index when its time agrees
-// (this keeps logs whose timestamps repeat unambiguous), else the nearest time within max_dt.
-class TrajectoryPoses {
- public:
-  TrajectoryPoses(const std::string& path, double max_dt)
-      : path_(path), traj_(io::readTrajectory(path)), index_(traj_), max_dt_(max_dt) {}
-  SE2 at(const Frame& f) const {
-    if (f.index < traj_.size() && std::abs(traj_[f.index].time - f.time) <= max_dt_) return traj_[f.index].pose;
-    if (auto i = index_.nearest(f.time, max_dt_)) return traj_[*i].pose;
-    throw badInput(fmt::format("has no pose within {} s of scan {} (time {:.6f})", max_dt_, f.index, f.time),
-                   ErrorLocation(path_, 0, "timestamp"));
-  }
-
- private:
-  std::string path_;
-  Trajectory traj_;
-  eval::TimeIndex index_;
-  double max_dt_;
 };
 
 OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map, std::size_t& overridden) {
@@ -93,75 +68,15 @@ OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map
 void run(const MapArgs& a) {
   const auto t0 = std::chrono::steady_clock::now();
   auto map = mapping::makeMap(a.model, a.options);
-  std::optional<TrajectoryPoses> traj;
-  if (!a.poses_file.empty()) traj.emplace(a.poses_file, a.max_dt);
+  mapping::FramePoses poses = a.poses_file.empty()
+                                  ? mapping::FramePoses::fromFrames(a.pose_source, "use --poses TRAJ or --pose-source")
+                                  : mapping::FramePoses::fromTrajectory(io::readTrajectory(a.poses_file), a.max_dt, a.poses_file);
   auto source = io::openLog(a.log, a.reader);
-  std::size_t scans = 0;
   const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
-  // Reading a scan, finding its pose and preparing its beams (with the surface guard's lines)
-  // read no map state: a second thread does them, a few scans ahead of this one, which inserts
-  // (the preparation is about a tenth of the work; BENCHMARK.md, mapping).
-  using Prepared = mapping::OccupancyMap::PreparedScan;
-  // A scan the map rejects (a pose too far out, an extent over the cell budget) is named in the error.
-  auto atScan = [&](const Error& e, std::size_t index, double time) {
-    return Error(e.kind(), e.message(),
-                 ErrorLocation(a.log, 0, fmt::format("scan {} (time {:.6f}) {}", index, time, e.where().field)));
-  };
-  struct Item {
-    std::unique_ptr<Prepared> prepared;
-    std::size_t index = 0;
-    double time = 0.0;
-  };
-  // Inserted scans' PreparedScans go back to the preparing thread, which reuses their buffers (and
-  // the beam directions, unchanged from scan to scan) instead of allocating a fresh set per scan.
-  std::mutex spare_mutex;
-  std::vector<std::unique_ptr<Prepared>> spare;
-  auto takeSpare = [&] {
-    std::lock_guard lock(spare_mutex);
-    if (spare.empty()) return std::make_unique<Prepared>();
-    std::unique_ptr<Prepared> p = std::move(spare.back());
-    spare.pop_back();
-    return p;
-  };
-  auto produce = [&]() -> std::optional<Item> {
-    const std::optional<Frame> f = source->next();
-    if (!f) return std::nullopt;
-    SE2 T_world_robot;
-    if (traj) {
-      T_world_robot = traj->at(*f);
-    } else {
-      const bool use_truth = a.pose_source == PoseSource::kTruth || (a.pose_source == PoseSource::kAuto && f->T_world_robot);
-      const std::optional<SE2>& pose = use_truth ? f->T_world_robot : f->T_odom_robot;
-      if (!pose)
-        throw badInput(fmt::format("scan {} (time {:.6f}) has no {} pose (use --poses TRAJ or --pose-source)", f->index,
-                                   f->time, use_truth ? "truth" : "odometry"),
-                       ErrorLocation(a.log));
-      T_world_robot = *pose;
-    }
-    Item item{takeSpare(), f->index, f->time};
-    try {
-      map->prepare(f->scan, T_world_robot * f->T_robot_laser, *item.prepared);
-    } catch (const Error& e) {
-      throw atScan(e, f->index, f->time);
-    }
-    return item;
-  };
-  {
-    ReadAhead<Item> ahead(produce, 16);  // (stops and joins its thread on an exception here)
-    while (std::optional<Item> item = ahead.next()) {
-      try {
-        map->insert(*item->prepared);
-      } catch (const Error& e) {
-        throw atScan(e, item->index, item->time);
-      }
-      {
-        std::lock_guard lock(spare_mutex);
-        spare.push_back(std::move(item->prepared));
-      }
-      ++scans;
-      if (progress && scans % 500 == 0) std::cerr << "\rmapped " << scans << " scans" << std::flush;
-    }
-  }
+  mapping::MapBuilder builder(*map, std::move(poses), {.source_name = a.log});
+  const std::size_t scans = builder.insert([&] { return source->next(); }, [progress](std::size_t done) {
+    if (progress && done % 500 == 0) std::cerr << "\rmapped " << done << " scans" << std::flush;
+  });
   if (progress) std::cerr << "\r";
   if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
   OccupancyImage image = mapping::toOccupancyImage(*map);
@@ -226,8 +141,9 @@ void addMapCommand(CLI::App& app) {
   sub->add_option("--truncation", a->options.tsdf.truncation_m, "tsdf: truncation distance [m]")->default_val(0.3);
   sub->add_option("--poses", a->poses_file, "trajectory file (t x y theta or TUM) giving the pose of every scan");
   sub->add_option("--max-dt", a->max_dt, "--poses: largest timestamp difference to accept [s]")->default_val(0.001);
-  const std::map<std::string, PoseSource> sources{
-      {"auto", PoseSource::kAuto}, {"truth", PoseSource::kTruth}, {"odometry", PoseSource::kOdometry}};
+  const std::map<std::string, mapping::PoseSource> sources{{"auto", mapping::PoseSource::kAuto},
+                                                           {"truth", mapping::PoseSource::kTruth},
+                                                           {"odometry", mapping::PoseSource::kOdometry}};
   sub->add_option("--pose-source", a->pose_source, "without --poses: auto (truth if present, else odometry), truth or odometry")
       ->transform(CLI::CheckedTransformer(sources, CLI::ignore_case))
       ->default_str("auto");

@@ -22,6 +22,7 @@
 #include "lidar2d/io/prefetch.hpp"
 #include "lidar2d/io/trajectory.hpp"
 #include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/map_builder.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/slam/slam.hpp"
 #include "map_output.hpp"
@@ -221,33 +222,44 @@ void run(const SlamArgs& a) {
   const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
 
   // Frames are processed as the reader thread (prefetch) parses them, so parsing overlaps with
-  // SLAM on the other core; they are kept for the final map, drawn from every scan at its
-  // optimised pose.
-  std::vector<Frame> frames;
+  // SLAM on the other core. Of each frame only its laser mounting is kept (for --pose-frame laser):
+  // the final map reads the log again.
+  std::vector<SE2> T_robot_laser;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   slam::Slam slam(options);
   ProgressBar bar(progress, source->sizeHint());
   const auto t_slam = Clock::now();
   while (auto f = source->next()) {
-    frames.push_back(std::move(*f));
-    slam.add(frames.back());
-    bar.update(frames.size(), slam.stats());
+    T_robot_laser.push_back(f->T_robot_laser);
+    slam.add(*f);
+    bar.update(T_robot_laser.size(), slam.stats());
   }
-  if (frames.empty()) throw badInput("log has no scans", ErrorLocation(a.log));
+  source.reset();
+  const std::size_t num_scans = T_robot_laser.size();
+  if (num_scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
   slam.finish();
-  bar.update(frames.size(), slam.stats(), true);
+  bar.update(num_scans, slam.stats(), true);
   bar.done();
   const double slam_seconds = secondsSince(t_slam);
   const auto trajectory = slam.trajectory();
 
-  // Map from every scan at its optimised pose.
+  // Map from every scan of the log, read again, at its optimised pose (the pose with the scan's
+  // index and exactly its time).
   const auto t_map = Clock::now();
   mapping::MapOptions mo;
   mo.resolution_m = a.resolution;
   mo.insert.max_range_m = options.max_range_m;
   auto map = mapping::makeMap(a.model, mo);
-  for (std::size_t i = 0; i < frames.size(); ++i)
-    map->insert(frames[i].scan, trajectory[i].T_world_robot * frames[i].T_robot_laser);
+  {
+    Trajectory optimised;
+    optimised.reserve(trajectory.size());
+    for (const auto& e : trajectory) optimised.push_back({e.time, e.T_world_robot});
+    mapping::MapBuilder builder(*map, mapping::FramePoses::fromTrajectory(std::move(optimised), 0.0, a.log),
+                                {.source_name = a.log});
+    auto again = io::openLog(a.log, a.reader);
+    if (builder.insert([&] { return again->next(); }) != num_scans)
+      throw ioError("the log changed while it was being read", ErrorLocation(a.log));
+  }
   const OccupancyImage image = mapping::toOccupancyImage(*map);
   const double map_seconds = secondsSince(t_map);
 
@@ -258,7 +270,7 @@ void run(const SlamArgs& a) {
   traj.reserve(trajectory.size());
   for (std::size_t i = 0; i < trajectory.size(); ++i) {
     const auto& e = trajectory[i];
-    traj.push_back({e.time, a.laser_frame ? e.T_world_robot * frames[i].T_robot_laser : e.T_world_robot});
+    traj.push_back({e.time, a.laser_frame ? e.T_world_robot * T_robot_laser[i] : e.T_world_robot});
   }
   io::writeTrajectory(dir + "/trajectory.txt", traj);
   std::vector<std::string> written{dir + "/trajectory.txt"};
@@ -290,7 +302,7 @@ void run(const SlamArgs& a) {
   j["optimization_s"] = s.optimization_seconds;
   j["slam_s"] = slam_seconds;
   j["map_s"] = map_seconds;
-  j["ms_per_scan_mean"] = slam_seconds * 1e3 / static_cast<double>(frames.size());
+  j["ms_per_scan_mean"] = slam_seconds * 1e3 / static_cast<double>(num_scans);
   j["ms_per_scan_median"] = eval::percentile(per_scan, 0.5);
   j["ms_per_scan_p95"] = eval::percentile(per_scan, 0.95);
   j["ms_per_scan_max"] = eval::percentile(per_scan, 1.0);
@@ -319,7 +331,7 @@ void run(const SlamArgs& a) {
         "slam: {} scans, {} nodes, {} loop closures ({} rejected), {} events; {:.2f} s ({:.2f} ms per scan), total "
         "{:.2f} s\n",
         s.scans, s.nodes, s.loop_accepted, s.loop_rejected, slam.events().size(), slam_seconds,
-        slam_seconds * 1e3 / static_cast<double>(frames.size()), secondsSince(t_start));
+        slam_seconds * 1e3 / static_cast<double>(num_scans), secondsSince(t_start));
     for (const auto& w : written) std::cout << w << "\n";
   }
 }

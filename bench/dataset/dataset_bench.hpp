@@ -2,12 +2,14 @@
 // Shared pieces of the dataset benchmark.
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
 
@@ -15,6 +17,12 @@ namespace lidar2d::bench {
 
 /// Reads every frame of a log into memory (so that timings exclude parsing).
 std::vector<Frame> loadFrames(const std::string& path);
+
+/// A map of `model` from the even-numbered frames (0, 2, 4, ...) at their truth poses, built by
+/// mapping::MapBuilder. Throws `lidar2d::Error` naming `name` and the scan when one lacks a truth pose.
+std::unique_ptr<mapping::OccupancyMap> evenFramesMap(const std::vector<Frame>& frames, const std::string& name,
+                                                     mapping::MapModel model = mapping::MapModel::kLogOdds,
+                                                     const mapping::MapOptions& options = {});
 
 /// CPU time of the calling thread [s]: per-item times on a machine shared with other jobs (wall
 /// time there includes waiting for the core).

@@ -43,14 +43,6 @@ bool near(const SE2& a, const SE2& b, double m = 0.3, double deg = 5.0) {
   return e.translation().norm() <= m && std::abs(e.theta()) <= deg * kDeg;
 }
 
-OccupancyImage evenMap(const std::vector<Frame>& frames) {
-  mapping::MapOptions o;
-  auto m = mapping::makeMap(mapping::MapModel::kLogOdds, o);
-  for (std::size_t i = 0; i < frames.size(); i += 2)
-    if (frames[i].T_world_robot) m->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
-  return mapping::toOccupancyImage(*m);
-}
-
 void row(const std::string& name, const std::string& method, std::size_t n, std::size_t ok, std::size_t answered,
          std::size_t declined, const std::vector<double>& ms, const std::string& db) {
   std::cout << fmt::format(
@@ -74,7 +66,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     }
     const std::vector<Frame> frames = loadFrames(path);
     const std::string name = std::filesystem::path(log).stem().stem().string();
-    const OccupancyImage map = evenMap(frames);
+    const OccupancyImage map = mapping::toOccupancyImage(*evenFramesMap(frames, path));
     if (!bo.save_maps.empty()) {
       std::filesystem::create_directories(bo.save_maps);
       io::writeMap((std::filesystem::path(bo.save_maps) / (name + "-even.yaml")).string(), map);
@@ -149,7 +141,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     const auto truth = sim::samplePath(sc.waypoints, {});
     sim::SimulatorOptions so;
     const std::vector<Frame> frames = sim::simulate(sc.world, truth, so.noiseFree());
-    const OccupancyImage map = evenMap(frames);
+    const OccupancyImage map = mapping::toOccupancyImage(*evenFramesMap(frames, "symmetric world"));
     localization::Localizer loc(map, bo.loc, bo.db);
     std::size_t n = 0, declined = 0, all_listed = 0, answered_one = 0;
     std::vector<double> ms;

@@ -209,7 +209,7 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
     // The scan nearest in time, within 1 ms. (The intel bag has bursts of scans logged under 1 ms
     // apart while the robot turns about 5 deg per scan: the first scan within the tolerance, as
     // this once took, is then the wrong one.)
-    const eval::TimeIndex time_index(times);
+    const TimeIndex time_index(times);
     auto frameAt = [&](double t) { return time_index.nearest(t, 1e-3); };
     struct Case {
       std::size_t target, source;

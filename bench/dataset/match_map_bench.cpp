@@ -47,12 +47,7 @@ void runMatchMapBenchmark(const std::string& data_dir, const MatchMapBenchOption
     const std::vector<Frame> frames = loadFrames(path);
     mapping::MapOptions mo;
     mo.resolution_m = bo.resolution_m;
-    auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
-    for (std::size_t i = 0; i < frames.size(); i += 2) {
-      if (!frames[i].T_world_robot) throw badInput("scan without a truth pose", ErrorLocation(path));
-      map->insert(frames[i].scan, *frames[i].T_world_robot * frames[i].T_robot_laser);
-    }
-    const OccupancyImage image = mapping::toOccupancyImage(*map);
+    const OccupancyImage image = mapping::toOccupancyImage(*evenFramesMap(frames, path, mapping::MapModel::kLogOdds, mo));
     // The odd scans (robot frame) and their perturbed guesses, the same for every row.
     std::vector<Points2> points;
     std::vector<SE2> truth, guess;

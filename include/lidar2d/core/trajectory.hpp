@@ -1,8 +1,11 @@
 #pragma once
 /// @file
 /// Timestamped poses as plain types: trajectories, ground-truth relations and relative poses
-/// between scans. io/trajectory.hpp reads and writes them as files; eval compares them.
+/// between scans, and the nearest-time lookup over a trajectory. io/trajectory.hpp reads and writes
+/// them as files; eval compares them; mapping places scans with them.
 
+#include <cstddef>
+#include <optional>
 #include <vector>
 
 #include "lidar2d/core/se2.hpp"
@@ -15,6 +18,26 @@ struct StampedPose {
   SE2 pose;           ///< e.g. T_world_robot
 };
 using Trajectory = std::vector<StampedPose>;
+
+/// Nearest-timestamp lookup by binary search over sorted times; indices refer to the original order.
+class TimeIndex {
+ public:
+  explicit TimeIndex(const Trajectory& trajectory);
+  explicit TimeIndex(const std::vector<double>& times);
+
+  /// Original index of the pose whose time is nearest to `t` with |time - t| <= max_dt, or nullopt.
+  /// Ties (equal distance before and after, or repeated times) go to the earlier time, then to the
+  /// earlier pose in the original order.
+  std::optional<std::size_t> nearest(double t, double max_dt) const;
+  /// True when at least two poses share a timestamp (time lookups are then ambiguous).
+  bool hasRepeatedTimes() const { return repeated_; }
+  std::size_t size() const { return times_.size(); }
+
+ private:
+  std::vector<double> times_;        // sorted
+  std::vector<std::size_t> order_;   // order_[k] = original index of times_[k]
+  bool repeated_ = false;
+};
 
 /// One ground-truth relation (Kuemmerle et al. 2009): the pose of the robot at `t2` in the frame of
 /// the robot at `t1`. dz, roll and pitch of the file are ignored (they are 0 in every 2D data set).

@@ -69,26 +69,6 @@ ErrorStats summarize(std::vector<double> values);
 /// NaN when `values` is empty. Used for the timing summaries of the CLI and the benchmarks.
 double percentile(std::vector<double> values, double q);
 
-/// Nearest-timestamp lookup by binary search over sorted times; indices refer to the original order.
-class TimeIndex {
- public:
-  explicit TimeIndex(const Trajectory& trajectory);
-  explicit TimeIndex(const std::vector<double>& times);
-
-  /// Original index of the pose whose time is nearest to `t` with |time - t| <= max_dt, or nullopt.
-  /// Ties (equal distance before and after, or repeated times) go to the earlier time, then to the
-  /// earlier pose in the original order.
-  std::optional<std::size_t> nearest(double t, double max_dt) const;
-  /// True when at least two poses share a timestamp (time lookups are then ambiguous).
-  bool hasRepeatedTimes() const { return repeated_; }
-  std::size_t size() const { return times_.size(); }
-
- private:
-  std::vector<double> times_;        // sorted
-  std::vector<std::size_t> order_;   // order_[k] = original index of times_[k]
-  bool repeated_ = false;
-};
-
 /// One associated pose pair.
 struct Match {
   std::size_t est = 0;  ///< index into the estimated trajectory

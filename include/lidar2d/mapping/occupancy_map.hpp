@@ -41,7 +41,7 @@ struct InsertOptions {
   /// next beam passes it, at most 2 sqrt(2) cells. A cell those segments pass through and no beam
   /// of the scan ends in is left as it was by that scan (neither hit nor cleared). Without the
   /// guard, beams that graze a wall, or pass the edge of an obstacle, clear the cells the surface
-  /// passes through (BENCHMARK.md, simulated office; docs/mapping.md). 0 disables the guard.
+  /// passes through (docs/mapping.md). 0 disables the guard.
   double surface_guard_max_m = 1.0;
   /// The surface guard takes a return and its nearer neighbouring return as one surface when they
   /// lie at most this far apart [m] (the farther neighbour is more likely across a depth jump).
@@ -52,11 +52,8 @@ struct InsertOptions {
   /// one thread, in the single-threaded order, so the map is identical). Scans too small or too
   /// lopsided to split run on the calling thread, and so do the next scans after a split that
   /// was slower than one thread (busy cores). Larger values currently use 2 threads.
-  /// On the 2-core reference machine two threads do not pay: the split costs 20-35% extra work
-  /// (walking to the split line, the clipped traversal) and two busy cores run each thread about
-  /// 25% slower; `lidar2d map` on freiburg-079, whose log reader already uses the second core,
-  /// took a median 1.05 s either way over 10 interleaved runs, with 49% more CPU time on two
-  /// threads (and slower on two when the machine was busy; BENCHMARK.md). More cores would pay.
+  /// The default is 1 because on two cores the split does not pay: it costs extra work (walking to
+  /// the split line, the clipped traversal) and the second core is busy reading the log.
   unsigned threads = 1;
   /// With threads > 1: after a split scan that took longer than one thread would have (cores busy
   /// with other work, so the worker got its time slice late), insert the next scans on one thread
@@ -74,8 +71,7 @@ struct LogOddsOptions {
   /// +2 per hit, -1 per pass, clamped to 1..100; probability = value / 100.
   bool classic_integer = false;
   /// Exported occupied when probability > this. The default classifies by the more likely state
-  /// (maximum a posteriori), which explains 92-97% of held-out endpoints on the Radish logs with
-  /// under 1% of free space marked occupied (BENCHMARK.md).
+  /// (maximum a posteriori).
   double occupied_threshold = 0.5;
   double free_threshold = 0.5;  ///< exported free when probability < this
 };
@@ -90,7 +86,7 @@ struct TsdfOptions {
   double truncation_m = 0.3;  ///< |signed distance| is clamped to this [m]
   /// How far behind each return cells are updated (with negative distances) [m]; at most the
   /// truncation. Shorter than the truncation because walls are thinner: a long negative band
-  /// reaches the room behind the wall and cancels its zero crossing (measured in BENCHMARK.md).
+  /// reaches the room behind the wall and cancels its zero crossing.
   double behind_surface_m = 0.15;
   double max_weight = 100.0;  ///< cap of the running-average weight, a whole number (older data keeps 1/cap influence)
 };
@@ -131,7 +127,7 @@ class OccupancyMap {
   class PreparedScan;
   /// The first half of `insert`: turns the scan into beams (and, for the surface guard, the lines
   /// they spare) in `out`, reading no map state, so that it may run on another thread while the
-  /// map inserts an earlier scan (`lidar2d map` does). Throws as `insert` does for a bad pose.
+  /// map inserts an earlier scan (`MapBuilder` does). Throws as `insert` does for a bad pose.
   /// `out` keeps its buffers from scan to scan.
   void prepare(const LaserScan& scan, const SE2& T_world_laser, PreparedScan& out) const;
   /// The second half: inserts a scan `prepare` made for this map, exactly as `insert` would have;

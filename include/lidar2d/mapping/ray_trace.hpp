@@ -36,7 +36,7 @@ class RayWalk {
   /// An empty walk (done, in cell (0, 0)); assign a real one before use.
   RayWalk() = default;
   // (Forced inline: the walk is the innermost loop of map insertion, and GCC stops inlining it into
-  // the large insertion functions otherwise - 10-20% slower, measured with perf.)
+  // the large insertion functions otherwise.)
   [[gnu::always_inline]] RayWalk(const Eigen::Vector2d& start, const Eigen::Vector2d& end)
       : x_(floorToInt32(start.x())), y_(floorToInt32(start.y())) {
     const std::int32_t ex = floorToInt32(end.x());
@@ -92,8 +92,7 @@ class RayWalk {
   /// whether it will be visited (false: the run ends in it); the same for y.
   /// (One counter per axis counts the steps to the next lap or to the axis' last step, whichever
   /// comes first, so that a step makes one test besides the choice of its axis. That choice stays a
-  /// branch: an integer error term chosen by a conditional move had a third of the simulated
-  /// mispredictions but half again the instructions, and was no faster; BENCHMARK.md, mapping.)
+  /// branch: a branch-free choice costs more instructions than the mispredictions it saves.)
   template <typename Visit, typename OnX, typename OnY, typename OnLap>
   [[gnu::always_inline]] void run(std::int32_t n, std::int32_t first_lap_x, std::int32_t first_lap_y, std::int32_t lap,
                                   Visit&& visit, OnX&& on_x, OnY&& on_y, OnLap&& on_lap) {
