@@ -136,7 +136,7 @@ struct IcpOptions {
   /// (the `normal_neighbors` nearest, within `normal_max_radius_m`; 8 at most) is nearest to the
   /// source point, as Censi's PL-ICP pairs every point with the line through its two nearest target
   /// points. false drops those pairs (or pairs them point to point: `point_pair_weight`). These
-  /// pairs are left out of the reported information and covariance (see `finish` in icp.cpp).
+  /// pairs are left out of the reported information and covariance (see `finish` in icp_problem.cpp).
   /// Measured on the Radish logs (BENCHMARK.md, "What changed since the previous table", tenth
   /// session): more pairs right, and more time on 360-beam scans, where many short fits fail the
   /// flatness test.
@@ -208,7 +208,8 @@ class IcpTarget {
                             std::uint32_t* hint = nullptr) const;
 
   struct Impl;
-  /// Internal: the search structures, for the matcher in icp.cpp (an incomplete type elsewhere).
+  /// Internal: the search structures, for the correspondence search in icp_problem.cpp (an
+  /// incomplete type elsewhere).
   const Impl& impl() const { return *impl_; }
 
  private:
