@@ -199,8 +199,8 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
       points.push_back(f->scan.toPoints(f->T_robot_laser));
     }
     // The scan nearest in time, within 1 ms. (The intel bag has bursts of scans logged under 1 ms
-    // apart while the robot turns about 5 deg per scan: the first scan within the tolerance, as
-    // this once took, is then the wrong one.)
+    // apart while the robot turns about 5 deg per scan: the first scan within the tolerance would
+    // often be the wrong one.)
     const eval::TimeIndex time_index(times);
     auto frameAt = [&](double t) { return time_index.nearest(t, 1e-3); };
     struct Case {

@@ -19,8 +19,8 @@ namespace {
 // (a Ceres LossFunction) is applied per line term or per pair inside the block
 // (robustScaling), so the block's squared norm is the sum of rho over them: the same objective as
 // one residual block per pair with the loss attached, without Ceres's per-block bookkeeping
-// (evaluation dispatch, validity checks, the loss's Jacobian correction), which took most of the
-// time with one block per pair.
+// (evaluation dispatch, validity checks, the loss's Jacobian correction), which would take most of
+// the time with one block per pair.
 class PairResiduals final : public ceres::CostFunction {
  public:
   PairResiduals(const Icp& icp, bool p2l, const ceres::LossFunction* loss)
