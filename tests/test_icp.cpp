@@ -352,7 +352,7 @@ TEST_P(IcpSolvers, PointPairsPinTheCorridorWithPosts) {
 // along x, alternately 4 cm up and down): their line fits fail the flatness test, so point-to-line
 // without two-point lines drops their pairs and keeps x where the guess put it. With them (the
 // default) each zig-zag point pairs with the line through it and its neighbour nearest to the
-// source point, which pins x. The information leaves those lines out (icp.cpp, `finish`): it still
+// source point, which pins x. The information leaves those lines out (icp_problem.cpp, `finish`): it still
 // shows x as free.
 TEST_P(IcpSolvers, TwoPointLinesPinTheCorridorWithZigZags) {
   Points2 target = corridorWalls();

@@ -1,12 +1,10 @@
 // lidar2d match LOG --method p2p|p2l|lf|corr [--solver gn|ceres] [--init odom|identity] [--then p2p|p2l]
-//   -o FILE [--eval]: aligns every scan to the previous one.
+//   -o FILE [--eval]: aligns every scan to the previous one (registration::SequenceMatcher).
 //
-// For each consecutive pair (previous = target, current = source), both scans are turned into points
-// in their robot frames (LaserScan::toPoints(T_robot_laser)), the initial guess is the odometry's
-// relative motion T_prev_cur = odom_prev^-1 * odom_cur (or the identity), and the matcher estimates
-// T_prev_cur. With --then, a second stage (ICP) starts from the first stage's estimate: "--method corr
-// --then p2l" is the correlative search for large initial errors followed by point-to-line ICP (the
-// correlative search's own likelihood-field refinement is then skipped). Output (io::readRelativePoses reads it): one line per pair,
+// For each consecutive pair (previous = target, current = source) the matcher estimates T_prev_cur,
+// from the odometry's relative motion or the identity; with --then, ICP refines it ("--method corr
+// --then p2l": the correlative search for large initial errors, then point-to-line ICP). Output
+// (io::readRelativePoses reads it): one line per pair,
 //   t_prev t_cur dx dy dtheta converged iterations    [s, s, m, m, rad, 0/1, count]
 // written atomically. --eval compares the pairs with the log's truth (eval::evaluatePairs: success =
 // error < 10 cm and < 2 deg) and prints the success rate, median errors and time per pair.
@@ -17,25 +15,24 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
-#include <exception>
 #include <iostream>
 #include <map>
 #include <memory>
 #include <numbers>
-#include <mutex>
 #include <optional>
 #include <thread>
 #include <vector>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/core/frame.hpp"
+#include "lidar2d/core/trajectory.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/prefetch.hpp"
-#include "lidar2d/io/trajectory.hpp"
 #include "lidar2d/registration/matcher.hpp"
+#include "lidar2d/registration/sequence_matcher.hpp"
 
 namespace lidar2d::cli {
 namespace {
@@ -54,43 +51,15 @@ struct MatchArgs {
   io::ReaderOptions reader;
 };
 
-// Calls f(i) for i in [0, n) on `threads` threads (the caller's included); rethrows the first
-// exception after all have finished.
-template <typename F>
-void parallelFor(std::size_t n, unsigned threads, F&& f) {
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr error;
-  std::mutex error_mutex;
-  auto work = [&] {
-    try {
-      for (std::size_t i; (i = next.fetch_add(1)) < n;) f(i);
-    } catch (...) {
-      const std::lock_guard<std::mutex> lock(error_mutex);
-      if (!error) error = std::current_exception();
-      next = n;
-    }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads && t < n; ++t) pool.emplace_back(work);
-  work();
-  for (auto& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
-}
-
 void run(const MatchArgs& a) {
   using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
-  if (const std::string bad = a.options.icp.check(); !bad.empty())
-    throw invalidArgument(fmt::format("invalid matcher option: {}", bad));
-  registration::MatcherOptions then_options = a.options;
-  if (a.then) {
-    if (*a.then != registration::Method::kP2P && *a.then != registration::Method::kP2L)
-      throw invalidArgument("--then must be an ICP method (p2p or p2l)");
-    then_options.method = *a.then;
-    if (a.options.method == registration::Method::kCorrelative) then_options.corr.refine = false;
-  }
-  registration::MatcherOptions first_options = a.options;
-  if (a.then && a.options.method == registration::Method::kCorrelative) first_options.corr.refine = false;
+  registration::SequenceOptions so;
+  so.matcher = a.options;
+  so.then = a.then;
+  so.init = a.init == Init::kOdom ? registration::odometryGuess : registration::identityGuess;
+  so.threads = a.threads;
+  const registration::SequenceMatcher matcher(so);  // checks the options
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   io::AtomicFile out(a.output);
   out.stream() << fmt::format(
@@ -105,91 +74,40 @@ void run(const MatchArgs& a) {
           : std::string());
   out.stream() << "# t_prev t_cur dx dy dtheta converged iterations\n";
 
-  // Pairs are independent, so they are matched in chunks of frames, each chunk's targets prepared
-  // and its pairs matched by all cores (the log reader runs on its own thread); results are
-  // written in log order and equal a sequential run's.
-  const unsigned threads = std::max(1u, std::min(a.threads, 64u));
-  constexpr std::size_t kChunk = 128;
-  std::optional<registration::PreparedTarget> prev, prev_then;  // the last frame of the previous chunk
-  std::optional<Frame> prev_frame;
-  std::vector<RelativePose> pairs;
+  // Frames are checked as they are read, so that the error names the log.
   Trajectory truth;
-  double match_s = 0.0;  // preparation and matching, summed over the threads
-  std::size_t scans = 0, converged = 0;
-  std::vector<Frame> chunk;
-  bool more = true;
-  while (more) {
-    chunk.clear();
-    while (chunk.size() < kChunk) {
-      auto f = source->next();
-      if (!f) {
-        more = false;
-        break;
-      }
-      ++scans;
-      if (a.init == Init::kOdom && !f->T_odom_robot)
-        throw badInput(fmt::format("scan {} (time {:.6f}) has no odometry (use --init identity)", f->index, f->time),
+  const auto next_frame = [&]() -> std::optional<Frame> {
+    std::optional<Frame> f = source->next();
+    if (!f) return f;
+    if (a.init == Init::kOdom && !f->T_odom_robot)
+      throw badInput(fmt::format("scan {} (time {:.6f}) has no odometry (use --init identity)", f->index, f->time),
+                     ErrorLocation(a.log));
+    if (a.eval) {
+      if (!f->T_world_robot)
+        throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
+                                   f->index, f->time),
                        ErrorLocation(a.log));
-      if (a.eval) {
-        if (!f->T_world_robot)
-          throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
-                                     f->index, f->time),
-                         ErrorLocation(a.log));
-        truth.push_back({f->time, *f->T_world_robot});
-      }
-      chunk.push_back(std::move(*f));
+      truth.push_back({f->time, *f->T_world_robot});
     }
-    const std::size_t n = chunk.size();
-    if (n == 0) break;
-    std::vector<std::optional<registration::PreparedTarget>> targets(n), targets_then(n);
-    std::vector<std::optional<registration::Result>> results(n);
-    std::vector<double> seconds(n, 0.0);
-    std::vector<char> second_stage(n, 0);  // the result is the --then stage's
-    parallelFor(n, threads, [&](std::size_t i) {
-      const auto t0 = Clock::now();
-      targets[i].emplace(chunk[i].scan.toPoints(chunk[i].T_robot_laser), first_options);
-      if (a.then) targets_then[i].emplace(targets[i]->points(), then_options);
-      seconds[i] += std::chrono::duration<double>(Clock::now() - t0).count();
-    });
-    parallelFor(n, threads, [&](std::size_t i) {
-      const Frame* before = i > 0 ? &chunk[i - 1] : (prev_frame ? &*prev_frame : nullptr);
-      if (!before) return;  // the log's first scan
-      const registration::PreparedTarget& target = i > 0 ? *targets[i - 1] : *prev;
-      const auto t0 = Clock::now();
-      const SE2 init = a.init == Init::kOdom ? before->T_odom_robot->inverse() * *chunk[i].T_odom_robot : SE2();
-      registration::Result r = registration::matchScans(target, targets[i]->points(), init, first_options);
-      if (a.then && r.status != registration::Status::kInvalidInput) {
-        const registration::PreparedTarget& target_then = i > 0 ? *targets_then[i - 1] : *prev_then;
-        r = registration::matchScans(target_then, targets[i]->points(), r.T_target_source, then_options);
-        second_stage[i] = 1;
-      }
-      seconds[i] += std::chrono::duration<double>(Clock::now() - t0).count();
-      results[i] = std::move(r);
-    });
-    for (std::size_t i = 0; i < n; ++i) {
-      match_s += seconds[i];
-      if (!results[i]) continue;
-      const registration::Result& r = *results[i];
-      if (r.status == registration::Status::kInvalidInput)
-        throw invalidArgument(fmt::format("method {}: {}",
-                                          registration::toString(second_stage[i] ? *a.then : a.options.method),
-                                          r.message));
-      const double t_before = i > 0 ? chunk[i - 1].time : prev_frame->time;
-      const SE2& T = r.T_target_source;
-      out.stream() << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {} {}\n", t_before, chunk[i].time, T.x(), T.y(),
-                                  T.theta(), r.converged ? 1 : 0, r.iterations);
-      pairs.push_back({t_before, chunk[i].time, T, r.converged, r.iterations});
-      converged += r.converged;
-    }
-    prev = std::move(targets[n - 1]);
-    if (a.then) prev_then = std::move(targets_then[n - 1]);
-    chunk[n - 1].scan = LaserScan();  // only the times and poses of the previous frame are needed
-    prev_frame = std::move(chunk[n - 1]);
-  }
-  if (scans < 2) throw badInput(fmt::format("log has {} scan(s); matching needs at least 2", scans), ErrorLocation(a.log));
+    return f;
+  };
+  std::vector<RelativePose> pairs;
+  const auto write_pair = [&](const registration::SequencePair& p) {
+    const registration::Result& r = p.result;
+    if (r.status == registration::Status::kInvalidInput)
+      throw invalidArgument(
+          fmt::format("method {}: {}", registration::toString(p.refined ? *a.then : a.options.method), r.message));
+    const SE2& T = r.T_target_source;
+    out.stream() << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {} {}\n", p.t_prev, p.t_cur, T.x(), T.y(),
+                                T.theta(), r.converged ? 1 : 0, r.iterations);
+    pairs.push_back({p.t_prev, p.t_cur, T, r.converged, r.iterations});
+  };
+  const registration::SequenceSummary summary = matcher.run(next_frame, write_pair);
+  if (summary.frames < 2)
+    throw badInput(fmt::format("log has {} scan(s); matching needs at least 2", summary.frames), ErrorLocation(a.log));
   out.commit();
   const double total_s = std::chrono::duration<double>(Clock::now() - t_start).count();
-  const double per_pair_ms = 1e3 * match_s / static_cast<double>(pairs.size());  // CPU time per pair
+  const double per_pair_ms = 1e3 * summary.wall_s / static_cast<double>(pairs.size());  // on one core
   if (a.eval) {
     const eval::PairsResult e = eval::evaluatePairs(pairs, truth);
     constexpr double kDeg = 180.0 / std::numbers::pi;
@@ -203,7 +121,7 @@ void run(const MatchArgs& a) {
   }
   if (!a.quiet)
     std::cerr << fmt::format("matched {} pairs ({} converged) with {}{}/{} in {:.3f} s ({:.3f} ms per pair) -> {}\n",
-                             pairs.size(), converged, registration::toString(a.options.method),
+                             pairs.size(), summary.converged, registration::toString(a.options.method),
                              a.then ? std::string(" then ") + registration::toString(*a.then) : std::string(),
                              registration::toString(a.options.solver), total_s, per_pair_ms, a.output);
 }

@@ -27,6 +27,7 @@
 #include "lidar2d/io/trajectory.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/matcher.hpp"
+#include "lidar2d/registration/sequence_matcher.hpp"
 #include "lidar2d/sim/noise.hpp"
 
 namespace lidar2d::bench {
@@ -39,45 +40,36 @@ struct Row {
   double median_ms = 0.0;
   double total_s = 0.0;
   std::size_t not_converged = 0;
-  bool implemented = true;
 };
 
 // The success bar of the protocol: under 10 cm and 2 degrees.
 bool withinBar(const SE2& error) { return error.translation().norm() < 0.1 && std::abs(error.theta()) < 2.0 * kDeg; }
 
-// `then`: when given, a second matcher refines each result of the first (for example correlative
-// search, then point-to-line ICP from its winner); its target preparation is timed too.
-Row runPairs(const std::vector<Points2>& points, const std::vector<SE2>& inits, const Trajectory& truth,
-             const registration::MatcherOptions& options,
-             const std::optional<registration::MatcherOptions>& then = std::nullopt) {
+// Matches every frame to the previous one (registration::SequenceMatcher on one thread) from
+// inits[k], frame k's guess. `then`: an ICP refine stage from the first stage's estimate (for example
+// correlative search, then point-to-line ICP); its target preparation is timed too.
+Row runPairs(const std::vector<Frame>& frames, const std::vector<Points2>& points, const std::vector<SE2>& inits,
+             const Trajectory& truth, const registration::MatcherOptions& options,
+             std::optional<registration::Method> then = std::nullopt) {
   Row row;
   std::vector<RelativePose> pairs;
   std::vector<double> ms;
-  pairs.reserve(points.size());
-  ms.reserve(points.size());
-  std::optional<registration::PreparedTarget> prev, prev_then;
-  for (std::size_t k = 0; k < points.size(); ++k) {
-    const auto t0 = std::chrono::steady_clock::now();
-    const double c0 = threadCpuSeconds();
-    registration::PreparedTarget cur(points[k], options);
-    std::optional<registration::PreparedTarget> cur_then;
-    if (then) cur_then.emplace(points[k], *then);
-    if (prev) {
-      registration::Result r = registration::matchScans(*prev, points[k], inits[k], options);
-      if (then) r = registration::matchScans(*prev_then, points[k], r.T_target_source, *then);
-      if (r.status == registration::Status::kInvalidInput && r.message == "not implemented yet") {
-        row.implemented = false;
-        return row;
-      }
-      row.not_converged += !r.converged;
-      pairs.push_back({truth[k - 1].time, truth[k].time, r.T_target_source, r.converged, r.iterations});
-    }
-    prev.emplace(std::move(cur));
-    if (then) prev_then.emplace(std::move(*cur_then));
-    const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    row.total_s += dt;
-    if (k > 0) ms.push_back(1e3 * (threadCpuSeconds() - c0));
-  }
+  pairs.reserve(frames.size());
+  ms.reserve(frames.size());
+  registration::SequenceOptions so;
+  so.matcher = options;
+  so.then = then;
+  // Frame::index is the position in `frames`, which hold the whole log.
+  so.init = [&inits](const Frame&, const Frame& cur) { return inits[cur.index]; };
+  so.threads = 1;  // per-pair CPU times on one core
+  const registration::SequenceSummary summary =
+      registration::SequenceMatcher(so).run(frames, [&](const registration::SequencePair& p) {
+        const registration::Result& r = p.result;
+        row.not_converged += !r.converged;
+        pairs.push_back({p.t_prev, p.t_cur, r.T_target_source, r.converged, r.iterations});
+        ms.push_back(1e3 * p.cpu_s);
+      });
+  row.total_s = summary.wall_s;
   row.median_ms = eval::percentile(ms, 0.5);
   row.eval = eval::evaluatePairs(pairs, truth);
   if (std::getenv("LIDAR2D_BENCH_DUMP")) {
@@ -207,8 +199,8 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
       points.push_back(f->scan.toPoints(f->T_robot_laser));
     }
     // The scan nearest in time, within 1 ms. (The intel bag has bursts of scans logged under 1 ms
-    // apart while the robot turns about 5 deg per scan: the first scan within the tolerance, as
-    // this once took, is then the wrong one.)
+    // apart while the robot turns about 5 deg per scan: the first scan within the tolerance would
+    // often be the wrong one.)
     const TimeIndex time_index(times);
     auto frameAt = [&](double t) { return time_index.nearest(t, 1e-3); };
     struct Case {
@@ -259,19 +251,16 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
         o.corr = bo.corr;
         o.lf = bo.lf;
         o.method = two_stage ? registration::Method::kCorrelative : *registration::parseMethod(method_name);
-        std::optional<registration::MatcherOptions> then;
-        if (two_stage) {
-          o.corr.refine = false;
-          then = o;
-          then->method = registration::Method::kP2L;
-        }
+        registration::SequenceOptions so;
+        so.matcher = o;
+        if (two_stage) so.then = registration::Method::kP2L;
+        const registration::SequenceMatcher matcher(so);
         std::vector<double> et, er;
         std::size_t ok = 0, not_converged = 0;
         for (std::size_t k = 0; k < cases.size(); ++k) {
           const Case& c = cases[k];
           const SE2 init = init_name == "perturbed" ? perturbed[k] : SE2();
-          registration::Result r = registration::matchScans(points[c.target], points[c.source], init, o);
-          if (then) r = registration::matchScans(points[c.target], points[c.source], r.T_target_source, *then);
+          const registration::Result r = matcher.matchPair(points[c.target], points[c.source], init);
           not_converged += !r.converged;
           const SE2 e = c.truth.inverse() * r.T_target_source;
           et.push_back(e.translation().norm());
@@ -371,14 +360,9 @@ void runMatchBenchmark(const std::string& data_dir, const MatchBenchOptions& bo)
           o.lf = bo.lf;
           o.method = method;
           o.solver = solver;
-          std::optional<registration::MatcherOptions> then;
-          if (two_stage) {
-            o.corr.refine = false;  // the ICP stage refines
-            then = o;
-            then->method = registration::Method::kP2L;
-          }
-          const Row row = runPairs(points, *inits, truth, o, then);
-          if (!row.implemented) break;
+          std::optional<registration::Method> then;  // (the ICP stage replaces the correlative refinement)
+          if (two_stage) then = registration::Method::kP2L;
+          const Row row = runPairs(frames, points, *inits, truth, o, then);
           std::cout << fmt::format("| {} | {} | {} | {} | {} | {:.1f}% | {:.2f} | {:.3f} | {:.3f} | {:.2f} | {} |\n",
                                    method_name, registration::toString(solver), name, init_name,
                                    row.eval.count, 100.0 * row.eval.success_rate, 100.0 * row.eval.trans_m.median,

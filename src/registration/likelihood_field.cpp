@@ -29,10 +29,8 @@ constexpr double kCycleSpreadCells = 0.1;
 
 // Gauss-Newton on a coarse level stops when its step is under this many of the level's cells (and
 // as many radians per metre of cell): 1 mm and 0.29 deg on the 20 cm level of the default three.
-// The seed it hands on is then far inside the next level's basin; the finest level keeps the step
-// thresholds of the options. Measured against the thresholds alone: the same success rates on
-// every row of BENCHMARK.md's likelihood-field tables (within one pair), 3 of 27 iterations fewer
-// on the freiburg-079 benchmark pair, 3 of 13 on the intel one.
+// The seed it hands on is then far inside the next level's basin, so the iterations this saves do
+// not change the result; the finest level keeps the step thresholds of the options.
 constexpr double kCoarseStepCells = 0.005;
 
 // Largest number of nodes one level may have: a field is a working buffer, not a canvas for
@@ -203,9 +201,8 @@ SE2 lowestCost(const LikelihoodField& field, int l, const Points2& src, const st
 // The robust loss (a Ceres LossFunction) is applied per point inside the block (robustScaling), so
 // that the block's squared norm is the sum of rho(v^2) over the points, the same objective as one
 // block per point with the loss attached. One block instead of one per point: Ceres's bookkeeping
-// per residual block (evaluation dispatch, validity checks, the loss's Jacobian correction) took
-// most of the solve's time (the freiburg-079 benchmark pair: 2.3 ms with a block per point, 0.83 ms
-// with one block).
+// per residual block (evaluation dispatch, validity checks, the loss's Jacobian correction) would
+// take most of the solve's time.
 class FieldResiduals final : public ceres::CostFunction {
  public:
   FieldResiduals(const LikelihoodField::Level& level, const Points2& src, const ceres::LossFunction* loss)
@@ -250,7 +247,7 @@ class FieldResiduals final : public ceres::CostFunction {
 // theta: each component is then below it too), the Gauss-Newton solver's test. Ceres's own
 // tolerances are relative to the cost and to |x|; on the piecewise-bilinear field the cost keeps
 // changing in its last digits while the steps stay at micrometres, so without this most solves
-// ran to max_iterations and reported no convergence (BENCHMARK.md, "Scan matching").
+// would run to max_iterations and report no convergence.
 class SmallStepStop final : public ceres::IterationCallback {
  public:
   explicit SmallStepStop(double max_norm) : max_norm_(max_norm) {}

@@ -20,12 +20,12 @@
 /// leaves those pairs out (`Result::information`: their normals are partly noise). Without them
 /// such pairs are dropped unless `point_pair_weight` > 0: then such a pair adds w (x, y) of
 /// T p_i - q_i as two residuals (each with the robust loss), which pins the direction along a
-/// corridor's walls that the line pairs leave free (BENCHMARK.md). It
-/// stops when the increment of the pose falls below both `translation_eps_m` and `rotation_eps_rad`
-/// (by default 1 mm and 1 mrad for point-to-line, a tenth of that for point-to-point:
-/// `IcpOptions::defaultTranslationEps`), or when a search returns a set of pairs already solved in
-/// one of the last 8 iterations (a fixed point of the correspondences, or a
-/// cycle through a few sets, where searching on cannot settle further); both count as converged.
+/// corridor's walls that the line pairs leave free. It stops when the increment of the pose falls
+/// below both `translation_eps_m` and `rotation_eps_rad` (by default 1 mm and 1 mrad for
+/// point-to-line, a tenth of that for point-to-point: `IcpOptions::defaultTranslationEps`), or when
+/// a search returns a set of pairs already solved in one of the last 8 iterations (a fixed point of
+/// the correspondences, or a cycle through a few sets, where searching on cannot settle further);
+/// both count as converged.
 ///
 /// Bad input never throws and never yields a NaN pose: empty or too small point sets, all-NaN or
 /// all-identical points, a non-finite initial guess and out-of-domain options give a `Result` with
@@ -124,28 +124,21 @@ struct IcpOptions {
   /// Source points closer than this to the previous point kept, in the order given (a scan's: by
   /// bearing), are left out of the match [m], >= 0; 0 keeps them all. A 360-beam scan's returns
   /// near the laser lie a few millimetres apart, and their pairs cost time without pinning the pose
-  /// any better than every third one does: at the default 0.03 m, freiburg-079's point-to-line
-  /// matches take a third fewer instructions, and the success rates of the protocol's rows and the
-  /// relations moved by -1.2 to +4.2 points, most within 0.2 (BENCHMARK.md, "What changed since the
-  /// previous table", eleventh session). Intel's 1-degree scans lose fewer points. When fewer than
-  /// `min_points` would be left, all finite points are used. The reported information matrix sums
-  /// the kept points' terms only.
+  /// any better than every third one does. When fewer than `min_points` would be left, all finite
+  /// points are used. The reported information matrix sums the kept points' terms only.
   double min_source_spacing_m = 0.03;
   /// Point-to-line: pair a target point whose neighbourhood fits no line (a corner, clutter, or a
   /// short noisy stretch of wall) with the line through it and whichever of its fitted neighbours
   /// (the `normal_neighbors` nearest, within `normal_max_radius_m`; 8 at most) is nearest to the
   /// source point, as Censi's PL-ICP pairs every point with the line through its two nearest target
   /// points. false drops those pairs (or pairs them point to point: `point_pair_weight`). These
-  /// pairs are left out of the reported information and covariance (see `finish` in icp.cpp).
-  /// Measured on the Radish logs (BENCHMARK.md, "What changed since the previous table", tenth
-  /// session): more pairs right, and more time on 360-beam scans, where many short fits fail the
+  /// pairs are left out of the reported information and covariance (see `finish` in icp_problem.cpp).
+  /// They get more pairs right, at a cost in time on 360-beam scans, where many short fits fail the
   /// flatness test.
   bool two_point_lines = true;
   int gn_inner_iterations = 3;          ///< Gauss-Newton steps per set of correspondences, >= 1
   /// Ceres (Levenberg-Marquardt) iterations per set of correspondences, >= 1. As many as the
-  /// Gauss-Newton steps: more only refine a set of pairs that the next search replaces. At 10
-  /// (before 2026-12-01) the Ceres variants took 1.5-2x as long with the same success rates from
-  /// the perturbed guess (BENCHMARK.md, "What changed since the previous table", eleventh session).
+  /// Gauss-Newton steps: more only refine a set of pairs that the next search replaces.
   int ceres_max_inner_iterations = 3;
 
   /// The convergence thresholds in effect: the ones set, else the metric's defaults.
@@ -155,12 +148,11 @@ struct IcpOptions {
   /// Default convergence thresholds per metric: 1 mm and 1 mrad for point-to-line, 0.1 mm and
   /// 0.1 mrad for point-to-point. Point-to-line is within a millimetre of its fixed point after a
   /// few iterations; from there on its nearest neighbours hop between adjacent target points (each
-  /// with its own line fit) and the pose wanders by 0.2-2 mm per iteration without settling. Those
-  /// iterations were about 30% of its time on freiburg-079, and stopping before them costs one or two
-  /// pairs of success per log, mostly within the scans' noise (BENCHMARK.md, "Scan matching"); on
-  /// noise-free simulated scans it stops within 0.2 mm of the truth. Point-to-point
-  /// converges only linearly, creeping along walls by about a millimetre per iteration: stopped at
-  /// 1 mm it ends up to 5 mm short, so it keeps the finer threshold.
+  /// with its own line fit) and the pose wanders by 0.2-2 mm per iteration without settling:
+  /// stopping at 1 mm skips those iterations (about 30% of its time on freiburg-079) for one or two
+  /// pairs of success per log, and still ends within 0.2 mm of the truth on noise-free simulated
+  /// scans. Point-to-point converges only linearly, creeping along walls by about a millimetre per
+  /// iteration: stopped at 1 mm it ends up to 5 mm short, so it keeps the finer threshold.
   static constexpr double defaultTranslationEps(IcpMetric m) { return m == IcpMetric::kPointToLine ? 1e-3 : 1e-4; }
   static constexpr double defaultRotationEps(IcpMetric m) { return m == IcpMetric::kPointToLine ? 1e-3 : 1e-4; }
 
@@ -208,7 +200,8 @@ class IcpTarget {
                             std::uint32_t* hint = nullptr) const;
 
   struct Impl;
-  /// Internal: the search structures, for the matcher in icp.cpp (an incomplete type elsewhere).
+  /// Internal: the search structures, for the correspondence search in icp_problem.cpp (an
+  /// incomplete type elsewhere).
   const Impl& impl() const { return *impl_; }
 
  private:

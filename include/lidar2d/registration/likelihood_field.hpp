@@ -71,10 +71,9 @@ struct LikelihoodFieldOptions {
   /// Gauss-Newton at the finest level: halve a step that raises the cost (all points, those outside
   /// the truncation counted at it), up to 4 times, and stop where none lowers it. Against a map's
   /// unsigned field, whose bilinear interpolant has kinks along the cells, plain Gauss-Newton keeps
-  /// stepping across the minimum until max_iterations; with the search it stops there. Measured
-  /// (BENCHMARK.md, "Scan to map"): scan to map +4-5 points of success, and the matches converge;
-  /// scan to scan on intel -0.3 (perturbed guess) and -1.0 (identity) points, freiburg-079
-  /// unchanged: so off by default, on for `PreparedTarget::fromMap` targets.
+  /// stepping across the minimum until max_iterations; with the search it stops there. It helps
+  /// scan to map (more successes, converged matches) but not scan to scan (slightly fewer successes
+  /// on intel): off by default, on for `PreparedTarget::fromMap` targets.
   bool line_search = false;
 
   /// Throws `lidar2d::Error` (kInvalidArgument) naming the first field out of its domain.

@@ -64,16 +64,13 @@ class PreparedTarget {
   /// Obstacles are the cells with a value >= `options.map_occupied_min`. Matches against it run the
   /// field's Gauss-Newton with `LikelihoodFieldOptions::line_search` on (for the correlative
   /// search's refinement too): against a map's unsigned field it stops at the minimum instead of
-  /// stepping across it until max_iterations (BENCHMARK.md, "Scan to map").
+  /// stepping across it until max_iterations.
   /// kP2P and kP2L give a target that every match reports as kInvalidInput: against the centres
   /// of a map's cells ICP is biased by up to half a cell (a wall on a cell border is drawn on one
   /// side of it; the field measures the distance to the cells' extent instead), and point-to-line
-  /// finds few lines along walls drawn two or more cells thick (measured on the simulated office,
-  /// 360 noise-free beams, 5 cm cells, guess 13 cm and 3 deg off: p2p missed 3 cm / 0.5 deg at 5
-  /// of 6 poses, by 3-4 cm and once by 13 cm and 2.4 deg; p2l, with 9 cells per line fit, had too
-  /// few pairs at 2 of the 6 and missed by 3.5-5 cm at 3 others). ICP
-  /// scan-to-map matches a point map instead: an `IcpTarget` (k-d tree search) over the scan points
-  /// of a local map, as the SLAM front end does.
+  /// finds few lines along walls drawn two or more cells thick. ICP scan-to-map matches a point
+  /// map instead: an `IcpTarget` (k-d tree search) over the scan points of a local map, as the SLAM
+  /// front end does.
   /// Never throws: out-of-domain options are reported by matchScans, like the constructor's.
   static PreparedTarget fromMap(const OccupancyImage& map, const MatcherOptions& options);
   ~PreparedTarget();
