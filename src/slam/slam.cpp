@@ -34,19 +34,6 @@ using Clock = std::chrono::steady_clock;
 
 double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-void requirePositive(double v, const char* field) {
-  if (!(v > 0.0) || !std::isfinite(v)) throw invalidArgument("must be a finite value > 0", {"SlamOptions", 0, field});
-}
-void requireNonNegative(double v, const char* field) {
-  if (!(v >= 0.0) || !std::isfinite(v)) throw invalidArgument("must be a finite value >= 0", {"SlamOptions", 0, field});
-}
-void requireFraction(double v, const char* field) {
-  if (!(v > 0.0 && v <= 1.0)) throw invalidArgument("must be in (0, 1]", {"SlamOptions", 0, field});
-}
-void requireAtLeast(int v, int min, const char* field) {
-  if (v < min) throw invalidArgument(fmt::format("must be >= {}", min), {"SlamOptions", 0, field});
-}
-
 /// Centroid of the points in each `cell_m` square. Stacked scans of the same wall would otherwise
 /// give each target point near-duplicate neighbours from other scans, and a line fit over a
 /// neighbourhood of duplicates has no direction (no normal): point-to-line ICP then loses its
@@ -114,66 +101,6 @@ const char* toString(Constraint::Kind k) {
       return "loop";
   }
   return "unknown";
-}
-
-void SlamOptions::validate() const {
-  requirePositive(max_range_m, "max_range_m");
-  requireAtLeast(min_points, 3, "min_points");
-  requireNonNegative(node_min_translation_m, "node_min_translation_m");
-  requireNonNegative(node_min_rotation_rad, "node_min_rotation_rad");
-  requirePositive(node_max_interval_s, "node_max_interval_s");
-  requireAtLeast(local_map_nodes, 1, "local_map_nodes");
-  requirePositive(icp_max_correspondence_m, "icp_max_correspondence_m");
-  requirePositive(map_voxel_m, "map_voxel_m");
-  if (!(max_line_flatness > 0.0 && max_line_flatness <= 1.0))
-    throw invalidArgument("must be in (0, 1]", {"SlamOptions", 0, "max_line_flatness"});
-  requireAtLeast(normal_neighbors, 2, "normal_neighbors");
-  requirePositive(scan_voxel_m, "scan_voxel_m");
-  requirePositive(match_inlier_distance_m, "match_inlier_distance_m");
-  requireFraction(min_explained_fraction, "min_explained_fraction");
-  requirePositive(fallback_linear_window_m, "fallback_linear_window_m");
-  requirePositive(fallback_angular_window_rad, "fallback_angular_window_rad");
-  requireNonNegative(degeneracy_threshold, "degeneracy_threshold");
-  requireNonNegative(alternative_start_m, "alternative_start_m");
-  requireNonNegative(alternative_start_rad, "alternative_start_rad");
-  requirePositive(odometry_jump_m, "odometry_jump_m");
-  requirePositive(odometry_jump_rad, "odometry_jump_rad");
-  requirePositive(time_gap_s, "time_gap_s");
-  requireAtLeast(submap_nodes, 2, "submap_nodes");
-  requirePositive(loop_search_radius_m, "loop_search_radius_m");
-  requireAtLeast(loop_search_every_nodes, 1, "loop_search_every_nodes");
-  requireAtLeast(loop_searches_per_node, 1, "loop_searches_per_node");
-  requireAtLeast(intermediate_iterations, 1, "intermediate_iterations");
-  requirePositive(loop_linear_window_m, "loop_linear_window_m");
-  requirePositive(loop_angular_window_rad, "loop_angular_window_rad");
-  requireFraction(loop_min_score, "loop_min_score");
-  requireFraction(loop_min_explained_fraction, "loop_min_explained_fraction");
-  requireAtLeast(loop_confirm_window_nodes, 1, "loop_confirm_window_nodes");
-  requirePositive(loop_confirm_tolerance_m, "loop_confirm_tolerance_m");
-  requirePositive(loop_confirm_tolerance_rad, "loop_confirm_tolerance_rad");
-  requireAtLeast(loop_link_memory_nodes, 0, "loop_link_memory_nodes");
-  requirePositive(sequential_sigma_m, "sequential_sigma_m");
-  requirePositive(sequential_sigma_rad, "sequential_sigma_rad");
-  requirePositive(loop_sigma_m, "loop_sigma_m");
-  requirePositive(loop_sigma_rad, "loop_sigma_rad");
-  requirePositive(loop_huber, "loop_huber");
-  requirePositive(odometry_sigma_m, "odometry_sigma_m");
-  requirePositive(odometry_sigma_rad, "odometry_sigma_rad");
-  requireAtLeast(optimize_every_nodes, 1, "optimize_every_nodes");
-  requireAtLeast(descriptor_every_nodes, 1, "descriptor_every_nodes");
-  requireAtLeast(descriptor_quiet_nodes, 0, "descriptor_quiet_nodes");
-  requireAtLeast(descriptor_min_age_nodes, 0, "descriptor_min_age_nodes");
-  if (!(descriptor_min_votes >= 1.0) || !std::isfinite(descriptor_min_votes))
-    throw invalidArgument("must be a finite value >= 1", {"SlamOptions", 0, "descriptor_min_votes"});
-  requireAtLeast(descriptor_max_candidates, 1, "descriptor_max_candidates");
-  requireAtLeast(descriptor_max_lines, 2, "descriptor_max_lines");
-  requirePositive(descriptor_linear_window_m, "descriptor_linear_window_m");
-  requirePositive(descriptor_angular_window_rad, "descriptor_angular_window_rad");
-  requireNonNegative(descriptor_max_correction_m, "descriptor_max_correction_m");
-  requireNonNegative(descriptor_drift_fraction, "descriptor_drift_fraction");
-  requireNonNegative(descriptor_max_rotation_rad, "descriptor_max_rotation_rad");
-  if (!(descriptor_max_see_through >= 0.0 && descriptor_max_see_through <= 1.0))
-    throw invalidArgument("must be in [0, 1]", {"SlamOptions", 0, "descriptor_max_see_through"});
 }
 
 struct Slam::Impl {
