@@ -26,9 +26,7 @@ std::string commentLines(const std::string& text, std::size_t width = 100) {
   return out;
 }
 
-std::string rangeText(const slam::SlamOption& opt) {
-  return opt.isFlag() ? "true or false" : opt.range.describe();
-}
+std::string rangeText(const slam::SlamOption& opt) { return opt.isFlag() ? "true or false" : opt.range.describe(); }
 
 }  // namespace
 
@@ -41,7 +39,8 @@ slam::SlamOptions readSlamConfig(const std::string& path) {
   } catch (const YAML::BadFile&) {
     throw ioError("cannot read the config file", ErrorLocation(path));
   } catch (const YAML::Exception& e) {
-    throw badInput(fmt::format("not valid YAML: {}", e.msg), ErrorLocation(path, static_cast<std::size_t>(e.mark.line + 1)));
+    throw badInput(fmt::format("not valid YAML: {}", e.msg),
+                   ErrorLocation(path, static_cast<std::size_t>(e.mark.line + 1)));
   }
   if (root.IsNull()) return o;
   if (!root.IsMap()) throw badInput("expected a mapping of option names to values", ErrorLocation(path, 1));

@@ -158,8 +158,11 @@ struct SlamOption {
   std::optional<std::string> rangeError(const SlamOptions& o) const;
 };
 
-// `path` is a SlamOptions member (e.g. graph.threads): its name as text and its accessor, from one spelling.
+// `path` is a SlamOptions member (e.g. graph.threads): its name as text and its accessor, from one
+// spelling.
+// clang-format off
 #define LIDAR2D_SLAM_FIELD(path) #path, SlamOption::Ref(+[](SlamOptions& o) -> auto& { return o.path; })
+// clang-format on
 
 /// Every SLAM option, in SlamOptions' order: the one declaration of their names, units, ranges and
 /// meanings. Row: member, group, unit, range, help.
@@ -250,8 +253,8 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "submaps whose last node is fewer than this many nodes old are not looked up"},
     {LIDAR2D_SLAM_FIELD(descriptor_min_votes), "loop closure by descriptors", "votes", OptionRange::atLeast(1),
      "line-pair votes a hypothesis needs"},
-    {LIDAR2D_SLAM_FIELD(descriptor_max_candidates), "loop closure by descriptors", "hypotheses", OptionRange::atLeast(1),
-     "hypotheses verified per look-up, most votes first"},
+    {LIDAR2D_SLAM_FIELD(descriptor_max_candidates), "loop closure by descriptors", "hypotheses",
+     OptionRange::atLeast(1), "hypotheses verified per look-up, most votes first"},
     {LIDAR2D_SLAM_FIELD(descriptor_max_lines), "loop closure by descriptors", "lines", OptionRange::atLeast(2),
      "longest lines of a scan described and looked up"},
     {LIDAR2D_SLAM_FIELD(descriptor_linear_window_m), "loop closure by descriptors", "m", OptionRange::above(0),
@@ -266,7 +269,8 @@ inline constexpr SlamOption kSlamOptionTable[] = {
     {LIDAR2D_SLAM_FIELD(descriptor_max_rotation_rad), "loop closure by descriptors", "deg", OptionRange::atLeast(0),
      "... and it may turn the current estimate by at most this (aliased places are typically turned by 90 "
      "or 180 degrees)"},
-    {LIDAR2D_SLAM_FIELD(descriptor_max_see_through), "loop closure by descriptors", "fraction", OptionRange::unitInterval(),
+    {LIDAR2D_SLAM_FIELD(descriptor_max_see_through), "loop closure by descriptors", "fraction",
+     OptionRange::unitInterval(),
      "a hypothesis is rejected when more of the scan's beams than this pass through the submap's walls "
      "(more than 0.3 m before their endpoint)"},
     {LIDAR2D_SLAM_FIELD(sequential_sigma_m), "pose graph", "m", OptionRange::above(0),
