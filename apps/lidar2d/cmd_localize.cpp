@@ -22,7 +22,7 @@
 #include <optional>
 
 #include "commands.hpp"
-#include "progress_line.hpp"
+#include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"

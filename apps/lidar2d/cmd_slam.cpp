@@ -2,7 +2,6 @@
 // DIR/graph.txt, DIR/summary.json and DIR/report.html.
 
 #include <fmt/format.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -22,6 +21,7 @@
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/slam/slam.hpp"
 #include "map_output.hpp"
+#include "progress.hpp"
 #include "slam_config.hpp"
 #include "slam_report.hpp"
 
@@ -47,38 +47,27 @@ struct SlamArgs {
 
 double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-/// A progress bar on stderr, redrawn at most ten times a second; a running count when the total
-/// is not known in advance (CARMEN text logs).
-class ProgressBar {
+/// SLAM's progress line: a bar with percentage when the log's size is known, a running count
+/// otherwise (CARMEN text logs), with the nodes and loop closures so far and the time.
+class SlamProgress {
  public:
-  ProgressBar(bool enabled, std::optional<std::size_t> total) : enabled_(enabled), total_(total), start_(Clock::now()) {}
+  SlamProgress(bool quiet, std::optional<std::size_t> total) : line_(quiet), total_(total) {}
   void update(std::size_t done, const slam::SlamStats& s, bool force = false) {
-    if (!enabled_) return;
-    const auto now = Clock::now();
-    if (!force && now - last_ < std::chrono::milliseconds(100)) return;
-    last_ = now;
-    const std::string tail = fmt::format("{} scans, {} nodes, {} loop closures, {:.1f} s ", done, s.nodes, s.loop_accepted,
-                                         std::chrono::duration<double>(now - start_).count());
-    if (total_ && *total_ > 0) {
-      const double f = std::min(1.0, static_cast<double>(done) / static_cast<double>(*total_));
-      const int width = 30;
-      const int filled = static_cast<int>(width * f);
-      std::cerr << fmt::format("\rslam [{}{}] {:3.0f}% {}", std::string(filled, '#'), std::string(width - filled, '.'),
-                               100.0 * f, tail)
-                << std::flush;
-    } else {
-      std::cerr << "\rslam " << tail << std::flush;
-    }
+    line_.update(
+        [&] {
+          return fmt::format("slam {}{} scans, {} nodes, {} loop closures, {:.1f} s ",
+                             total_ && *total_ > 0 ? progressBar(done, *total_) + " " : "", done, s.nodes,
+                             s.loop_accepted, secondsSince(start_));
+        },
+        force);
   }
-  void done() {
-    if (enabled_) std::cerr << "\n";
-  }
+  /// Keeps the last line on screen.
+  void done() { line_.finish(); }
 
  private:
-  bool enabled_;
+  ProgressLine line_;
   std::optional<std::size_t> total_;
-  Clock::time_point start_;
-  Clock::time_point last_{};
+  Clock::time_point start_ = Clock::now();
 };
 
 void writeGraph(const std::string& path, const slam::Slam& slam) {
@@ -114,7 +103,6 @@ void run(const SlamArgs& a) {
   std::error_code ec;
   if (fs::exists(a.dir, ec) && !fs::is_directory(a.dir, ec))
     throw ioError("exists and is not a directory", ErrorLocation(a.dir, 0, "-o"));
-  const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
 
   // Frames are processed as the reader thread (prefetch) parses them, so parsing overlaps with
   // SLAM on the other core; they are kept for the final map, drawn from every scan at its
@@ -122,7 +110,7 @@ void run(const SlamArgs& a) {
   std::vector<Frame> frames;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   slam::Slam slam(options);
-  ProgressBar bar(progress, source->sizeHint());
+  SlamProgress bar(a.quiet, source->sizeHint());
   const auto t_slam = Clock::now();
   while (auto f = source->next()) {
     frames.push_back(std::move(*f));
