@@ -111,11 +111,18 @@ TEST_F(CliSlam, ConfigFileOverridesDefaultsAndRejectsMistakes) {
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(nlohmann::json::parse(test::readFile(t.path() / "a" / "summary.json"))["used_odometry"], false);
 
+  const auto used = nlohmann::json::parse(test::readFile(t.path() / "a" / "summary.json"))["options"];
+  EXPECT_EQ(used["submap_nodes"], 20);
+  EXPECT_EQ(used["loop_angular_window_deg"], 20.0);
+  EXPECT_EQ(used["use_odometry"], false);
+  EXPECT_EQ(used["loop_min_score"], 0.55);  // a default
+
   writeFile(t.path() / "bad.yaml", "submap_nodes: 20\nsubmap_size: 3\n");
   r = runCli({"slam", log().string(), "-o", (t.path() / "b").string(), "--config", (t.path() / "bad.yaml").string()});
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.err.find("bad.yaml:2"), std::string::npos) << r.err;
-  EXPECT_NE(r.err.find("submap_size"), std::string::npos) << r.err;
+  // One line naming the file, line and key.
+  EXPECT_EQ(r.err, "lidar2d: error: " + (t.path() / "bad.yaml").string() +
+                       ":2: submap_size: unknown option (lidar2d slam --dump-config lists them)\n");
   EXPECT_FALSE(fs::exists(t.path() / "b"));
 
   writeFile(t.path() / "type.yaml", "submap_nodes: many\n");
@@ -123,10 +130,16 @@ TEST_F(CliSlam, ConfigFileOverridesDefaultsAndRejectsMistakes) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("submap_nodes"), std::string::npos) << r.err;
 
-  writeFile(t.path() / "range.yaml", "loop_min_score: 2\n");
+  writeFile(t.path() / "range.yaml", "submap_nodes: 20\nloop_min_score: 2\n");
   r = runCli({"slam", log().string(), "-o", (t.path() / "d").string(), "--config", (t.path() / "range.yaml").string()});
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.err.find("loop_min_score"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err, "lidar2d: error: " + (t.path() / "range.yaml").string() + ":2: loop_min_score: must be in (0, 1]\n");
+  writeFile(t.path() / "angle.yaml", "loop_angular_window_deg: 0\n");
+  r = runCli({"slam", log().string(), "-o", (t.path() / "d").string(), "--config", (t.path() / "angle.yaml").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.err, "lidar2d: error: " + (t.path() / "angle.yaml").string() +
+                       ":1: loop_angular_window_deg: must be a finite value > 0\n");
+  EXPECT_FALSE(fs::exists(t.path() / "d"));
 
   // The descriptor loop-closure options (issue 7).
   writeFile(t.path() / "desc.yaml", "descriptor_loops: true\ndescriptor_every_nodes: 5\ndescriptor_max_rotation_deg: 20\n");
@@ -145,6 +158,51 @@ TEST_F(CliSlam, ConfigFileOverridesDefaultsAndRejectsMistakes) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("descriptor_max_see_through"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(t.path() / "g"));
+}
+
+TEST(CliSlamConfig, DumpConfigReadsBackToTheSameOptions) {
+  TempDir t;
+  // The defaults, without a log or an output folder.
+  const auto d = runCli({"slam", "--dump-config"});
+  ASSERT_EQ(d.exit_code, 0) << d.err;
+  EXPECT_NE(d.out.find("\nloop_angular_window_deg: 15\n"), std::string::npos) << d.out;
+  EXPECT_NE(d.out.find("\n# [m] > 0: returns at or beyond this range are not matched\nmax_range_m: 30\n"),
+            std::string::npos)
+      << d.out;
+  writeFile(t.path() / "defaults.yaml", d.out);
+  auto r = runCli({"slam", "--dump-config", "--config", (t.path() / "defaults.yaml").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, d.out);
+
+  // Other values, angles included, come back the same through a file.
+  writeFile(t.path() / "some.yaml", "loop_angular_window_deg: 12.3\nsequential_sigma_deg: 0.1\nscan_voxel_m: 0.07\n"
+                                    "descriptor_loops: false\ndescriptor_max_lines: 9\n");
+  const auto s = runCli({"slam", "--config", (t.path() / "some.yaml").string(), "--dump-config"});
+  ASSERT_EQ(s.exit_code, 0) << s.err;
+  EXPECT_NE(s.out.find("\nloop_angular_window_deg: 12.3\n"), std::string::npos) << s.out;
+  EXPECT_NE(s.out.find("\ndescriptor_loops: false\n"), std::string::npos) << s.out;
+  writeFile(t.path() / "some-dumped.yaml", s.out);
+  r = runCli({"slam", "--dump-config", "--config", (t.path() / "some-dumped.yaml").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, s.out);
+
+  // --markdown needs --dump-config; LOG and -o are needed without it.
+  EXPECT_EQ(runCli({"slam", "--markdown"}).exit_code, 2);
+  EXPECT_EQ(runCli({"slam", "--config", (t.path() / "some.yaml").string()}).exit_code, 2);
+}
+
+TEST(CliSlamConfig, DocsTableIsTheOptionTable) {
+  const std::string doc = test::readFile(test::sourceFile("docs/slam.md"));
+  const std::string open = "<!-- options table: the output of `lidar2d slam --dump-config --markdown` -->\n";
+  const std::string close = "<!-- end of the options table -->";
+  const auto a = doc.find(open);
+  const auto b = doc.find(close);
+  ASSERT_NE(a, std::string::npos);
+  ASSERT_NE(b, std::string::npos);
+  const auto r = runCli({"slam", "--dump-config", "--markdown"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(doc.substr(a + open.size(), b - a - open.size()), r.out)
+      << "docs/slam.md's options table is out of date: paste `lidar2d slam --dump-config --markdown` there";
 }
 
 TEST_F(CliSlam, BadInputIsOneClearError) {

@@ -22,7 +22,7 @@
 #include <optional>
 
 #include "commands.hpp"
-#include "progress_line.hpp"
+#include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/localization_score.hpp"
 #include "lidar2d/eval/metrics.hpp"

@@ -2,8 +2,6 @@
 // DIR/graph.txt, DIR/summary.json and DIR/report.html.
 
 #include <fmt/format.h>
-#include <unistd.h>
-#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <chrono>
@@ -12,8 +10,6 @@
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <numbers>
-#include <variant>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
@@ -26,6 +22,8 @@
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/slam/slam.hpp"
 #include "map_output.hpp"
+#include "progress.hpp"
+#include "slam_config.hpp"
 #include "slam_report.hpp"
 
 namespace lidar2d::cli {
@@ -41,6 +39,8 @@ struct SlamArgs {
   bool no_odometry = false;
   bool laser_frame = false;
   bool quiet = false;
+  bool dump_config = false;
+  bool markdown = false;
   mapping::MapModel model = mapping::MapModel::kLogOdds;
   double resolution = 0.05;
   io::ReaderOptions reader;
@@ -48,146 +48,27 @@ struct SlamArgs {
 
 double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-/// Every SlamOptions field by its name in the YAML config (angles in degrees there: `_deg`).
-using FieldRef = std::variant<double*, int*, std::size_t*, bool*>;
-struct AngleRef {
-  double* rad;
-};
-std::map<std::string, std::variant<FieldRef, AngleRef>> configFields(slam::SlamOptions& o) {
-  return {
-      {"use_odometry", FieldRef(&o.use_odometry)},
-      {"max_range_m", FieldRef(&o.max_range_m)},
-      {"min_points", FieldRef(&o.min_points)},
-      {"node_min_translation_m", FieldRef(&o.node_min_translation_m)},
-      {"node_min_rotation_deg", AngleRef{&o.node_min_rotation_rad}},
-      {"node_max_interval_s", FieldRef(&o.node_max_interval_s)},
-      {"local_map_nodes", FieldRef(&o.local_map_nodes)},
-      {"icp_max_correspondence_m", FieldRef(&o.icp_max_correspondence_m)},
-      {"scan_voxel_m", FieldRef(&o.scan_voxel_m)},
-      {"map_voxel_m", FieldRef(&o.map_voxel_m)},
-      {"normal_neighbors", FieldRef(&o.normal_neighbors)},
-      {"max_line_flatness", FieldRef(&o.max_line_flatness)},
-      {"match_inlier_distance_m", FieldRef(&o.match_inlier_distance_m)},
-      {"min_explained_fraction", FieldRef(&o.min_explained_fraction)},
-      {"alternative_start_m", FieldRef(&o.alternative_start_m)},
-      {"alternative_start_deg", AngleRef{&o.alternative_start_rad}},
-      {"fallback_linear_window_m", FieldRef(&o.fallback_linear_window_m)},
-      {"fallback_angular_window_deg", AngleRef{&o.fallback_angular_window_rad}},
-      {"degeneracy_threshold", FieldRef(&o.degeneracy_threshold)},
-      {"odometry_jump_m", FieldRef(&o.odometry_jump_m)},
-      {"odometry_jump_deg", AngleRef{&o.odometry_jump_rad}},
-      {"time_gap_s", FieldRef(&o.time_gap_s)},
-      {"submap_nodes", FieldRef(&o.submap_nodes)},
-      {"loop_search_radius_m", FieldRef(&o.loop_search_radius_m)},
-      {"loop_search_every_nodes", FieldRef(&o.loop_search_every_nodes)},
-      {"loop_searches_per_node", FieldRef(&o.loop_searches_per_node)},
-      {"loop_linear_window_m", FieldRef(&o.loop_linear_window_m)},
-      {"loop_angular_window_deg", AngleRef{&o.loop_angular_window_rad}},
-      {"loop_min_score", FieldRef(&o.loop_min_score)},
-      {"loop_min_explained_fraction", FieldRef(&o.loop_min_explained_fraction)},
-      {"loop_link_memory_nodes", FieldRef(&o.loop_link_memory_nodes)},
-      {"loop_confirm_window_nodes", FieldRef(&o.loop_confirm_window_nodes)},
-      {"loop_confirm_tolerance_m", FieldRef(&o.loop_confirm_tolerance_m)},
-      {"loop_confirm_tolerance_deg", AngleRef{&o.loop_confirm_tolerance_rad}},
-      {"sequential_sigma_m", FieldRef(&o.sequential_sigma_m)},
-      {"sequential_sigma_deg", AngleRef{&o.sequential_sigma_rad}},
-      {"loop_sigma_m", FieldRef(&o.loop_sigma_m)},
-      {"loop_sigma_deg", AngleRef{&o.loop_sigma_rad}},
-      {"loop_huber", FieldRef(&o.loop_huber)},
-      {"odometry_sigma_m", FieldRef(&o.odometry_sigma_m)},
-      {"odometry_sigma_deg", AngleRef{&o.odometry_sigma_rad}},
-      {"optimize_every_nodes", FieldRef(&o.optimize_every_nodes)},
-      {"intermediate_iterations", FieldRef(&o.intermediate_iterations)},
-      {"descriptor_loops", FieldRef(&o.descriptor_loops)},
-      {"front_end_likelihood_field", FieldRef(&o.front_end_likelihood_field)},
-      {"descriptor_every_nodes", FieldRef(&o.descriptor_every_nodes)},
-      {"descriptor_quiet_nodes", FieldRef(&o.descriptor_quiet_nodes)},
-      {"descriptor_min_age_nodes", FieldRef(&o.descriptor_min_age_nodes)},
-      {"descriptor_min_votes", FieldRef(&o.descriptor_min_votes)},
-      {"descriptor_max_candidates", FieldRef(&o.descriptor_max_candidates)},
-      {"descriptor_max_lines", FieldRef(&o.descriptor_max_lines)},
-      {"descriptor_linear_window_m", FieldRef(&o.descriptor_linear_window_m)},
-      {"descriptor_angular_window_deg", AngleRef{&o.descriptor_angular_window_rad}},
-      {"descriptor_max_correction_m", FieldRef(&o.descriptor_max_correction_m)},
-      {"descriptor_drift_fraction", FieldRef(&o.descriptor_drift_fraction)},
-      {"descriptor_max_rotation_deg", AngleRef{&o.descriptor_max_rotation_rad}},
-      {"descriptor_max_see_through", FieldRef(&o.descriptor_max_see_through)},
-      {"graph_max_iterations", FieldRef(&o.graph.max_iterations)},
-      {"graph_threads", FieldRef(&o.graph.threads)},
-  };
-}
-
-/// Reads a flat YAML mapping of option names to values over the defaults. Unknown keys and values
-/// of the wrong type are errors naming the file, line and key.
-slam::SlamOptions readConfig(const std::string& path) {
-  slam::SlamOptions o;
-  if (path.empty()) return o;
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw ioError("cannot read the config file", ErrorLocation(path));
-  } catch (const YAML::Exception& e) {
-    throw badInput(fmt::format("not valid YAML: {}", e.msg), ErrorLocation(path, static_cast<std::size_t>(e.mark.line + 1)));
-  }
-  if (root.IsNull()) return o;
-  if (!root.IsMap()) throw badInput("expected a mapping of option names to values", ErrorLocation(path, 1));
-  auto fields = configFields(o);
-  for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
-    const auto line = static_cast<std::size_t>(kv.first.Mark().line + 1);
-    auto it = fields.find(key);
-    if (it == fields.end()) throw badInput("unknown option (see docs/slam.md for the list)", ErrorLocation(path, line, key));
-    try {
-      if (const auto* a = std::get_if<AngleRef>(&it->second)) {
-        *a->rad = kv.second.as<double>() * std::numbers::pi / 180.0;
-      } else {
-        std::visit([&](auto* p) { *p = kv.second.as<std::remove_pointer_t<decltype(p)>>(); }, std::get<FieldRef>(it->second));
-      }
-    } catch (const YAML::Exception&) {
-      throw badInput("value of the wrong type", ErrorLocation(path, line, key));
-    }
-  }
-  try {
-    o.validate();
-  } catch (const Error& e) {
-    throw badInput(e.message(), ErrorLocation(path, 0, e.where().field));
-  }
-  return o;
-}
-
-/// A progress bar on stderr, redrawn at most ten times a second; a running count when the total
-/// is not known in advance (CARMEN text logs).
-class ProgressBar {
+/// SLAM's progress line: a bar with percentage when the log's size is known, a running count
+/// otherwise (CARMEN text logs), with the nodes and loop closures so far and the time.
+class SlamProgress {
  public:
-  ProgressBar(bool enabled, std::optional<std::size_t> total) : enabled_(enabled), total_(total), start_(Clock::now()) {}
+  SlamProgress(bool quiet, std::optional<std::size_t> total) : line_(quiet), total_(total) {}
   void update(std::size_t done, const slam::SlamStats& s, bool force = false) {
-    if (!enabled_) return;
-    const auto now = Clock::now();
-    if (!force && now - last_ < std::chrono::milliseconds(100)) return;
-    last_ = now;
-    const std::string tail = fmt::format("{} scans, {} nodes, {} loop closures, {:.1f} s ", done, s.nodes, s.loop_accepted,
-                                         std::chrono::duration<double>(now - start_).count());
-    if (total_ && *total_ > 0) {
-      const double f = std::min(1.0, static_cast<double>(done) / static_cast<double>(*total_));
-      const int width = 30;
-      const int filled = static_cast<int>(width * f);
-      std::cerr << fmt::format("\rslam [{}{}] {:3.0f}% {}", std::string(filled, '#'), std::string(width - filled, '.'),
-                               100.0 * f, tail)
-                << std::flush;
-    } else {
-      std::cerr << "\rslam " << tail << std::flush;
-    }
+    line_.update(
+        [&] {
+          return fmt::format("slam {}{} scans, {} nodes, {} loop closures, {:.1f} s ",
+                             total_ && *total_ > 0 ? progressBar(done, *total_) + " " : "", done, s.nodes,
+                             s.loop_accepted, secondsSince(start_));
+        },
+        force);
   }
-  void done() {
-    if (enabled_) std::cerr << "\n";
-  }
+  /// Keeps the last line on screen.
+  void done() { line_.finish(); }
 
  private:
-  bool enabled_;
+  ProgressLine line_;
   std::optional<std::size_t> total_;
-  Clock::time_point start_;
-  Clock::time_point last_{};
+  Clock::time_point start_ = Clock::now();
 };
 
 void writeGraph(const std::string& path, const slam::Slam& slam) {
@@ -211,15 +92,18 @@ void writeGraph(const std::string& path, const slam::Slam& slam) {
 
 void run(const SlamArgs& a) {
   const auto t_start = Clock::now();
-  slam::SlamOptions options = readConfig(a.config);
+  slam::SlamOptions options = readSlamConfig(a.config);
   if (a.no_odometry) options.use_odometry = false;
+  if (a.dump_config) {
+    std::cout << (a.markdown ? slamOptionsMarkdown(options) : slamConfigYaml(options));
+    return;
+  }
   if (!(a.resolution > 0.0) || a.resolution > 10.0)
     throw badInput("must be in (0, 10] m", ErrorLocation("command line", 0, "--resolution"));
   namespace fs = std::filesystem;
   std::error_code ec;
   if (fs::exists(a.dir, ec) && !fs::is_directory(a.dir, ec))
     throw ioError("exists and is not a directory", ErrorLocation(a.dir, 0, "-o"));
-  const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
 
   // Frames are processed as the reader thread (prefetch) parses them, so parsing overlaps with
   // SLAM on the other core. Of each frame only its laser mounting is kept (for --pose-frame laser):
@@ -227,7 +111,7 @@ void run(const SlamArgs& a) {
   std::vector<SE2> T_robot_laser;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
   slam::Slam slam(options);
-  ProgressBar bar(progress, source->sizeHint());
+  SlamProgress bar(a.quiet, source->sizeHint());
   const auto t_slam = Clock::now();
   while (auto f = source->next()) {
     T_robot_laser.push_back(f->T_robot_laser);
@@ -308,6 +192,7 @@ void run(const SlamArgs& a) {
   j["ms_per_scan_max"] = eval::percentile(per_scan, 1.0);
   j["used_odometry"] = options.use_odometry;
   j["pose_frame"] = a.laser_frame ? "laser" : "robot";
+  j["options"] = slamOptionsJson(options);
   Json ev = Json::array();
   for (const auto& e : slam.events()) ev.push_back({{"scan", e.frame_index}, {"time", e.time}, {"what", e.what}});
   j["events"] = ev;
@@ -341,9 +226,22 @@ void run(const SlamArgs& a) {
 void addSlamCommand(CLI::App& app) {
   auto a = std::make_shared<SlamArgs>();
   auto* sub = app.add_subcommand("slam", "Full 2D SLAM: trajectory of every scan, map, pose graph and an HTML report");
-  sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
-  sub->add_option("-o,--output", a->dir, "output folder (created if missing)")->required();
-  sub->add_option("--config", a->config, "YAML file of SLAM options overriding the defaults (docs/slam.md)");
+  auto* log = sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
+  auto* dir = sub->add_option("-o,--output", a->dir, "output folder (created if missing)")->required();
+  sub->add_option("--config", a->config, "YAML file of SLAM options overriding the defaults (--dump-config lists them)");
+  // Triggered as soon as it is parsed, before CLI11 checks that LOG and -o are given.
+  auto* dump = sub->add_flag_callback(
+                      "--dump-config",
+                      [a, log, dir] {
+                        a->dump_config = true;
+                        log->required(false);
+                        dir->required(false);
+                      },
+                      "print every SLAM option (with --config and --no-odometry applied) as a YAML config file, "
+                      "with its unit, range and meaning, and exit")
+                   ->trigger_on_parse();
+  sub->add_flag("--markdown", a->markdown, "with --dump-config: print the options as the Markdown table of docs/slam.md")
+      ->needs(dump);
   sub->add_flag("--no-odometry", a->no_odometry, "ignore the log's odometry (scan matching only)");
   const std::map<std::string, bool> frames{{"robot", false}, {"laser", true}};
   sub->add_option("--pose-frame", a->laser_frame,

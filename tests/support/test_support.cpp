@@ -21,6 +21,10 @@ std::filesystem::path dataDir() {
 
 std::filesystem::path dataFile(const std::string& relative) { return dataDir() / relative; }
 
+std::filesystem::path sourceFile(const std::string& relative) {
+  return std::filesystem::path(LIDAR2D_SOURCE_DIR) / relative;
+}
+
 TempDir::TempDir() {
   std::string templ = (std::filesystem::temp_directory_path() / "lidar2d-test-XXXXXX").string();
   if (!::mkdtemp(templ.data())) throw std::runtime_error("mkdtemp failed");

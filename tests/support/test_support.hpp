@@ -17,6 +17,8 @@ namespace lidar2d::test {
 std::filesystem::path dataDir();
 /// Path of a data file; when missing, the calling test should GTEST_SKIP (see REQUIRE_DATA).
 std::filesystem::path dataFile(const std::string& relative);
+/// Path of a file of the source tree (docs, headers), for tests that check them.
+std::filesystem::path sourceFile(const std::string& relative);
 
 /// Skips the current test with a message when a data file is missing.
 #define LIDAR2D_REQUIRE_DATA(relative)                                                            \

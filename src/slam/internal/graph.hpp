@@ -1,0 +1,26 @@
+#pragma once
+// SLAM's pose graph: the constraints that tie each new node to the previous one, and when and how
+// the graph of all nodes is optimised (slam::optimizePoseGraph).
+
+#include <Eigen/Core>
+#include <cstddef>
+
+#include "src/slam/internal/state.hpp"
+
+namespace lidar2d::slam::internal {
+
+/// The constraints from node n-1 to node `n` (n > 0): the front end's relative pose (weak along
+/// `dir_local`, the local-frame direction a degenerate match could not pin; only as strong as the
+/// prediction after a `restart`), and the odometry between them when both have trusted odometry.
+void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool degenerate,
+                              const Eigen::Vector2d& dir_local);
+
+/// Optimises every node's T_world_robot (node 0 fixed) with at most `iterations`; the front end's
+/// local frame follows the newest node.
+void optimize(SlamState& s, int iterations);
+
+/// Optimises when due after a new node: at once after a descriptor closure, optimize_every_nodes
+/// nodes after a searched closure, 10x as many after other closures.
+void optimizeIfDue(SlamState& s);
+
+}  // namespace lidar2d::slam::internal

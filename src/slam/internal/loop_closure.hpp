@@ -1,0 +1,50 @@
+#pragma once
+// SLAM's loop closure by proximity: finished submaps near a node's global estimate are matched by
+// ICP from a recent link or by branch-and-bound search + ICP, and a searched closure is accepted only
+// once a later search confirms it. Also the submaps' score grids (built on demand, a few kept).
+
+#include <cstddef>
+#include <optional>
+#include <vector>
+
+#include "src/slam/internal/state.hpp"
+
+namespace lidar2d::slam::internal {
+
+class LoopClosure {
+ public:
+  /// Reads and extends `s` (submaps, constraints, counters, the back end's flags).
+  explicit LoopClosure(SlamState& s)
+      : s_(s), opt(s.opt), loop_icp(s.match.loop_icp), loop_search(s.match.loop_search) {}
+  LoopClosure(const LoopClosure&) = delete;
+  LoopClosure& operator=(const LoopClosure&) = delete;
+
+  /// Freezes `sm`: its nodes' points in the anchor's frame, voxel-filtered, its centre and ICP target.
+  void finishSubmap(Submap& sm);
+  /// Closures from node `n` to the finished submaps within loop_search_radius_m of it (submaps
+  /// still in the local map excluded), nearest first. Returns which submaps it considered (by
+  /// index), or nothing when the node has too few points to match.
+  std::optional<std::vector<char>> searchNear(std::size_t n);
+  /// A searched closure `c` into `sm`: pending until a second one from a later node agrees with it
+  /// through the front end's relative poses (a wrong match in a self-similar place rarely repeats
+  /// consistently), then both are accepted; a pending one that disagrees is rejected.
+  void submitSearched(Constraint c, Submap& sm);
+  /// Pending closures never confirmed are listed as rejected (at the end of the run).
+  void expirePending();
+  /// The correlative grid of submap `s`, built on demand; only the most recently used few are kept.
+  const registration::CorrelativeGrid& gridOf(std::size_t s);
+
+ private:
+  static constexpr std::size_t kMaxGrids = 8;
+
+  registration::CorrelativeGrid submapGrid(const Submap& sm) const;
+  void acceptLoop(Constraint c, Submap& sm);
+
+  SlamState& s_;
+  const SlamOptions& opt;
+  const registration::IcpOptions& loop_icp;
+  const registration::CorrelativeOptions& loop_search;
+  std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
+};
+
+}  // namespace lidar2d::slam::internal

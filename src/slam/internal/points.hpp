@@ -1,0 +1,21 @@
+#pragma once
+// Point sets of the SLAM pipeline: a scan's points in the robot frame, the voxel filter, and how
+// much of a scan a target explains.
+
+#include "lidar2d/core/frame.hpp"
+#include "lidar2d/registration/icp.hpp"
+
+namespace lidar2d::slam::internal {
+
+/// The valid returns of `f` under `max_range_m`, in the robot frame (laser mounting applied), in
+/// scan order.
+Points2 scanPoints(const Frame& f, double max_range_m);
+
+/// Centroid of the points in each `cell_m` square, in order of first appearance.
+Points2 voxelFilter(const Points2& pts, double cell_m);
+
+/// The share of `pts` that lie within `inlier_m` of a point of `target` once moved by T; 0 for no
+/// points.
+double explainedFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T, double inlier_m);
+
+}  // namespace lidar2d::slam::internal

@@ -1,0 +1,117 @@
+#pragma once
+// What a SLAM run has built so far (scans, nodes, submaps, constraints, events, counters) and the
+// matcher settings derived from SlamOptions: shared by the parts of the pipeline (front end, loop
+// closure, descriptor loops, pose graph), which Slam::Impl (slam.cpp) wires together.
+
+#include <Eigen/Core>
+#include <chrono>
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "lidar2d/core/frame.hpp"
+#include "lidar2d/localization/lines.hpp"
+#include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/registration/correlative.hpp"
+#include "lidar2d/registration/icp.hpp"
+#include "lidar2d/registration/likelihood_field.hpp"
+#include "lidar2d/slam/slam.hpp"
+
+namespace lidar2d::slam::internal {
+
+using Clock = std::chrono::steady_clock;
+
+inline double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// One scan's record: the node it hangs off and its pose relative to that node.
+struct ScanRecord {
+  std::size_t frame_index = 0;
+  double time = 0.0;
+  std::size_t node = 0;
+  SE2 T_node_scan;
+  bool is_node = false;
+  bool matched = false;
+  bool degenerate = false;
+  double seconds = 0.0;
+};
+
+/// A submap: consecutive nodes, their points in the frame of the first (anchor) node.
+struct Submap {
+  std::size_t anchor = 0;
+  std::vector<std::size_t> nodes;
+  bool finished = false;
+  Points2 points_anchor;
+  Eigen::Vector2d center_anchor = Eigen::Vector2d::Zero();
+  std::unique_ptr<registration::IcpTarget> icp;
+  std::unique_ptr<registration::CorrelativeGrid> grid;  // built at the first branch-and-bound search
+  std::optional<std::size_t> last_link_node;
+  SE2 last_link_T_anchor_node;
+  std::optional<Constraint> pending;           // searched closure awaiting confirmation
+  std::unique_ptr<localization::Database> db;  // line-pair descriptors of its nodes (anchor frame)
+};
+
+/// The settings of every matcher SLAM runs, derived once from SlamOptions (makeMatcherSettings).
+struct MatcherSettings {
+  registration::IcpOptions icp;                        ///< front end: scan to local map
+  registration::IcpOptions loop_icp;                   ///< refinement of loop closures
+  registration::LikelihoodFieldOptions local_lf;       ///< front end with front_end_likelihood_field
+  registration::CorrelativeOptions fallback;           ///< front end's search when ICP explains too little
+  registration::CorrelativeOptions loop_search;        ///< branch and bound for loop closures
+  registration::CorrelativeOptions descriptor_search;  ///< ... around a descriptor hypothesis
+  localization::LocalizerOptions descriptor_query;     ///< line extraction and lookup of descriptor loops
+  localization::DatabaseOptions descriptor_db;         ///< each finished submap's descriptor index
+};
+MatcherSettings makeMatcherSettings(const SlamOptions& opt);
+
+/// The run's data. Node-indexed vectors all have one entry per node.
+struct SlamState {
+  /// Throws `lidar2d::Error` when `o` is invalid (SlamOptions::validate).
+  explicit SlamState(const SlamOptions& o) : opt(validated(o)), match(makeMatcherSettings(opt)) {}
+
+  const SlamOptions opt;
+  const MatcherSettings match;
+
+  std::vector<ScanRecord> scans;
+  std::vector<Node> nodes;
+  std::vector<Points2> node_points;                         // robot frame, voxel-filtered
+  std::vector<std::pair<LaserScan, SE2>> node_scans;        // each node's scan and T_robot_laser (submap grids)
+  std::vector<std::optional<SE2>> node_odometry;            // trusted odometry poses (odometry constraints)
+  std::vector<std::vector<localization::Line>> node_lines;  // robot frame, longest first (descriptor loops)
+  std::vector<double> node_path_m;                          // front-end path length from the first node [m]
+  std::vector<Submap> submaps;
+  std::vector<Constraint> constraints;
+  std::vector<PoseGraphEdge> edges;  // of the accepted constraints
+  std::vector<Event> events;
+  SlamStats stats;
+
+  // Back end.
+  SE2 T_world_local;
+  std::optional<std::size_t> last_loop_node;  // latest node with an accepted closure
+  std::size_t nodes_since_optimization = 0;
+  std::size_t loops_since_optimization = 0;
+  bool searched_loop_pending = false;     // a searched closure was accepted since the last optimisation
+  bool descriptor_loop_accepted = false;  // ... a descriptor closure, since the last node
+
+  void event(const Frame& f, std::string what) { events.push_back({f.index, f.time, std::move(what)}); }
+
+  static const SlamOptions& validated(const SlamOptions& o) {
+    o.validate();
+    return o;
+  }
+
+  /// Records `c`; an accepted one also becomes a pose-graph edge with this weight and Huber scale.
+  void addEdge(Constraint c, const Eigen::Matrix3d& sqrt_info, double huber) {
+    if (c.accepted) edges.push_back({c.from, c.to, c.T_from_to, sqrt_info, huber});
+    constraints.push_back(std::move(c));
+  }
+};
+
+/// The square-root information of independent x, y (sigma `sm`) and theta (sigma `sr`).
+inline Eigen::Matrix3d diagSqrtInfo(double sm, double sr) {
+  return Eigen::Vector3d(1.0 / sm, 1.0 / sm, 1.0 / sr).asDiagonal();
+}
+
+}  // namespace lidar2d::slam::internal

@@ -1,0 +1,214 @@
+#include "src/slam/internal/loop_closure.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+#include "src/slam/internal/points.hpp"
+
+namespace lidar2d::slam::internal {
+
+using registration::alignIcp;
+using registration::IcpTarget;
+
+void LoopClosure::finishSubmap(Submap& sm) {
+  const SE2 T_anchor_local = s_.nodes[sm.anchor].T_local_robot.inverse();
+  sm.points_anchor.clear();
+  Eigen::Vector2d center = Eigen::Vector2d::Zero();
+  for (std::size_t n : sm.nodes) {
+    const SE2 T = T_anchor_local * s_.nodes[n].T_local_robot;
+    center += T.translation();
+    for (const auto& p : s_.node_points[n]) sm.points_anchor.push_back(T * p);
+  }
+  sm.center_anchor = center / static_cast<double>(sm.nodes.size());
+  sm.points_anchor = voxelFilter(sm.points_anchor, opt.map_voxel_m);
+  sm.icp = std::make_unique<IcpTarget>(sm.points_anchor, loop_icp);
+  sm.finished = true;
+}
+
+std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
+  const Node& node = s_.nodes[n];
+  const Points2& pts = s_.node_points[n];
+  if (pts.size() < opt.min_points) return std::nullopt;
+  // Candidate submaps by distance, nearest first.
+  std::vector<std::pair<double, std::size_t>> candidates;
+  std::vector<char> covered(s_.submaps.size(), 0);  // submaps this search considers
+  for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
+    const Submap& sm = s_.submaps[s];
+    if (!sm.finished) continue;
+    // Submaps still in the local map are tied to this node by the sequential chain already.
+    if (sm.nodes.back() + static_cast<std::size_t>(opt.local_map_nodes) >= n) continue;
+    const Eigen::Vector2d center_world = s_.nodes[sm.anchor].T_world_robot * sm.center_anchor;
+    const double d = (center_world - node.T_world_robot.translation()).norm();
+    if (d <= opt.loop_search_radius_m) {
+      candidates.emplace_back(d, s);
+      covered[s] = 1;
+    }
+  }
+  std::sort(candidates.begin(), candidates.end());
+  int searches_left = opt.loop_searches_per_node;
+  for (const auto& [dist, s] : candidates) {
+    Submap& sm = s_.submaps[s];
+    const SE2& T_world_anchor = s_.nodes[sm.anchor].T_world_robot;
+
+    Constraint c;
+    c.kind = Constraint::Kind::kLoop;
+    c.from = sm.anchor;
+    c.to = n;
+    SE2 init;
+    if (sm.last_link_node && n - *sm.last_link_node <= static_cast<std::size_t>(opt.loop_link_memory_nodes)) {
+      const std::size_t m = *sm.last_link_node;
+      init = sm.last_link_T_anchor_node * (s_.nodes[m].T_local_robot.inverse() * node.T_local_robot);
+    } else if (n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 && searches_left > 0) {
+      --searches_left;
+      const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
+      const auto cr =
+          registration::matchCorrelative(gridOf(s), voxelFilter(pts, 2.0 * opt.scan_voxel_m), guess, loop_search);
+      ++s_.stats.loop_searches;
+      c.searched = true;
+      c.score = cr.score;
+      if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) continue;  // no candidate: nothing to record
+      init = cr.T_search;
+    } else {
+      continue;
+    }
+    const registration::Result res = alignIcp(*sm.icp, pts, init, loop_icp);
+    c.T_from_to = res.T_target_source;
+    c.explained = res.T_target_source.isFinite()
+                      ? explainedFraction(*sm.icp, pts, res.T_target_source, opt.match_inlier_distance_m)
+                      : 0.0;
+    const bool ok =
+        res.status == registration::Status::kConverged || res.status == registration::Status::kMaxIterations;
+    const SE2 d = init.inverse() * res.T_target_source;
+    if (!ok) {
+      c.accepted = false;
+      c.reason = fmt::format("refinement failed ({})", registration::toString(res.status));
+    } else if (c.explained < opt.loop_min_explained_fraction) {
+      c.accepted = false;
+      c.reason = fmt::format("explains {:.0f}% of the points", 100.0 * c.explained);
+    } else if (!c.searched && (d.translation().norm() > 0.2 || std::abs(d.theta()) > 3.0 * kDeg)) {
+      c.accepted = false;
+      c.reason = "disagrees with the submap's recent link";
+    } else if (c.searched && (d.translation().norm() > 0.3 || std::abs(d.theta()) > 5.0 * kDeg)) {
+      c.accepted = false;
+      c.reason = "refinement left the search's answer";
+    }
+    if (!c.accepted) {
+      if (c.searched) {
+        // Only searched closures are worth listing when rejected; link-following ones are routine.
+        ++s_.stats.loop_rejected;
+        s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+      }
+      continue;
+    }
+    if (c.searched) {
+      submitSearched(std::move(c), sm);
+      continue;
+    }
+    acceptLoop(c, sm);
+  }
+  return covered;
+}
+
+void LoopClosure::submitSearched(Constraint c, Submap& sm) {
+  std::optional<Constraint> confirmed;
+  if (sm.pending) {
+    const Constraint& p = *sm.pending;
+    const SE2 predicted = p.T_from_to * (s_.nodes[p.to].T_local_robot.inverse() * s_.nodes[c.to].T_local_robot);
+    const SE2 diff = predicted.inverse() * c.T_from_to;
+    const bool recent = c.to - p.to <= static_cast<std::size_t>(opt.loop_confirm_window_nodes);
+    if (recent && diff.translation().norm() <= opt.loop_confirm_tolerance_m &&
+        std::abs(diff.theta()) <= opt.loop_confirm_tolerance_rad) {
+      confirmed = p;
+    } else {
+      Constraint old = p;
+      old.accepted = false;
+      old.reason = recent ? "contradicted by a later search" : "not confirmed by a later search";
+      ++s_.stats.loop_rejected;
+      s_.addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
+    }
+    sm.pending.reset();
+  }
+  if (!confirmed) {
+    sm.pending = std::move(c);
+    return;
+  }
+  acceptLoop(*confirmed, sm);
+  s_.searched_loop_pending = true;
+  acceptLoop(std::move(c), sm);
+}
+
+void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
+  ++s_.stats.loop_accepted;
+  if (!s_.last_loop_node || c.to > *s_.last_loop_node) s_.last_loop_node = c.to;
+  const bool descriptor = c.descriptor;
+  if (descriptor) {
+    ++s_.stats.descriptor_accepted;
+    s_.descriptor_loop_accepted = true;
+    const ScanRecord& r = s_.scans[s_.nodes[c.to].scan];
+    const double correction =
+        ((s_.nodes[c.from].T_world_robot * c.T_from_to).translation() - s_.nodes[c.to].T_world_robot.translation())
+            .norm();
+    s_.events.push_back(
+        {r.frame_index, r.time,
+         fmt::format("loop closure found by descriptors: node {} to submap {}, correcting {:.2f} m of drift", c.to,
+                     s_.nodes[c.from].submap, correction)});
+  }
+  if (!sm.last_link_node || c.to > *sm.last_link_node) {
+    sm.last_link_node = c.to;
+    sm.last_link_T_anchor_node = c.T_from_to;
+  }
+  ++s_.loops_since_optimization;
+  // A descriptor closure corrects metres of drift: under the robust loss it could not pull the
+  // chain of stiff front-end edges that far. It has passed the stricter tests (and a second
+  // closure confirms it), so it is a plain quadratic constraint.
+  s_.addEdge(std::move(c), diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad), descriptor ? 0.0 : opt.loop_huber);
+}
+
+void LoopClosure::expirePending() {
+  for (Submap& sm : s_.submaps)
+    if (sm.pending) {
+      Constraint old = *sm.pending;
+      old.accepted = false;
+      old.reason = "not confirmed by a later search";
+      ++s_.stats.loop_rejected;
+      s_.addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
+      sm.pending.reset();
+    }
+}
+
+// A grid with its max-grids takes megabytes, and a long run would otherwise hold one per submap.
+const registration::CorrelativeGrid& LoopClosure::gridOf(std::size_t s) {
+  Submap& sm = s_.submaps[s];
+  grid_lru.erase(std::remove(grid_lru.begin(), grid_lru.end(), s), grid_lru.end());
+  grid_lru.push_back(s);
+  if (!sm.grid) sm.grid = std::make_unique<registration::CorrelativeGrid>(submapGrid(sm));
+  while (grid_lru.size() > kMaxGrids) {
+    s_.submaps[grid_lru.front()].grid.reset();
+    grid_lru.erase(grid_lru.begin());
+  }
+  return *sm.grid;
+}
+
+/// The score grid of a finished submap for the branch-and-bound searches, from its occupancy grid
+/// built with the mapping module: every node's scan inserted (log-odds, ray traced) at its pose in
+/// the anchor's frame. A finished submap is frozen (the front end's relative poses of its nodes
+/// no longer change), so the grid can be dropped and rebuilt alike.
+registration::CorrelativeGrid LoopClosure::submapGrid(const Submap& sm) const {
+  mapping::MapOptions mo;
+  mo.resolution_m = loop_search.resolution_m;
+  mo.insert.max_range_m = opt.max_range_m;
+  const auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
+  const SE2 T_anchor_local = s_.nodes[sm.anchor].T_local_robot.inverse();
+  for (const std::size_t n : sm.nodes)
+    map->insert(s_.node_scans[n].first, T_anchor_local * s_.nodes[n].T_local_robot * s_.node_scans[n].second);
+  const OccupancyImage image = mapping::toOccupancyImage(*map);
+  if (image.width() == 0) return registration::CorrelativeGrid::fromPoints(sm.points_anchor, loop_search);
+  return registration::CorrelativeGrid::fromMap(image, loop_search);
+}
+
+}  // namespace lidar2d::slam::internal

@@ -1,0 +1,61 @@
+#include "src/slam/internal/points.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <unordered_map>
+
+namespace lidar2d::slam::internal {
+
+Points2 scanPoints(const Frame& f, double max_range_m) {
+  Points2 pts;
+  const LaserScan& s = f.scan;
+  pts.reserve(s.size());
+  for (std::size_t i : s.validIndices()) {
+    const double r = s.ranges()[i];
+    if (!(r < max_range_m)) continue;
+    const double a = s.angle(i);
+    pts.push_back(f.T_robot_laser * Eigen::Vector2d(r * std::cos(a), r * std::sin(a)));
+  }
+  return pts;
+}
+
+/// Stacked scans of the same wall would otherwise give each target point near-duplicate neighbours
+/// from other scans, and a line fit over a neighbourhood of duplicates has no direction (no normal):
+/// point-to-line ICP then loses its correspondences exactly where the robot stands still or turns
+/// on the spot.
+Points2 voxelFilter(const Points2& pts, double cell_m) {
+  struct Acc {
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    int n = 0;
+  };
+  std::unordered_map<std::uint64_t, std::size_t> index;
+  std::vector<Acc> acc;
+  index.reserve(pts.size());
+  acc.reserve(pts.size());
+  for (const auto& p : pts) {
+    const auto ix = static_cast<std::int64_t>(std::floor(p.x() / cell_m));
+    const auto iy = static_cast<std::int64_t>(std::floor(p.y() / cell_m));
+    const std::uint64_t key = (static_cast<std::uint64_t>(ix) << 32) ^ (static_cast<std::uint64_t>(iy) & 0xffffffffULL);
+    auto [it, inserted] = index.try_emplace(key, acc.size());
+    if (inserted) acc.emplace_back();
+    acc[it->second].sum += p;
+    ++acc[it->second].n;
+  }
+  Points2 out;
+  out.reserve(acc.size());
+  for (const auto& a : acc) out.push_back(a.sum / a.n);
+  return out;
+}
+
+double explainedFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T, double inlier_m) {
+  if (pts.empty()) return 0.0;
+  const double d2max = inlier_m * inlier_m;
+  std::size_t n = 0;
+  for (const auto& p : pts) {
+    double d2 = 0.0;
+    if (target.nearest(T * p, &d2) < target.size() && d2 <= d2max) ++n;
+  }
+  return static_cast<double>(n) / static_cast<double>(pts.size());
+}
+
+}  // namespace lidar2d::slam::internal
