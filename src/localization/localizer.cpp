@@ -13,6 +13,7 @@
 #include <unordered_map>
 
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/geometry/ray_cast.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
 
@@ -216,42 +217,6 @@ std::uint64_t mapChecksum(const OccupancyImage& map) {
   return h;
 }
 
-namespace {
-
-// Distance from `start` (cell units, map frame) along unit `dir` to the first obstacle cell, by
-// exact grid traversal (Amanatides & Woo 1987), plus half a cell (a real return lies inside the
-// cell, on average at its middle). Returns +inf when nothing is hit within max_cells.
-double castRay(const std::vector<std::uint8_t>& obstacle, int width, int height, const Eigen::Vector2d& start,
-               const Eigen::Vector2d& dir, double max_cells) {
-  int ix = static_cast<int>(std::floor(start.x()));
-  int iy = static_cast<int>(std::floor(start.y()));
-  const int step_x = dir.x() > 0 ? 1 : -1;
-  const int step_y = dir.y() > 0 ? 1 : -1;
-  const double inf = std::numeric_limits<double>::infinity();
-  const double t_dx = dir.x() != 0 ? std::abs(1.0 / dir.x()) : inf;
-  const double t_dy = dir.y() != 0 ? std::abs(1.0 / dir.y()) : inf;
-  double t_x = dir.x() != 0 ? ((dir.x() > 0 ? (ix + 1 - start.x()) : (start.x() - ix)) * t_dx) : inf;
-  double t_y = dir.y() != 0 ? ((dir.y() > 0 ? (iy + 1 - start.y()) : (start.y() - iy)) * t_dy) : inf;
-  double t = 0;
-  while (t <= max_cells) {
-    if (ix < 0 || iy < 0 || ix >= width || iy >= height) return inf;
-    if (obstacle[static_cast<std::size_t>(iy) * static_cast<std::size_t>(width) + static_cast<std::size_t>(ix)])
-      return t + 0.5;
-    if (t_x < t_y) {
-      t = t_x;
-      t_x += t_dx;
-      ix += step_x;
-    } else {
-      t = t_y;
-      t_y += t_dy;
-      iy += step_y;
-    }
-  }
-  return inf;
-}
-
-}  // namespace
-
 Database Database::build(const OccupancyImage& map, const DatabaseOptions& options, unsigned threads,
                          ProgressCallback progress, void* progress_user) {
   options.validate();
@@ -310,6 +275,9 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
                    ErrorLocation({}, 0, "free space"));
 
   // Virtual scans, line extraction: in parallel over positions.
+  const auto is_obstacle = [&](std::int32_t x, std::int32_t y) {
+    return obstacle[static_cast<std::size_t>(y) * static_cast<std::size_t>(W) + static_cast<std::size_t>(x)] != 0;
+  };
   const int n_orient = std::max(1, static_cast<int>(std::ceil(kTwoPi / options.fov_rad - 1e-9)));
   const double inc = options.fov_rad >= kTwoPi - 1e-9 ? kTwoPi / options.beams : options.fov_rad / (options.beams - 1);
   const double a0 = options.fov_rad >= kTwoPi - 1e-9 ? -kPi : -0.5 * options.fov_rad;
@@ -332,7 +300,10 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
         for (int b = 0; b < options.beams; ++b) {
           const double a_world = o * kTwoPi / n_orient + a0 + b * inc;  // beam angle in the world frame
           const double a_map = a_world - yaw;
-          const double r = castRay(obstacle, W, H, start, Eigen::Vector2d(std::cos(a_map), std::sin(a_map)), max_cells);
+          // Range to the first obstacle cell plus half a cell (a real return lies inside the cell,
+          // on average at its middle) [cells]; +inf when nothing is hit within max_cells.
+          const Eigen::Vector2d dir(std::cos(a_map), std::sin(a_map));
+          const double r = geometry::castRay(start, dir, max_cells, W, H, is_obstacle) + 0.5;
           if (std::isfinite(r))
             pts.emplace_back(r * res * std::cos(a_world), r * res * std::sin(a_world));
           else
