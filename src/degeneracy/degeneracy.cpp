@@ -9,50 +9,16 @@
 #include <numbers>
 #include <numeric>
 
-#include "src/geometry/kdtree2.hpp"
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/geometry/line_fit.hpp"
+#include "src/geometry/eigen2.hpp"
+#include "src/geometry/kdtree2.hpp"
 
 namespace lidar2d::degeneracy {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kPi = std::numbers::pi;
-
-// An axis angle wrapped to (-pi/2, pi/2].
-double wrapAxis(double a) { return 0.5 * wrapAngle(2.0 * a); }
-
-// Eigen-decomposition of the symmetric 2x2 matrix [[a, b], [b, c]] in closed form: eigenvalues
-// lo <= hi and the angle of the eigenvector of lo.
-struct Eig2 {
-  double lo = 0.0, hi = 0.0, lo_angle = 0.0;
-};
-Eig2 eig2(double a, double b, double c) {
-  const double m = 0.5 * (a + c);
-  const double d = std::hypot(0.5 * (a - c), b);
-  const double hi_angle = 0.5 * std::atan2(2.0 * b, a - c);
-  return {m - d, m + d, wrapAxis(hi_angle + 0.5 * kPi)};
-}
-
-// The same without trigonometry (hot loops): eigenvalues lo <= hi and the unit eigenvector of lo.
-struct Eig2Vec {
-  double lo = 0.0, hi = 0.0;
-  Eigen::Vector2d lo_vec = Eigen::Vector2d::UnitX();
-};
-Eig2Vec eig2vec(double a, double b, double c) {
-  const double m = 0.5 * (a + c);
-  const double h = 0.5 * (a - c);
-  const double d = std::sqrt(h * h + b * b);
-  Eig2Vec e{m - d, m + d, Eigen::Vector2d::UnitX()};
-  // (A - lo I) v = 0: v = (b, lo - a) or (lo - c, b); take the longer for accuracy.
-  const Eigen::Vector2d v1(b, e.lo - a), v2(e.lo - c, b);
-  const Eigen::Vector2d& v = v1.squaredNorm() >= v2.squaredNorm() ? v1 : v2;
-  const double n = v.norm();
-  if (n > 0.0)
-    e.lo_vec = v / n;
-  else
-    e.lo_vec = a <= c ? Eigen::Vector2d::UnitX() : Eigen::Vector2d::UnitY();  // isotropic or diagonal
-  return e;
-}
 
 // nanoflann result set appending every point within the radius to CSR arrays (no per-query vector).
 struct AppendResultSet {
@@ -154,84 +120,6 @@ void require(const std::string& bad) {
 
 // ---- geometric ----
 
-// Total-least-squares line of q[b, e).
-Line fitLine(const Points2& q, std::size_t b, std::size_t e) {
-  Line l;
-  const double n = static_cast<double>(e - b);
-  Eigen::Vector2d c = Eigen::Vector2d::Zero();
-  for (std::size_t i = b; i < e; ++i) c += q[i];
-  c /= n;
-  double sxx = 0, sxy = 0, syy = 0;
-  for (std::size_t i = b; i < e; ++i) {
-    const Eigen::Vector2d d = q[i] - c;
-    sxx += d.x() * d.x();
-    sxy += d.x() * d.y();
-    syy += d.y() * d.y();
-  }
-  const Eig2Vec e2 = eig2vec(sxx / n, sxy / n, syy / n);
-  const Eigen::Vector2d& normal = e2.lo_vec;
-  l.direction = Eigen::Vector2d(-normal.y(), normal.x());
-  l.centroid = c;
-  l.rms_m = std::sqrt(std::max(0.0, e2.lo));
-  double tmin = std::numeric_limits<double>::infinity(), tmax = -tmin;
-  for (std::size_t i = b; i < e; ++i) {
-    const double t = l.direction.dot(q[i] - c);
-    tmin = std::min(tmin, t);
-    tmax = std::max(tmax, t);
-  }
-  l.a = c + tmin * l.direction;
-  l.b = c + tmax * l.direction;
-  l.num_points = e - b;
-  return l;
-}
-
-struct Splitter {
-  const GeometricOptions& o;
-  const Points2& q;
-  int cluster;
-  std::vector<Line>& lines;
-  std::size_t& unstructured;
-
-  void run(std::size_t b, std::size_t e, int depth) {
-    const std::size_t n = e - b;
-    if (n < o.min_line_points) {
-      unstructured += n;
-      return;
-    }
-    Line l = fitLine(q, b, e);
-    if (l.rms_m <= o.max_line_rms_m) {
-      l.cluster = cluster;
-      lines.push_back(l);
-      return;
-    }
-    if (depth >= o.max_split_depth || n < 2) {
-      unstructured += n;
-      return;
-    }
-    // Douglas-Peucker: split at the point farthest from the chord between the ends (a corner of an
-    // L-shaped cluster, the far side of a curved one).
-    const Eigen::Vector2d a = q[b], z = q[e - 1];
-    Eigen::Vector2d u = z - a;
-    const double len = u.norm();
-    std::size_t k = b + n / 2;
-    if (len > 1e-9) {
-      u /= len;
-      double best = -1.0;
-      for (std::size_t i = b + 1; i + 1 < e; ++i) {
-        const Eigen::Vector2d d = q[i] - a;
-        const double dist = std::abs(u.x() * d.y() - u.y() * d.x());
-        if (dist > best) {
-          best = dist;
-          k = i;
-        }
-      }
-    }
-    k = std::clamp(k, b + 1, e - 1);
-    run(b, k, depth + 1);
-    run(k, e, depth + 1);
-  }
-};
-
 GeometricResult geometricFrom(const Prepared& p, std::size_t num_input, const GeometricOptions& o) {
   GeometricResult r;
   r.cluster_of_point.assign(num_input, -1);
@@ -281,7 +169,18 @@ GeometricResult geometricFrom(const Prepared& p, std::size_t num_input, const Ge
     }
   }
   // Keep the clusters of an accepted size; order each around the sensor (beam order, also for a 360
-  // degree scan whose seam cuts a cluster) and fit lines, splitting where one line does not fit.
+  // degree scan whose seam cuts a cluster) and fit lines, splitting where one line does not fit: a
+  // piece is a line when its total-least-squares fit is within max_line_rms_m, else it is split
+  // Douglas-Peucker style at the point farthest from its chord (a corner of an L-shaped cluster, the
+  // far side of a curved one); pieces too small or too deep to split are unstructured.
+  geometry::LineSplitOptions split;
+  split.rule = geometry::SplitRule::kFitResidual;
+  split.threshold_m = o.max_line_rms_m;
+  split.min_points = o.min_line_points;
+  split.max_depth = o.max_split_depth;
+  split.fit = {geometry::LineNormal::kMinorEigenvector, geometry::LineResidual::kMinorEigenvalue,
+               geometry::LineEnds::kExtremes};
+  std::vector<geometry::LinePiece> pieces;
   Points2 q;
   std::vector<int> cluster_of_kept(n, -1);
   for (auto& members : clusters) {
@@ -301,9 +200,25 @@ GeometricResult geometricFrom(const Prepared& p, std::size_t num_input, const Ge
     q.clear();
     for (std::size_t k = 0; k < members.size(); ++k) q.push_back(p.pts[members[(start + k) % members.size()]]);
     r.num_clustered_points += q.size();
-    Splitter s{o, q, id, r.lines, r.num_unstructured_points};
-    for (std::size_t b = 0; b < q.size(); b += o.max_cluster_points)
-      s.run(b, std::min(q.size(), b + o.max_cluster_points), 0);
+    for (std::size_t b = 0; b < q.size(); b += o.max_cluster_points) {
+      pieces.clear();
+      geometry::splitIntoLines(q, b, std::min(q.size(), b + o.max_cluster_points), split, &pieces);
+      for (const geometry::LinePiece& piece : pieces) {
+        if (piece.kind != geometry::LinePiece::Kind::kLine) {
+          r.num_unstructured_points += piece.end - piece.first;
+          continue;
+        }
+        Line l;
+        l.centroid = piece.fit.centroid;
+        l.direction = piece.fit.direction;
+        l.a = piece.fit.a;
+        l.b = piece.fit.b;
+        l.rms_m = piece.fit.rms_m;
+        l.num_points = piece.fit.num_points;
+        l.cluster = id;
+        r.lines.push_back(l);
+      }
+    }
   }
   for (std::size_t i = 0; i < num_input; ++i)
     if (p.kept_of_input[i] >= 0) r.cluster_of_point[i] = cluster_of_kept[static_cast<std::size_t>(p.kept_of_input[i])];
@@ -321,7 +236,7 @@ GeometricResult geometricFrom(const Prepared& p, std::size_t num_input, const Ge
     b += w * nx * ny;
     c += w * ny * ny;
   }
-  const Eig2 e = eig2(a, b, c);
+  const geometry::SymEigen2Angle e = geometry::symEigen2Angle(a, b, c);
   // The weakest direction d is the eigenvector of the smallest eigenvalue of M = sum n n^T: d^T M d is
   // the constraint along d.
   r.direction_rad = e.lo_angle;
@@ -372,7 +287,7 @@ InformationResult informationFrom(const Prepared& p, const InformationOptions& o
     }
     if (cnt < static_cast<double>(o.normal_min_neighbors)) continue;
     const double mx = sx / cnt, my = sy / cnt;
-    const Eig2Vec e = eig2vec(sxx / cnt - mx * mx, sxy / cnt - mx * my, syy / cnt - my * my);
+    const geometry::SymEigen2 e = geometry::symEigen2(sxx / cnt - mx * mx, sxy / cnt - mx * my, syy / cnt - my * my);
     if (!(e.hi > 0.0) || std::max(0.0, e.lo) > max_flat2 * e.hi) continue;
     const Eigen::Vector2d& nrm = e.lo_vec;
     // Residual n . (T p - q) at T = identity: d/d(x, y, theta) = [n_x, n_y, n . perp(p)].
@@ -386,7 +301,7 @@ InformationResult informationFrom(const Prepared& p, const InformationOptions& o
     r.reason = fmt::format("too few points on lines ({} with a normal, {} needed)", r.num_normals, o.input.min_points);
     return r;
   }
-  const Eig2 e = eig2(H(0, 0), H(0, 1), H(1, 1));
+  const geometry::SymEigen2Angle e = geometry::symEigen2Angle(H(0, 0), H(0, 1), H(1, 1));
   r.score = std::max(0.0, e.lo) / static_cast<double>(r.num_normals);
   r.direction_rad = e.lo_angle;
   r.rotation_score = sum_p2 > 0 ? H(2, 2) / sum_p2 : 0.0;

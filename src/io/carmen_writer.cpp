@@ -1,4 +1,4 @@
-// CARMEN text-log writer. Line layouts are those read by carmen_reader.cpp:
+// CARMEN text-log writer. Line layouts are those read by carmen_messages.cpp:
 //   ROBOTLASER1 laser_type start_angle field_of_view angular_resolution maximum_range accuracy
 //       remission_mode n r1..rn m e1..em laser_x laser_y laser_theta robot_x robot_y robot_theta
 //       tv rv forward_safety_dist side_safety_dist turn_axis timestamp host logger_timestamp

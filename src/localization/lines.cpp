@@ -8,6 +8,7 @@
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/core/se2.hpp"
+#include "lidar2d/geometry/line_fit.hpp"
 
 namespace lidar2d::localization {
 
@@ -30,78 +31,6 @@ Eigen::Vector2d Line::foot() const {
   return distance * Eigen::Vector2d(std::cos(normal_angle), std::sin(normal_angle));
 }
 
-namespace {
-
-// Total least-squares line through pts[first, last]: returns false when degenerate.
-struct Fit {
-  Eigen::Vector2d normal;
-  double c = 0;  // n . p = c
-  double rms = 0;
-};
-
-bool fitLine(const Points2& pts, std::size_t first, std::size_t last, Fit* fit) {
-  const std::size_t n = last - first + 1;
-  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-  for (std::size_t i = first; i <= last; ++i) mean += pts[i];
-  mean /= static_cast<double>(n);
-  double sxx = 0, sxy = 0, syy = 0;
-  for (std::size_t i = first; i <= last; ++i) {
-    const Eigen::Vector2d d = pts[i] - mean;
-    sxx += d.x() * d.x();
-    sxy += d.x() * d.y();
-    syy += d.y() * d.y();
-  }
-  // Direction of the principal axis; the normal is perpendicular to it.
-  const double angle = 0.5 * std::atan2(2.0 * sxy, sxx - syy);
-  const Eigen::Vector2d dir(std::cos(angle), std::sin(angle));
-  if (sxx + syy <= 1e-12) return false;
-  fit->normal = Eigen::Vector2d(-dir.y(), dir.x());
-  fit->c = fit->normal.dot(mean);
-  double ss = 0;
-  for (std::size_t i = first; i <= last; ++i) {
-    const double r = fit->normal.dot(pts[i]) - fit->c;
-    ss += r * r;
-  }
-  fit->rms = std::sqrt(ss / static_cast<double>(n));
-  return true;
-}
-
-// Recursive split of pts[first, last] (iterative with a stack): segments whose points all lie within
-// the threshold of their chord.
-void split(const Points2& pts, std::size_t first, std::size_t last, double threshold,
-           std::vector<std::pair<std::size_t, std::size_t>>* out) {
-  std::vector<std::pair<std::size_t, std::size_t>> stack{{first, last}};
-  while (!stack.empty()) {
-    const auto [a, b] = stack.back();
-    stack.pop_back();
-    if (b <= a + 1) {
-      out->push_back({a, b});
-      continue;
-    }
-    const Eigen::Vector2d chord = pts[b] - pts[a];
-    const double len = chord.norm();
-    std::size_t worst = a;
-    double worst_d = 0;
-    for (std::size_t i = a + 1; i < b; ++i) {
-      const Eigen::Vector2d v = pts[i] - pts[a];
-      const double d = len > 1e-9 ? std::abs(chord.x() * v.y() - chord.y() * v.x()) / len : v.norm();
-      if (d > worst_d) {
-        worst_d = d;
-        worst = i;
-      }
-    }
-    if (worst_d > threshold) {
-      // Right part pushed first so that segments come out in scan order.
-      stack.push_back({worst, b});
-      stack.push_back({a, worst});
-    } else {
-      out->push_back({a, b});
-    }
-  }
-}
-
-}  // namespace
-
 std::vector<Line> extractLines(const Points2& points, const LineExtractionOptions& options) {
   options.validate();
   Points2 pts;
@@ -111,42 +40,40 @@ std::vector<Line> extractLines(const Points2& points, const LineExtractionOption
   std::vector<Line> lines;
   if (pts.size() < options.min_points) return lines;
 
-  // 1. Runs of consecutive points closer than max_gap; 2. split each run at its farthest point.
-  std::vector<std::pair<std::size_t, std::size_t>> segments;
+  // 1. Runs of consecutive points closer than max_gap; 2. each run split at its farthest point from
+  // the chord (Douglas-Peucker) and every piece refitted by total least squares.
+  geometry::LineSplitOptions split;
+  split.rule = geometry::SplitRule::kChordDistance;
+  split.threshold_m = options.split_threshold_m;
+  split.min_points = options.min_points;
+  split.fit = {geometry::LineNormal::kPrincipalAngle, geometry::LineResidual::kFromPoints,
+               geometry::LineEnds::kFirstAndLast, /*normal_from_origin=*/true};
+  std::vector<geometry::LinePiece> pieces;
   std::size_t run_start = 0;
   for (std::size_t i = 1; i <= pts.size(); ++i) {
     if (i == pts.size() || (pts[i] - pts[i - 1]).norm() > options.max_gap_m) {
-      if (i - 1 > run_start) split(pts, run_start, i - 1, options.split_threshold_m, &segments);
+      if (i - 1 > run_start) geometry::splitIntoLines(pts, run_start, i, split, &pieces);
       run_start = i;
     }
   }
 
-  // 3. Refit each segment by total least squares; keep the long, straight ones.
+  // 3. Keep the long, straight pieces (the normal of a piece on one spot is arbitrary).
   std::vector<Line> raw;
-  for (const auto& [a, b] : segments) {
-    if (b - a + 1 < options.min_points) continue;
-    Fit fit;
-    if (!fitLine(pts, a, b, &fit) || fit.rms > options.max_rms_m) continue;
-    Eigen::Vector2d n = fit.normal;
-    double c = fit.c;
-    if (c < 0) {
-      n = -n;
-      c = -c;
-    }
-    if (c < options.min_distance_m) continue;
-    const Eigen::Vector2d dir(-n.y(), n.x());
-    const Eigen::Vector2d pa = pts[a] - (n.dot(pts[a]) - c) * n;
-    const Eigen::Vector2d pb = pts[b] - (n.dot(pts[b]) - c) * n;
-    const double length = std::abs(dir.dot(pb - pa));
+  for (const geometry::LinePiece& piece : pieces) {
+    const geometry::LineFit& fit = piece.fit;
+    if (piece.kind != geometry::LinePiece::Kind::kLine || fit.scatter_m2 <= 1e-12 || fit.rms_m > options.max_rms_m)
+      continue;
+    if (fit.offset_m < options.min_distance_m) continue;
+    const double length = std::abs(fit.direction.dot(fit.b - fit.a));
     if (length < options.min_length_m) continue;
     Line l;
-    l.normal_angle = std::atan2(n.y(), n.x());
-    l.distance = c;
+    l.normal_angle = std::atan2(fit.normal.y(), fit.normal.x());
+    l.distance = fit.offset_m;
     l.length = length;
-    l.a = pa;
-    l.b = pb;
-    l.num_points = b - a + 1;
-    l.rms_m = fit.rms;
+    l.a = fit.a;
+    l.b = fit.b;
+    l.num_points = fit.num_points;
+    l.rms_m = fit.rms_m;
     raw.push_back(l);
   }
 

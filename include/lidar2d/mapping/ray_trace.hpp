@@ -1,7 +1,10 @@
 #pragma once
 /// @file
 /// Exact grid traversal of a segment (Amanatides & Woo 1987, "A fast voxel traversal algorithm for
-/// ray tracing"): every cell the segment passes through is visited exactly once, in order.
+/// ray tracing"): every cell the segment passes through is visited exactly once, in order. It walks
+/// as geometry/ray_cast.hpp's `GridRay` (the open ray the localizer casts) does, specialised for map
+/// insertion and kept separate for that loop's speed: a step budget per axis makes it end exactly
+/// in its end cell, and `run` batches the steps.
 
 #include <Eigen/Core>
 #include <algorithm>
@@ -10,18 +13,12 @@
 #include <cstdlib>
 #include <limits>
 
+#include "lidar2d/geometry/ray_cast.hpp"
 #include "lidar2d/mapping/tiled_grid.hpp"
 
 namespace lidar2d::mapping {
 
-/// floor(v) as an integer, for finite v within the int32 range (as the cast of std::floor, which
-/// on the baseline x86-64 target, without SSE4.1's rounding instruction, is a sequence of about 14
-/// instructions and a branch; map insertion floors several coordinates per beam). Exact:
-/// truncation toward zero, less one when that rounded up.
-[[gnu::always_inline]] inline std::int32_t floorToInt32(double v) {
-  const auto i = static_cast<std::int32_t>(v);
-  return i - static_cast<std::int32_t>(v < static_cast<double>(i));
-}
+using geometry::floorToInt32;
 
 /// The state of an exact traversal of the segment `start` -> `end`, both in continuous cell
 /// coordinates (cell (x, y) spans [x, x+1) x [y, y+1); see `GridGeometry::toCellCoords`). It starts
@@ -29,7 +26,7 @@ namespace lidar2d::mapping {
 /// the end cell. A segment through a cell corner continues into one of the two side cells (the walk
 /// stays 4-connected). The number of steps is fixed by the end cell; once one axis has arrived the
 /// other is forced, so the walk ends exactly in the end cell despite rounding near corners.
-/// Preconditions: finite inputs. Every traversal in lidar2d uses this one walk, so that all of them
+/// Preconditions: finite inputs. Every traversal of mapping uses this one walk, so that all of them
 /// visit the same cells in the same order.
 class RayWalk {
  public:

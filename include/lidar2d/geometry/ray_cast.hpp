@@ -1,0 +1,84 @@
+#pragma once
+/// @file
+/// Exact grid traversal (Amanatides & Woo 1987, "A fast voxel traversal algorithm for ray tracing")
+/// of a ray in a grid of unit cells: cell (x, y) spans [x, x+1) x [y, y+1) in continuous cell
+/// coordinates. mapping/ray_trace.hpp's `RayWalk` has the same setup and step rule (with dir =
+/// end - start) but stays separate: it walks a segment to a fixed end cell (a step budget per axis,
+/// so that it ends exactly there despite rounding) in a loop tuned for map insertion, where
+/// `GridRay` walks an open ray and knows the ray parameter at which it entered each cell.
+
+#include <Eigen/Core>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+namespace lidar2d::geometry {
+
+/// floor(v) as an integer, for finite v within the int32 range (as the cast of std::floor, which
+/// on the baseline x86-64 target, without SSE4.1's rounding instruction, is a sequence of about 14
+/// instructions and a branch). Exact: truncation toward zero, less one when that rounded up.
+[[gnu::always_inline]] inline std::int32_t floorToInt32(double v) {
+  const auto i = static_cast<std::int32_t>(v);
+  return i - static_cast<std::int32_t>(v < static_cast<double>(i));
+}
+
+/// The cells of the ray p(t) = start + t dir, t >= 0 (continuous cell coordinates), in order: it
+/// starts in the cell of `start` at t = 0; each `step()` moves to the next cell the ray enters, and
+/// `t()` is then the parameter at which it entered. Where the ray crosses a cell corner it continues
+/// into one of the two side cells (a tie steps in y), so the walk stays 4-connected. With a unit
+/// `dir`, t is the distance travelled [cells]. Preconditions: finite inputs, dir != 0, start within
+/// the int32 range; a walk that steps on forever leaves that range (the caller bounds it).
+class GridRay {
+ public:
+  GridRay(const Eigen::Vector2d& start, const Eigen::Vector2d& dir)
+      : x_(floorToInt32(start.x())), y_(floorToInt32(start.y())) {
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    step_x_ = dir.x() > 0 ? 1 : -1;
+    step_y_ = dir.y() > 0 ? 1 : -1;
+    // t between two crossings of x (y) cell boundaries, and t of the next crossing.
+    t_delta_x_ = dir.x() != 0 ? 1.0 / std::abs(dir.x()) : kInf;
+    t_delta_y_ = dir.y() != 0 ? 1.0 / std::abs(dir.y()) : kInf;
+    t_next_x_ = dir.x() > 0 ? (x_ + 1 - start.x()) * t_delta_x_ : (dir.x() < 0 ? (start.x() - x_) * t_delta_x_ : kInf);
+    t_next_y_ = dir.y() > 0 ? (y_ + 1 - start.y()) * t_delta_y_ : (dir.y() < 0 ? (start.y() - y_) * t_delta_y_ : kInf);
+  }
+
+  std::int32_t x() const { return x_; }
+  std::int32_t y() const { return y_; }
+  /// Ray parameter at which the ray entered the current cell (0 in the start cell).
+  double t() const { return t_; }
+
+  /// Moves to the next cell.
+  void step() {
+    if (t_next_x_ < t_next_y_) {
+      t_ = t_next_x_;
+      t_next_x_ += t_delta_x_;
+      x_ += step_x_;
+    } else {
+      t_ = t_next_y_;
+      t_next_y_ += t_delta_y_;
+      y_ += step_y_;
+    }
+  }
+
+ private:
+  std::int32_t x_, y_;
+  std::int32_t step_x_, step_y_;
+  double t_delta_x_, t_delta_y_, t_next_x_, t_next_y_;
+  double t_ = 0.0;
+};
+
+/// Casts the ray p(t) = start + t dir (see `GridRay`) through the grid of cells [0, width) x
+/// [0, height) and returns the entry parameter t of the first cell along the ray for which
+/// `hit(x, y)` is true (0 when it is the start cell); +inf when the ray leaves the grid first or
+/// enters no such cell at t <= max_t. `hit` is called only for cells inside the grid.
+template <typename Hit>
+double castRay(const Eigen::Vector2d& start, const Eigen::Vector2d& dir, double max_t, std::int32_t width,
+               std::int32_t height, Hit&& hit) {
+  for (GridRay ray(start, dir); ray.t() <= max_t; ray.step()) {
+    if (ray.x() < 0 || ray.y() < 0 || ray.x() >= width || ray.y() >= height) break;
+    if (hit(ray.x(), ray.y())) return ray.t();
+  }
+  return std::numeric_limits<double>::infinity();
+}
+
+}  // namespace lidar2d::geometry

@@ -1,0 +1,333 @@
+// The localization database: the virtual scans of a map's free space, their lines and range
+// profiles (Database::build), and the k-d tree over line pairs the query looks up (buildIndex).
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <thread>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/geometry/ray_cast.hpp"
+#include "lidar2d/localization/localizer.hpp"
+#include "src/localization/internal/database_index.hpp"
+
+namespace lidar2d::localization {
+
+using internal::badOption;
+using internal::kPi;
+using internal::kTwoPi;
+using internal::sectorOf;
+using internal::wrapTwoPi;
+
+namespace {
+
+// Grid positions (before the clearance test) a database may be built over: 10^7 is a 630 m square
+// at the default 0.2 m step, hours of virtual scans and gigabytes of memory.
+constexpr double kMaxGridPositions = 1e7;
+// The clearance in cells a database build tests around each position, at most.
+constexpr double kMaxClearanceCells = 500;
+
+}  // namespace
+
+void DatabaseOptions::validate() const {
+  if (!(step_m > 0) || !std::isfinite(step_m)) throw badOption("step_m", step_m);
+  if (beams < 8 || beams > 100000) throw badOption("beams", beams);
+  if (!(fov_rad > 0) || !(fov_rad <= kTwoPi + 1e-9)) throw badOption("fov_rad", fov_rad);
+  if (!(max_range_m > 0) || !std::isfinite(max_range_m)) throw badOption("max_range_m", max_range_m);
+  if (!(clearance_m >= 0) || !(clearance_m <= 100)) throw badOption("clearance_m", clearance_m);
+  if (occupied_min < 1 || occupied_min > 100) throw badOption("occupied_min", occupied_min);
+  if (free_max < 0 || free_max > 99 || free_max >= occupied_min) throw badOption("free_max", free_max);
+  if (max_lines < 2 || max_lines > 64) throw badOption("max_lines", static_cast<double>(max_lines));
+  if (!(min_pair_angle_rad >= 0) || !(min_pair_angle_rad <= kPi / 2))
+    throw badOption("min_pair_angle_rad", min_pair_angle_rad);
+  if (!(key_angle_scale_m_per_rad > 0) || !std::isfinite(key_angle_scale_m_per_rad))
+    throw badOption("key_angle_scale_m_per_rad", key_angle_scale_m_per_rad);
+  if (profile_bins != 0 && (profile_bins < 8 || profile_bins > 720)) throw badOption("profile_bins", profile_bins);
+  lines.validate();
+}
+
+void Database::Impl::buildIndex() {
+  pairs.clear();
+  const double min_sin = std::sin(options.min_pair_angle_rad);
+  const double k = options.key_angle_scale_m_per_rad;
+  for (std::uint32_t p = 0; p < positions.size(); ++p) {
+    const Position& pos = positions[p];
+    for (std::uint32_t a = 0; a < pos.num_lines; ++a)
+      for (std::uint32_t b = a + 1; b < pos.num_lines; ++b) {
+        const LineFeature& la = lines[pos.first_line + a];
+        const LineFeature& lb = lines[pos.first_line + b];
+        const double rel = wrapTwoPi(static_cast<double>(lb.normal_angle) - la.normal_angle);
+        if (std::abs(std::sin(rel)) < min_sin) continue;
+        internal::Pair pr;
+        pr.key[0] = la.distance;
+        pr.key[1] = lb.distance;
+        pr.key[2] = static_cast<float>(k * rel);
+        pr.ref = pos.first_line + a;
+        pr.other = pos.first_line + b;
+        pr.pos = p;
+        pairs.push_back(pr);
+      }
+  }
+  pairs.shrink_to_fit();
+  doubled.clear();
+  coarse_doubled.clear();
+  if (!profiles.empty()) {
+    const auto B = static_cast<std::size_t>(options.profile_bins);
+    coarse_factor = B % 3 == 0 ? 3 : (B % 2 == 0 ? 2 : 1);
+    const std::size_t C = B / coarse_factor;
+    doubled.resize(2 * profiles.size());
+    coarse_doubled.resize(2 * C * positions.size());
+    for (std::size_t p = 0; p < positions.size(); ++p) {
+      const float* prof = profiles.data() + p * B;
+      std::copy_n(prof, B, doubled.begin() + static_cast<std::ptrdiff_t>(2 * p * B));
+      std::copy_n(prof, B, doubled.begin() + static_cast<std::ptrdiff_t>((2 * p + 1) * B));
+      for (std::size_t c = 0; c < C; ++c) {
+        const float v = *std::min_element(prof + c * coarse_factor, prof + (c + 1) * coarse_factor);
+        coarse_doubled[2 * p * C + c] = coarse_doubled[2 * p * C + C + c] = v;
+      }
+    }
+  }
+  adaptor.pairs = &pairs;
+  tree = std::make_unique<internal::PairTree>(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+  if (!pairs.empty()) tree->buildIndex();
+}
+
+Database::Database() : impl_(std::make_unique<Impl>()) {}
+Database::~Database() = default;
+Database::Database(Database&& o) noexcept : impl_(std::move(o.impl_)) {}
+Database& Database::operator=(Database&& o) noexcept {
+  impl_ = std::move(o.impl_);
+  return *this;
+}
+
+const DatabaseOptions& Database::options() const { return impl_->options; }
+std::uint64_t Database::mapChecksum() const { return impl_->map_checksum; }
+const std::vector<Database::Position>& Database::positions() const { return impl_->positions; }
+const std::vector<Database::LineFeature>& Database::lines() const { return impl_->lines; }
+const std::vector<float>& Database::profiles() const { return impl_->profiles; }
+std::size_t Database::numPairs() const { return impl_->pairs.size(); }
+bool Database::empty() const { return impl_->pairs.empty(); }
+std::size_t Database::memoryBytes() const {
+  const Impl& d = *impl_;
+  // Tree: one index per pair plus about one node (~48 bytes) per leaf of 16.
+  return d.positions.capacity() * sizeof(Position) + d.lines.capacity() * sizeof(LineFeature) +
+         d.pairs.capacity() * sizeof(internal::Pair) + d.pairs.size() * (sizeof(std::uint32_t) + 48 / 8) +
+         (d.profiles.capacity() + d.doubled.capacity() + d.coarse_doubled.capacity()) * sizeof(float);
+}
+
+std::uint64_t mapChecksum(const OccupancyImage& map) {
+  std::uint64_t h = 1469598103934665603ULL;
+  auto mix = [&h](const void* data, std::size_t n) {
+    const auto* b = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < n; ++i) {
+      h ^= b[i];
+      h *= 1099511628211ULL;
+    }
+  };
+  const std::int32_t w = map.width(), hh = map.height();
+  const double v[4] = {map.resolution(), map.origin().x(), map.origin().y(), map.origin().theta()};
+  mix(&w, sizeof w);
+  mix(&hh, sizeof hh);
+  mix(v, sizeof v);
+  mix(map.cells().data(), map.cells().size());
+  return h;
+}
+
+Database Database::build(const OccupancyImage& map, const DatabaseOptions& options, unsigned threads,
+                         ProgressCallback progress, void* progress_user) {
+  options.validate();
+  const int W = map.width(), H = map.height();
+  const double res = map.resolution();
+  if (W <= 0 || H <= 0 || !(res > 0)) throw badInput("the map is empty", ErrorLocation({}, 0, "map"));
+  const std::size_t n_cells = static_cast<std::size_t>(W) * static_cast<std::size_t>(H);
+  std::vector<std::uint8_t> obstacle(n_cells), free(n_cells);
+  for (std::size_t i = 0; i < n_cells; ++i) {
+    const int v = map.cells()[i];
+    obstacle[i] = v >= options.occupied_min;
+    free[i] = v >= 0 && v <= options.free_max;
+  }
+
+  // Positions: a grid over the map (map frame) keeping the clearance from every non-free cell.
+  // An absurd grid (a huge map, a tiny step) is an error up front rather than hours of work and
+  // then an out-of-memory crash.
+  const double grid_positions = std::ceil(W * res / options.step_m) * std::ceil(H * res / options.step_m);
+  if (grid_positions > kMaxGridPositions)
+    throw badInput(
+        fmt::format("the map spans {:.0f} m x {:.0f} m, which at a step of {} m is {:.3g} database positions, "
+                    "more than the limit of {:.0f}: use a step of at least {:.2f} m",
+                    W * res, H * res, options.step_m, grid_positions, kMaxGridPositions,
+                    std::sqrt(W * res * H * res / kMaxGridPositions) * 1.01),
+        ErrorLocation({}, 0, "step"));
+  // (Each candidate tests the disc of cells within the clearance: bounded, as a clearance of many
+  // cells at a fine resolution would test millions per position.)
+  if (options.clearance_m / res > kMaxClearanceCells)
+    throw badInput(fmt::format("a clearance of {} m is {:.0f} cells of this map's {} m, more than the limit of {:.0f}",
+                               options.clearance_m, std::ceil(options.clearance_m / res), res, kMaxClearanceCells),
+                   ErrorLocation({}, 0, "clearance"));
+  const int clear = static_cast<int>(std::ceil(options.clearance_m / res));
+  std::vector<Eigen::Vector2i> offsets;
+  for (int dy = -clear; dy <= clear; ++dy)
+    for (int dx = -clear; dx <= clear; ++dx)
+      if ((dx * dx + dy * dy) * res * res <= options.clearance_m * options.clearance_m + 1e-12)
+        offsets.emplace_back(dx, dy);
+  std::vector<Eigen::Vector2d> cand;  // map frame [m]
+  for (double y = 0.5 * options.step_m; y < H * res; y += options.step_m)
+    for (double x = 0.5 * options.step_m; x < W * res; x += options.step_m) {
+      const int cx = static_cast<int>(x / res), cy = static_cast<int>(y / res);
+      bool ok = true;
+      for (const auto& o : offsets) {
+        const int qx = cx + o.x(), qy = cy + o.y();
+        if (qx < 0 || qy < 0 || qx >= W || qy >= H ||
+            !free[static_cast<std::size_t>(qy) * static_cast<std::size_t>(W) + static_cast<std::size_t>(qx)]) {
+          ok = false;
+          break;
+        }
+      }
+      if (ok) cand.emplace_back(x, y);
+    }
+  if (cand.empty())
+    throw badInput(fmt::format("the map has no free cell {:.2f} m away from obstacles and unknown space "
+                               "(nothing to localize in)",
+                               options.clearance_m),
+                   ErrorLocation({}, 0, "free space"));
+
+  // Virtual scans, line extraction: in parallel over positions.
+  const auto is_obstacle = [&](std::int32_t x, std::int32_t y) {
+    return obstacle[static_cast<std::size_t>(y) * static_cast<std::size_t>(W) + static_cast<std::size_t>(x)] != 0;
+  };
+  const int n_orient = std::max(1, static_cast<int>(std::ceil(kTwoPi / options.fov_rad - 1e-9)));
+  const double inc = options.fov_rad >= kTwoPi - 1e-9 ? kTwoPi / options.beams : options.fov_rad / (options.beams - 1);
+  const double a0 = options.fov_rad >= kTwoPi - 1e-9 ? -kPi : -0.5 * options.fov_rad;
+  const double max_cells = options.max_range_m / res;
+  const double yaw = map.origin().theta();
+  std::vector<std::vector<Line>> per_pos(cand.size());
+  const auto B = static_cast<std::size_t>(options.profile_bins);
+  std::vector<float> cand_profiles(cand.size() * B, static_cast<float>(options.max_range_m));
+  std::atomic<std::size_t> next{0}, done{0};
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  threads = static_cast<unsigned>(std::min<std::size_t>(threads, cand.size()));
+  auto worker = [&](bool report) {
+    Points2 pts;
+    std::vector<Line> all;
+    for (std::size_t i; (i = next.fetch_add(1)) < cand.size();) {
+      const Eigen::Vector2d start = cand[i] / res;
+      all.clear();
+      for (int o = 0; o < n_orient; ++o) {
+        pts.clear();
+        for (int b = 0; b < options.beams; ++b) {
+          const double a_world = o * kTwoPi / n_orient + a0 + b * inc;  // beam angle in the world frame
+          const double a_map = a_world - yaw;
+          // Range to the first obstacle cell plus half a cell (a real return lies inside the cell,
+          // on average at its middle) [cells]; +inf when nothing is hit within max_cells.
+          const Eigen::Vector2d dir(std::cos(a_map), std::sin(a_map));
+          const double r = geometry::castRay(start, dir, max_cells, W, H, is_obstacle) + 0.5;
+          if (std::isfinite(r))
+            pts.emplace_back(r * res * std::cos(a_world), r * res * std::sin(a_world));
+          else
+            pts.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0.0);
+          if (B > 0 && std::isfinite(r)) {
+            float& v = cand_profiles[i * B + sectorOf(a_world, B)];
+            v = std::min(v, static_cast<float>(r * res));
+          }
+        }
+        // A NaN between two runs separates them like a gap: split the point list at invalid beams.
+        Points2 run;
+        auto flush = [&] {
+          if (run.size() >= options.lines.min_points) {
+            auto ls = extractLines(run, options.lines);
+            all.insert(all.end(), ls.begin(), ls.end());
+          }
+          run.clear();
+        };
+        for (const auto& p : pts) {
+          if (p.allFinite())
+            run.push_back(p);
+          else
+            flush();
+        }
+        flush();
+      }
+      // Merge duplicates (same infinite line from two orientations or runs), longest first.
+      std::sort(all.begin(), all.end(), [](const Line& x, const Line& y) { return x.length > y.length; });
+      std::vector<Line> kept;
+      for (const Line& l : all) {
+        bool dup = false;
+        for (Line& k : kept)
+          if (std::abs(angleDiff(l.normal_angle, k.normal_angle)) <= options.lines.merge_angle_rad &&
+              std::abs(l.distance - k.distance) <= options.lines.merge_distance_m) {
+            k.length += l.length;
+            dup = true;
+            break;
+          }
+        if (!dup) kept.push_back(l);
+      }
+      if (kept.size() > options.max_lines) kept.resize(options.max_lines);
+      per_pos[i] = std::move(kept);
+      const std::size_t d = done.fetch_add(1) + 1;
+      if (report && progress && (d % 256 == 0 || d == cand.size())) progress(d, cand.size(), progress_user);
+    }
+  };
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(worker, false);
+  worker(true);
+  for (auto& t : pool) t.join();
+  if (progress) progress(cand.size(), cand.size(), progress_user);
+
+  std::vector<Position> positions;
+  std::vector<LineFeature> lines;
+  std::vector<float> profiles;
+  for (std::size_t i = 0; i < cand.size(); ++i) {
+    // A position with fewer than two lines gives no pair but may still be found by its profile.
+    if (per_pos[i].size() < 2 && B == 0) continue;
+    // Whole centimetres, as the database file stores them (a loaded database answers alike).
+    for (std::size_t k = 0; k < B; ++k)
+      profiles.push_back(static_cast<float>(std::round(cand_profiles[i * B + k] * 100.0) / 100.0));
+    const Eigen::Vector2d w = map.origin() * (cand[i]);
+    Position p;
+    p.x = static_cast<float>(w.x());
+    p.y = static_cast<float>(w.y());
+    p.first_line = static_cast<std::uint32_t>(lines.size());
+    p.num_lines = static_cast<std::uint32_t>(per_pos[i].size());
+    for (const Line& l : per_pos[i])
+      lines.push_back(
+          {static_cast<float>(l.normal_angle), static_cast<float>(l.distance), static_cast<float>(l.length)});
+    positions.push_back(p);
+  }
+  return fromParts(options, localization::mapChecksum(map), std::move(positions), std::move(lines),
+                   std::move(profiles));
+}
+
+Database Database::fromParts(const DatabaseOptions& options, std::uint64_t map_checksum,
+                             std::vector<Position> positions, std::vector<LineFeature> lines,
+                             std::vector<float> profiles) {
+  options.validate();
+  if (!profiles.empty() && profiles.size() != positions.size() * static_cast<std::size_t>(options.profile_bins))
+    throw badInput(fmt::format("database profiles hold {} values, {} positions x {} bins expected", profiles.size(),
+                               positions.size(), options.profile_bins),
+                   ErrorLocation({}, 0, "profiles"));
+  for (std::size_t i = 0; i < profiles.size(); ++i)
+    if (!std::isfinite(profiles[i]) || !(profiles[i] >= 0))
+      throw badInput(fmt::format("database profile value {} is invalid", i), ErrorLocation({}, 0, "profiles"));
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    const Position& p = positions[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) ||
+        static_cast<std::uint64_t>(p.first_line) + p.num_lines > lines.size())
+      throw badInput(fmt::format("database position {} is invalid (non-finite or lines out of range)", i),
+                     ErrorLocation({}, 0, "positions"));
+  }
+  for (std::size_t i = 0; i < lines.size(); ++i)
+    if (!std::isfinite(lines[i].normal_angle) || !std::isfinite(lines[i].distance) || !(lines[i].distance >= 0))
+      throw badInput(fmt::format("database line {} is invalid", i), ErrorLocation({}, 0, "lines"));
+  Database db;
+  db.impl_->options = options;
+  db.impl_->map_checksum = map_checksum;
+  db.impl_->positions = std::move(positions);
+  db.impl_->lines = std::move(lines);
+  db.impl_->profiles = std::move(profiles);
+  db.impl_->buildIndex();
+  return db;
+}
+
+}  // namespace lidar2d::localization

@@ -1,0 +1,151 @@
+// geometry::castRay against a per-cell reference (the ray clipped to every occupied cell of the grid,
+// Liang-Barsky) on seeded random grids and rays, GridRay's walk (4-connected, entry parameters in
+// order), and GridRay against mapping's RayWalk on the same segments.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include "lidar2d/geometry/ray_cast.hpp"
+#include "lidar2d/mapping/ray_trace.hpp"
+
+namespace lidar2d::geometry {
+namespace {
+
+using V = Eigen::Vector2d;
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// The parameters [t_in, t_out] at which the ray start + t dir (t >= 0) is inside cell (x, y), or
+// t_in > t_out when it misses the cell.
+std::pair<double, double> clip(const V& start, const V& dir, int x, int y) {
+  double t_in = 0.0, t_out = kInf;
+  for (int k = 0; k < 2; ++k) {
+    const double lo = (k == 0 ? x : y), hi = lo + 1.0;
+    if (dir[k] == 0.0) {
+      if (start[k] < lo || start[k] >= hi) return {1.0, 0.0};
+      continue;
+    }
+    double ta = (lo - start[k]) / dir[k], tb = (hi - start[k]) / dir[k];
+    if (ta > tb) std::swap(ta, tb);
+    t_in = std::max(t_in, ta);
+    t_out = std::min(t_out, tb);
+  }
+  return {t_in, t_out};
+}
+
+struct Grid {
+  int width = 0, height = 0;
+  std::vector<std::uint8_t> occupied;
+  bool at(int x, int y) const { return occupied[static_cast<std::size_t>(y) * width + x] != 0; }
+};
+
+// The reference: the smallest entry parameter over the occupied cells the ray passes through over a
+// positive length, if at most max_t; its cell in *hit_x, *hit_y.
+double referenceCast(const Grid& g, const V& start, const V& dir, double max_t, int* hit_x, int* hit_y) {
+  double best = kInf;
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x) {
+      if (!g.at(x, y)) continue;
+      const auto [t_in, t_out] = clip(start, dir, x, y);
+      if (t_out - t_in > 1e-12 && t_in <= max_t && t_in < best) {
+        best = t_in;
+        *hit_x = x;
+        *hit_y = y;
+      }
+    }
+  return best;
+}
+
+TEST(CastRay, MatchesPerCellReferenceOnRandomGridsAndRays) {
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 2000; ++trial) {
+    Grid g;
+    g.width = 5 + static_cast<int>(rng() % 40);
+    g.height = 5 + static_cast<int>(rng() % 40);
+    const double density = trial % 4 == 0 ? 0.0 : 0.02 + 0.1 * u(rng);
+    for (int i = 0; i < g.width * g.height; ++i) g.occupied.push_back(u(rng) < density);
+    const V start(u(rng) * g.width, u(rng) * g.height);
+    // Random directions, some along the axes and the diagonals.
+    double angle = 2.0 * std::numbers::pi * u(rng);
+    if (trial % 5 == 1) angle = std::numbers::pi / 2 * static_cast<double>(rng() % 4);
+    if (trial % 5 == 2) angle = std::numbers::pi / 4 * static_cast<double>(1 + 2 * (rng() % 4));
+    const V dir(std::cos(angle), std::sin(angle));
+    const double max_t = trial % 3 == 0 ? kInf : 60.0 * u(rng);
+
+    int ref_x = -1, ref_y = -1;
+    const double ref = referenceCast(g, start, dir, max_t, &ref_x, &ref_y);
+    int hit_x = -1, hit_y = -1;
+    const double t = castRay(start, dir, max_t, g.width, g.height, [&](std::int32_t x, std::int32_t y) {
+      EXPECT_TRUE(x >= 0 && y >= 0 && x < g.width && y < g.height);
+      hit_x = x;
+      hit_y = y;
+      return g.at(x, y);
+    });
+    if (std::isinf(ref)) {
+      EXPECT_EQ(t, kInf) << "trial " << trial;
+      continue;
+    }
+    ASSERT_NEAR(t, ref, 1e-9) << "trial " << trial;
+    EXPECT_EQ(hit_x, ref_x) << "trial " << trial;
+    EXPECT_EQ(hit_y, ref_y) << "trial " << trial;
+  }
+}
+
+TEST(CastRay, StartCellLeavingTheGridAndRange) {
+  Grid g{4, 3, std::vector<std::uint8_t>(12, 0)};
+  g.occupied[1 * 4 + 1] = 1;  // cell (1, 1)
+  auto hit = [&](std::int32_t x, std::int32_t y) { return g.at(x, y); };
+  EXPECT_EQ(castRay(V(1.5, 1.5), V(1, 0), 10.0, 4, 3, hit), 0.0);          // starts in it
+  EXPECT_DOUBLE_EQ(castRay(V(3.5, 1.5), V(-1, 0), 10.0, 4, 3, hit), 1.5);  // enters it at x = 2
+  EXPECT_EQ(castRay(V(3.5, 1.5), V(-1, 0), 1.49, 4, 3, hit), kInf);        // too far
+  EXPECT_EQ(castRay(V(3.5, 0.5), V(-1, 0), 10.0, 4, 3, hit), kInf);        // leaves the grid at x = 0
+  EXPECT_EQ(castRay(V(1.5, 0.5), V(0, -1), 10.0, 4, 3, hit), kInf);        // leaves the grid at y = 0
+}
+
+TEST(GridRay, WalksFourConnectedCellsWithIncreasingEntryParameters) {
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> u(-100.0, 100.0);
+  for (int trial = 0; trial < 1000; ++trial) {
+    const V start(u(rng), u(rng));
+    const V dir = V(u(rng), u(rng)).normalized();
+    GridRay ray(start, dir);
+    EXPECT_EQ(ray.x(), static_cast<int>(std::floor(start.x())));
+    EXPECT_EQ(ray.y(), static_cast<int>(std::floor(start.y())));
+    EXPECT_EQ(ray.t(), 0.0);
+    for (int k = 0; k < 100; ++k) {
+      const int x = ray.x(), y = ray.y();
+      const double t = ray.t();
+      ray.step();
+      EXPECT_EQ(std::abs(ray.x() - x) + std::abs(ray.y() - y), 1);
+      EXPECT_GE(ray.t(), t);
+      // The point at the entry parameter lies on the boundary of the new cell.
+      const V p = start + ray.t() * dir;
+      EXPECT_LE(std::max(ray.x() - p.x(), p.x() - (ray.x() + 1)), 1e-9) << "trial " << trial;
+      EXPECT_LE(std::max(ray.y() - p.y(), p.y() - (ray.y() + 1)), 1e-9) << "trial " << trial;
+    }
+  }
+}
+
+TEST(GridRay, VisitsTheCellsOfMappingsRayWalk) {
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<double> u(-50.0, 50.0);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const V a(u(rng), u(rng));
+    const V b = a + V(u(rng), u(rng)) * 0.5;
+    GridRay ray(a, b - a);
+    for (mapping::RayWalk walk(a, b);; walk.step()) {
+      ASSERT_EQ(ray.x(), walk.x()) << "trial " << trial;
+      ASSERT_EQ(ray.y(), walk.y()) << "trial " << trial;
+      if (walk.done()) break;
+      ray.step();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace lidar2d::geometry
