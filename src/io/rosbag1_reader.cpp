@@ -36,34 +36,21 @@ constexpr const char* kTfMessageMd5 = "94810edda583a504dfda3829e70d7eec";  // tf
 constexpr double kTfSearchWindowS = 30.0;
 constexpr std::size_t kMaxTfMessages = 100000;
 
-class Ros1Source final : public FrameSource {
+class Ros1Source final : public RosMessageSource {
  public:
-  Ros1Source(std::string path, const ReaderOptions& options)
-      : path_(std::move(path)), bag_(path_), assembler_(SE2(), false) {
+  Ros1Source(std::string path, const ReaderOptions& options) : RosMessageSource(std::move(path)), bag_(path_) {
     setUp(options);
   }
 
-  std::optional<std::size_t> sizeHint() const override { return size_hint_; }
-
-  std::optional<Frame> next() override {
-    for (;;) {
-      if (auto f = assembler_.pop()) return f;
-      if (done_) return std::nullopt;
-      if (next_ == view_.size()) {
-        assembler_.finish();
-        done_ = true;
-        continue;
-      }
-      consume(view_[next_++]);
-    }
-  }
-
   LogFormat format() const override { return LogFormat::kRosbag1; }
-  const std::string& path() const override { return path_; }
-
-  SourceNotes notes() const override { return rosNotes(notes_, assembler_.warnings(), negative_ranges_, zero_stamps_); }
 
  private:
+  bool feed() override {
+    if (next_ == view_.size()) return false;
+    consume(view_[next_++]);
+    return true;
+  }
+
   struct Topic {
     RosTopicInfo info;
     std::set<std::string> md5s;
@@ -189,36 +176,18 @@ class Ros1Source final : public FrameSource {
     const std::size_t count = is_scan ? ++scan_count_ : ++odom_count_;
     const RosMessageRef ref{path_, fmt::format("message {} on {} (bag time {:.6f})", count, topic, rosSeconds(m.time))};
     if (is_scan) {
-      const RosLaserScanMsg msg = decodeLaserScan(bag_.read(m), RosWire::kRos1, ref);
-      RosNanos stamp = msg.stamp;
-      if (stamp == 0) {
-        ++zero_stamps_;
-        stamp = m.time;
-      }
-      const double t = rosSeconds(stamp);
-      assembler_.pushScan(toLaserScan(msg, t, ref, negative_ranges_), t);
+      pushScan(bag_.read(m), RosWire::kRos1, ref, m.time);
     } else {
-      const RosOdometryMsg msg = decodeOdometry(bag_.read(m), RosWire::kRos1, ref);
-      RosNanos stamp = msg.stamp;
-      if (stamp == 0) {
-        ++zero_stamps_;
-        stamp = m.time;
-      }
-      assembler_.pushOdometry(rosSeconds(stamp), projectToPlane(msg.pose));
+      pushOdometry(bag_.read(m), RosWire::kRos1, ref, m.time);
     }
   }
 
-  std::string path_;
   Ros1Bag bag_;
   std::vector<Ros1Entry> view_;  // the scan and odometry messages, in time order
   std::size_t next_ = 0;
-  std::optional<std::size_t> size_hint_;
   std::string scan_topic_, odom_topic_;
   std::vector<std::uint32_t> scan_connections_;
-  RosFrameAssembler assembler_;
-  SourceNotes notes_;
-  std::size_t scan_count_ = 0, odom_count_ = 0, negative_ranges_ = 0, zero_stamps_ = 0;
-  bool done_ = false;
+  std::size_t scan_count_ = 0, odom_count_ = 0;
 };
 
 }  // namespace

@@ -100,10 +100,10 @@ struct StmtCloser {
 using DbPtr = std::unique_ptr<sqlite3, DbCloser>;
 using StmtPtr = std::unique_ptr<sqlite3_stmt, StmtCloser>;
 
-class Ros2Source final : public FrameSource {
+class Ros2Source final : public RosMessageSource {
  public:
   Ros2Source(std::string path, const ReaderOptions& options)
-      : path_(std::move(path)), db_file_(findDatabase(path_).string()), assembler_(SE2(), false) {
+      : RosMessageSource(std::move(path)), db_file_(findDatabase(path_).string()) {
     std::error_code ec;
     if (fs::exists(db_file_ + "-wal", ec) && fs::file_size(db_file_ + "-wal", ec) > 0)
       notes_.warnings.push_back(
@@ -117,32 +117,20 @@ class Ros2Source final : public FrameSource {
     setUp(options);
   }
 
-  std::optional<std::size_t> sizeHint() const override { return size_hint_; }
-
-  std::optional<Frame> next() override {
-    for (;;) {
-      if (auto f = assembler_.pop()) return f;
-      if (done_) return std::nullopt;
-      const int rc = sqlite3_step(stream_.get());
-      if (rc == SQLITE_DONE) {
-        assembler_.finish();
-        done_ = true;
-        stream_.reset();
-        continue;
-      }
-      if (rc != SQLITE_ROW) fail("reading messages");
-      consume(stream_.get());
-    }
-  }
-
   LogFormat format() const override { return LogFormat::kRosbag2; }
-  const std::string& path() const override { return path_; }
-
-  SourceNotes notes() const override {
-    return rosNotes(notes_, assembler_.warnings(), negative_ranges_, zero_stamps_);
-  }
 
  private:
+  bool feed() override {
+    const int rc = sqlite3_step(stream_.get());
+    if (rc == SQLITE_DONE) {
+      stream_.reset();
+      return false;
+    }
+    if (rc != SQLITE_ROW) fail("reading messages");
+    consume(stream_.get());
+    return true;
+  }
+
   struct Topic {
     std::int64_t id = 0;
     RosTopicInfo info;
@@ -308,37 +296,17 @@ class Ros2Source final : public FrameSource {
     const RosNanos bag_time = sqlite3_column_int64(s, 2);
     const auto data = blob(s, 3);
     if (topic_id == scan_topic_.id) {
-      const RosMessageRef r = ref(id, scan_topic_.info.name);
-      const RosLaserScanMsg msg = decodeLaserScan(data, RosWire::kCdr, r);
-      RosNanos stamp = msg.stamp;
-      if (stamp == 0) {
-        ++zero_stamps_;
-        stamp = bag_time;
-      }
-      const double t = rosSeconds(stamp);
-      assembler_.pushScan(toLaserScan(msg, t, r, negative_ranges_), t);
+      pushScan(data, RosWire::kCdr, ref(id, scan_topic_.info.name), bag_time);
     } else if (odom_topic_ && topic_id == odom_topic_->id) {
-      const RosOdometryMsg msg = decodeOdometry(data, RosWire::kCdr, ref(id, odom_topic_->info.name));
-      RosNanos stamp = msg.stamp;
-      if (stamp == 0) {
-        ++zero_stamps_;
-        stamp = bag_time;
-      }
-      assembler_.pushOdometry(rosSeconds(stamp), projectToPlane(msg.pose));
+      pushOdometry(data, RosWire::kCdr, ref(id, odom_topic_->info.name), bag_time);
     }
   }
 
-  std::string path_;
   std::string db_file_;
   DbPtr db_;
   StmtPtr stream_;
   Topic scan_topic_;
-  std::optional<std::size_t> size_hint_;
   std::optional<Topic> odom_topic_;
-  RosFrameAssembler assembler_;
-  SourceNotes notes_;
-  std::size_t negative_ranges_ = 0, zero_stamps_ = 0;
-  bool done_ = false;
 };
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <variant>
 
 #include "lidar2d/core/error.hpp"
 #include "src/registration/internal/lf_raster.hpp"
@@ -296,18 +297,39 @@ CorrelativeResult searchDiscretised(const CorrelativeGrid& grid, const Discretis
 
 }  // namespace
 
-CorrelativeResult matchCorrelative(const CorrelativeGrid& grid, const Points2& source, const SE2& init,
-                                   const CorrelativeOptions& options, const LikelihoodField* refine_field) {
+namespace {
+
+// The search window around `init` shared by the branch-and-bound and the exhaustive search: the
+// valid source points, and the angles and translations of +-angular_window x +-linear_window
+// discretised (`nl` cells each way). Returns the failure result instead when the input is unusable.
+struct LocalWindow {
+  Points2 src;
+  int nl = 0;
+  Discretised d;
+};
+std::variant<LocalWindow, CorrelativeResult> localWindow(const CorrelativeGrid& grid, const Points2& source,
+                                                         const SE2& init, const CorrelativeOptions& options) {
   options.validate();
   if (!init.isFinite()) return failure(SE2(), Status::kInvalidInput, "the initial guess is not finite");
   std::optional<CorrelativeResult> fail;
-  const Points2 src = validSource(source, options, grid, init, fail);
+  LocalWindow w;
+  w.src = validSource(source, options, grid, init, fail);
   if (fail) return *fail;
-  const double step = angularStep(options, src, grid.resolution());
+  const double step = angularStep(options, w.src, grid.resolution());
   const int na = static_cast<int>(std::ceil(options.angular_window_rad / step - 1e-9));
-  const int nl = static_cast<int>(std::ceil(options.linear_window_m / grid.resolution() - 1e-9));
-  const auto d = discretise(grid, src, init, step, -na, na, nl, nl);
-  return searchDiscretised(grid, d, nl, nl, src, options, refine_field, init);
+  w.nl = static_cast<int>(std::ceil(options.linear_window_m / grid.resolution() - 1e-9));
+  w.d = discretise(grid, w.src, init, step, -na, na, w.nl, w.nl);
+  return w;
+}
+
+}  // namespace
+
+CorrelativeResult matchCorrelative(const CorrelativeGrid& grid, const Points2& source, const SE2& init,
+                                   const CorrelativeOptions& options, const LikelihoodField* refine_field) {
+  auto window = localWindow(grid, source, init, options);
+  if (auto* fail = std::get_if<CorrelativeResult>(&window)) return *fail;
+  const LocalWindow& w = std::get<LocalWindow>(window);
+  return searchDiscretised(grid, w.d, w.nl, w.nl, w.src, options, refine_field, init);
 }
 
 CorrelativeResult matchCorrelativeGlobal(const CorrelativeGrid& grid, const Points2& source,
@@ -335,15 +357,9 @@ CorrelativeResult matchCorrelative(const Points2& target, const Points2& source,
 
 CorrelativeResult matchCorrelativeExhaustive(const CorrelativeGrid& grid, const Points2& source, const SE2& init,
                                              const CorrelativeOptions& options) {
-  options.validate();
-  if (!init.isFinite()) return failure(SE2(), Status::kInvalidInput, "the initial guess is not finite");
-  std::optional<CorrelativeResult> fail;
-  const Points2 src = validSource(source, options, grid, init, fail);
-  if (fail) return *fail;
-  const double step = angularStep(options, src, grid.resolution());
-  const int na = static_cast<int>(std::ceil(options.angular_window_rad / step - 1e-9));
-  const int nl = static_cast<int>(std::ceil(options.linear_window_m / grid.resolution() - 1e-9));
-  const auto d = discretise(grid, src, init, step, -na, na, nl, nl);
+  auto window = localWindow(grid, source, init, options);
+  if (auto* fail = std::get_if<CorrelativeResult>(&window)) return *fail;
+  const auto& [src, nl, d] = std::get<LocalWindow>(window);
   Candidate best{0, 0, 0, -1.0};
   std::size_t scored = 0;
   for (int k = 0; k < static_cast<int>(d.angles.size()); ++k)

@@ -298,4 +298,38 @@ void describeRosSources(SourceNotes& notes, const std::string& scan_topic, const
         fmt::format("{} ({} to '{}', interpolated at scan stamps)", odom_topic, odom_type, robot_frame);
 }
 
+std::optional<Frame> RosMessageSource::next() {
+  for (;;) {
+    if (auto f = assembler_.pop()) return f;
+    if (done_) return std::nullopt;
+    if (!feed()) {
+      assembler_.finish();
+      done_ = true;
+    }
+  }
+}
+
+SourceNotes RosMessageSource::notes() const {
+  return rosNotes(notes_, assembler_.warnings(), negative_ranges_, zero_stamps_);
+}
+
+RosNanos RosMessageSource::stampOr(RosNanos stamp, RosNanos bag_time) {
+  if (stamp != 0) return stamp;
+  ++zero_stamps_;
+  return bag_time;
+}
+
+void RosMessageSource::pushScan(std::span<const std::uint8_t> bytes, RosWire wire, const RosMessageRef& ref,
+                                RosNanos bag_time) {
+  const RosLaserScanMsg msg = decodeLaserScan(bytes, wire, ref);
+  const double t = rosSeconds(stampOr(msg.stamp, bag_time));
+  assembler_.pushScan(toLaserScan(msg, t, ref, negative_ranges_), t);
+}
+
+void RosMessageSource::pushOdometry(std::span<const std::uint8_t> bytes, RosWire wire, const RosMessageRef& ref,
+                                    RosNanos bag_time) {
+  const RosOdometryMsg msg = decodeOdometry(bytes, wire, ref);
+  assembler_.pushOdometry(rosSeconds(stampOr(msg.stamp, bag_time)), projectToPlane(msg.pose));
+}
+
 }  // namespace lidar2d::io::internal

@@ -8,6 +8,7 @@
 #include <deque>
 #include <map>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -193,6 +194,37 @@ class RosFrameAssembler {
   double max_gap_ = 0.0;
   std::size_t odom_out_of_order_ = 0;
   std::size_t forced_ = 0;
+};
+
+/// The part of a ROS bag reader that does not depend on the container (shared by the ROS1 and ROS2
+/// readers): frames come from a RosFrameAssembler fed with the decoded scan and odometry messages;
+/// a header stamp of 0 is replaced by the message's bag time (and counted). A reader implements
+/// `feed()` (decode the next message of its container with `pushScan` / `pushOdometry`, or return
+/// false at the end) and `format()`, and sets the protected members in its constructor.
+class RosMessageSource : public FrameSource {
+ public:
+  std::optional<Frame> next() override;
+  std::optional<std::size_t> sizeHint() const override { return size_hint_; }
+  const std::string& path() const override { return path_; }
+  SourceNotes notes() const override;
+
+ protected:
+  explicit RosMessageSource(std::string path) : path_(std::move(path)) {}
+  /// Reads the next scan or odometry message into the assembler; false when there is none left.
+  virtual bool feed() = 0;
+  void pushScan(std::span<const std::uint8_t> bytes, RosWire wire, const RosMessageRef& ref, RosNanos bag_time);
+  void pushOdometry(std::span<const std::uint8_t> bytes, RosWire wire, const RosMessageRef& ref, RosNanos bag_time);
+
+  std::string path_;
+  std::optional<std::size_t> size_hint_;
+  RosFrameAssembler assembler_{SE2(), false};
+  SourceNotes notes_;
+
+ private:
+  RosNanos stampOr(RosNanos stamp, RosNanos bag_time);
+
+  std::size_t negative_ranges_ = 0, zero_stamps_ = 0;
+  bool done_ = false;
 };
 
 }  // namespace lidar2d::io::internal
