@@ -11,7 +11,6 @@
 
 namespace lidar2d::slam::internal {
 
-using registration::alignIcp;
 
 void DescriptorLoops::describeNode(const Points2& raw) {
   s_.node_lines.emplace_back();
@@ -133,41 +132,28 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
     c.searched = true;
     c.descriptor = true;
     c.score = cr.score;
-    const registration::Result res = alignIcp(*sm.icp, pts, cr.T_search, loop_icp);
-    c.T_from_to = res.T_target_source;
-    c.explained = res.T_target_source.isFinite()
-                      ? explainedFraction(*sm.icp, pts, res.T_target_source, opt.match_inlier_distance_m)
-                      : 0.0;
-    const bool ok =
-        res.status == registration::Status::kConverged || res.status == registration::Status::kMaxIterations;
-    const SE2 d = cr.T_search.inverse() * res.T_target_source;
-    // The correction the closure makes to the current estimate must fit the drift the front end
-    // can have accumulated since it last saw that submap.
-    const SE2 implied = T_world_anchor * c.T_from_to;
-    const double correction = (implied.translation() - node.T_world_robot.translation()).norm();
-    const double turn = std::abs(angleDiff(implied.theta(), node.T_world_robot.theta()));
-    const double path = s_.node_path_m[n] - s_.node_path_m[sm.nodes.back()];
-    const double allowed = opt.descriptor_max_correction_m + opt.descriptor_drift_fraction * path;
-    if (!ok) {
-      c.accepted = false;
-      c.reason = fmt::format("refinement failed ({})", registration::toString(res.status));
-    } else if (c.explained < opt.loop_min_explained_fraction) {
-      c.accepted = false;
-      c.reason = fmt::format("explains {:.0f}% of the points", 100.0 * c.explained);
-    } else if (d.translation().norm() > 0.3 || std::abs(d.theta()) > 5.0 * kDeg) {
-      c.accepted = false;
-      c.reason = "refinement left the search's answer";
-    } else if (correction > allowed || turn > opt.descriptor_max_rotation_rad) {
-      c.accepted = false;
-      c.reason = fmt::format("implausible correction of {:.1f} m / {:.0f} deg after {:.0f} m of path", correction,
-                             turn / kDeg, path);
-    } else if (const double through = seeThroughFraction(*sm.icp, pts, c.T_from_to);
-               through > opt.descriptor_max_see_through) {
-      c.accepted = false;
-      c.reason = fmt::format("sees through the submap's walls ({:.0f}% of the beams)", 100.0 * through);
-    } else if (!covered[h.submap] && current_explained >= opt.loop_min_explained_fraction) {
-      c.accepted = false;
-      c.reason = fmt::format("the current estimate explains {:.0f}% of the points already", 100.0 * current_explained);
+    closure_.refine(c, sm, pts, cr.T_search);
+    if (c.accepted) {
+      // The correction the closure makes to the current estimate must fit the drift the front end
+      // can have accumulated since it last saw that submap.
+      const SE2 implied = T_world_anchor * c.T_from_to;
+      const double correction = (implied.translation() - node.T_world_robot.translation()).norm();
+      const double turn = std::abs(angleDiff(implied.theta(), node.T_world_robot.theta()));
+      const double path = s_.node_path_m[n] - s_.node_path_m[sm.nodes.back()];
+      const double allowed = opt.descriptor_max_correction_m + opt.descriptor_drift_fraction * path;
+      if (correction > allowed || turn > opt.descriptor_max_rotation_rad) {
+        c.accepted = false;
+        c.reason = fmt::format("implausible correction of {:.1f} m / {:.0f} deg after {:.0f} m of path", correction,
+                               turn / kDeg, path);
+      } else if (const double through = seeThroughFraction(*sm.icp, pts, c.T_from_to);
+                 through > opt.descriptor_max_see_through) {
+        c.accepted = false;
+        c.reason = fmt::format("sees through the submap's walls ({:.0f}% of the beams)", 100.0 * through);
+      } else if (!covered[h.submap] && current_explained >= opt.loop_min_explained_fraction) {
+        c.accepted = false;
+        c.reason =
+            fmt::format("the current estimate explains {:.0f}% of the points already", 100.0 * current_explained);
+      }
     }
     if (c.accepted) {
       passed.push_back(std::move(c));

@@ -76,27 +76,7 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     } else {
       continue;
     }
-    const registration::Result res = alignIcp(*sm.icp, pts, init, loop_icp);
-    c.T_from_to = res.T_target_source;
-    c.explained = res.T_target_source.isFinite()
-                      ? explainedFraction(*sm.icp, pts, res.T_target_source, opt.match_inlier_distance_m)
-                      : 0.0;
-    const bool ok =
-        res.status == registration::Status::kConverged || res.status == registration::Status::kMaxIterations;
-    const SE2 d = init.inverse() * res.T_target_source;
-    if (!ok) {
-      c.accepted = false;
-      c.reason = fmt::format("refinement failed ({})", registration::toString(res.status));
-    } else if (c.explained < opt.loop_min_explained_fraction) {
-      c.accepted = false;
-      c.reason = fmt::format("explains {:.0f}% of the points", 100.0 * c.explained);
-    } else if (!c.searched && (d.translation().norm() > 0.2 || std::abs(d.theta()) > 3.0 * kDeg)) {
-      c.accepted = false;
-      c.reason = "disagrees with the submap's recent link";
-    } else if (c.searched && (d.translation().norm() > 0.3 || std::abs(d.theta()) > 5.0 * kDeg)) {
-      c.accepted = false;
-      c.reason = "refinement left the search's answer";
-    }
+    refine(c, sm, pts, init);
     if (!c.accepted) {
       if (c.searched) {
         // Only searched closures are worth listing when rejected; link-following ones are routine.
@@ -112,6 +92,29 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     acceptLoop(c, sm);
   }
   return covered;
+}
+
+void LoopClosure::refine(Constraint& c, const Submap& sm, const Points2& pts, const SE2& init) const {
+  const registration::Result res = alignIcp(*sm.icp, pts, init, loop_icp);
+  c.T_from_to = res.T_target_source;
+  c.explained = res.T_target_source.isFinite()
+                    ? explainedFraction(*sm.icp, pts, res.T_target_source, opt.match_inlier_distance_m)
+                    : 0.0;
+  const bool ok = res.status == registration::Status::kConverged || res.status == registration::Status::kMaxIterations;
+  const SE2 d = init.inverse() * res.T_target_source;
+  if (!ok) {
+    c.accepted = false;
+    c.reason = fmt::format("refinement failed ({})", registration::toString(res.status));
+  } else if (c.explained < opt.loop_min_explained_fraction) {
+    c.accepted = false;
+    c.reason = fmt::format("explains {:.0f}% of the points", 100.0 * c.explained);
+  } else if (!c.searched && (d.translation().norm() > 0.2 || std::abs(d.theta()) > 3.0 * kDeg)) {
+    c.accepted = false;
+    c.reason = "disagrees with the submap's recent link";
+  } else if (c.searched && (d.translation().norm() > 0.3 || std::abs(d.theta()) > 5.0 * kDeg)) {
+    c.accepted = false;
+    c.reason = "refinement left the search's answer";
+  }
 }
 
 void LoopClosure::submitSearched(Constraint c, Submap& sm) {

@@ -19,7 +19,6 @@ class DescriptorLoops {
       : s_(s),
         closure_(closure),
         opt(s.opt),
-        loop_icp(s.match.loop_icp),
         descriptor_search(s.match.descriptor_search),
         descriptor_query(s.match.descriptor_query),
         descriptor_db(s.match.descriptor_db) {}
@@ -40,7 +39,6 @@ class DescriptorLoops {
   SlamState& s_;
   LoopClosure& closure_;
   const SlamOptions& opt;
-  const registration::IcpOptions& loop_icp;
   const registration::CorrelativeOptions& descriptor_search;
   const localization::LocalizerOptions& descriptor_query;
   const localization::DatabaseOptions& descriptor_db;

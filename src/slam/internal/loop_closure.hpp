@@ -33,6 +33,12 @@ class LoopClosure {
   void expirePending();
   /// The correlative grid of submap `s`, built on demand; only the most recently used few are kept.
   const registration::CorrelativeGrid& gridOf(std::size_t s);
+  /// Refines closure `c` (kind, from, to and `searched` set) into submap `sm` by ICP of the node's
+  /// points `pts` from `init` (the node's pose in the anchor's frame): sets `c.T_from_to` and
+  /// `c.explained`, and rejects `c` (accepted = false, with the reason) when ICP fails, when it
+  /// explains fewer than loop_min_explained_fraction of the points, or when it moved farther from
+  /// `init` than a searched closure (0.3 m / 5 deg) or a link-following one (0.2 m / 3 deg) may.
+  void refine(Constraint& c, const Submap& sm, const Points2& pts, const SE2& init) const;
 
  private:
   static constexpr std::size_t kMaxGrids = 8;
