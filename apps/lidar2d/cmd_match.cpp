@@ -163,14 +163,14 @@ void addMatchCommand(CLI::App& app) {
   sub->add_option("--max-iterations", a->options.icp.max_iterations, "ICP: max iterations")->capture_default_str();
   sub->add_option("--point-pairs", a->options.icp.point_pair_weight,
                   "p2l: pair target points with no line (with two-point lines: only those without a neighbour) point "
-                  "to point, with this weight; pins corridors, costs time (BENCHMARK.md); 0: none")
+                  "to point, with this weight; pins corridors, costs time (docs/matching.md); 0: none")
       ->capture_default_str();
   sub->add_flag_callback("--no-two-point-lines", [a] { a->options.icp.two_point_lines = false; },
                 "p2l: drop the pairs whose target point fits no line (corners, clutter, short noisy walls) instead of "
-                "pairing them with the line through it and a neighbour (Censi's two nearest points; BENCHMARK.md)");
+                "pairing them with the line through it and a neighbour (Censi's two nearest points; docs/matching.md)");
   sub->add_option("--source-spacing", a->options.icp.min_source_spacing_m,
                   "ICP: leave out source points closer than this to the previous one kept [m]; 0 keeps all "
-                  "(BENCHMARK.md)")
+                  "(docs/matching.md)")
       ->capture_default_str();
   sub->add_flag("--eval", a->eval,
                 "compare with the log's truth: success rate (< 10 cm and < 2 deg), median errors, ms per pair");

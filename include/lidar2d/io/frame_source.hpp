@@ -43,7 +43,7 @@ struct ReaderOptions {
   /// what the log says (a ROS bag's tf, a CARMEN log's front-laser offset); std::nullopt keeps the
   /// log's. Only the mounting changes: the odometry and truth poses stay as the log gives them.
   /// (For a log whose calibration is wrong: the fr079 bag's tf puts the laser 4 cm ahead of
-  /// base_link, the original CARMEN log 4 cm behind the robot's centre; BENCHMARK.md, SLAM.)
+  /// base_link, the original CARMEN log 4 cm behind the robot's centre; docs/slam.md.)
   std::optional<SE2> laser_mount;
 };
 
