@@ -6,8 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <regex>
 #include <set>
+#include <sstream>
 #include <string>
 
 #include "lidar2d/slam/slam.hpp"
@@ -61,11 +61,15 @@ TEST(SlamOptionTable, ListsEveryFieldOfSlamOptions) {
   const auto end = header.find("\n};", begin);
   ASSERT_NE(begin, std::string::npos);
   ASSERT_NE(end, std::string::npos);
-  const std::string body = header.substr(begin, end - begin);
-  const std::regex member(R"(\n\s*(?:bool|int|double|std::size_t)\s+(\w+)\s*=)");
+  std::istringstream body(header.substr(begin, end - begin));
   std::set<std::string> declared{"graph.max_iterations", "graph.threads"};
-  for (auto it = std::sregex_iterator(body.begin(), body.end(), member); it != std::sregex_iterator(); ++it)
-    declared.insert((*it)[1]);
+  for (std::string line; std::getline(body, line);) {
+    std::istringstream words(line);
+    std::string type, name, eq;
+    words >> type >> name >> eq;
+    if ((type == "bool" || type == "int" || type == "double" || type == "std::size_t") && eq == "=")
+      declared.insert(name);
+  }
   std::set<std::string> listed;
   for (const SlamOption& opt : slamOptionTable()) listed.insert(std::string(opt.field));
   EXPECT_EQ(declared, listed);
