@@ -26,16 +26,7 @@ constexpr double kDeg = kPi / 180.0;
 using lidar2d::test::IsNearPose;
 using lidar2d::test::throwsError;
 
-struct Stats {
-  double n = 0, sum = 0, sum2 = 0;
-  void add(double v) {
-    n += 1;
-    sum += v;
-    sum2 += v * v;
-  }
-  double mean() const { return sum / n; }
-  double stddev() const { return std::sqrt(std::max(0.0, sum2 / n - mean() * mean())); }
-};
+using lidar2d::test::Stats;
 
 // A simulated log along a built-in world's route (few beams: the scans only ride along).
 std::vector<Frame> simulatedLog(const std::string& world, std::size_t scans = 0) {

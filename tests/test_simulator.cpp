@@ -21,16 +21,7 @@ using V = Eigen::Vector2d;
 constexpr double kPi = std::numbers::pi;
 using lidar2d::test::IsNearPose;
 
-struct Stats {
-  double n = 0, sum = 0, sum2 = 0;
-  void add(double v) {
-    n += 1;
-    sum += v;
-    sum2 += v * v;
-  }
-  double mean() const { return sum / n; }
-  double stddev() const { return std::sqrt(std::max(0.0, sum2 / n - mean() * mean())); }
-};
+using lidar2d::test::Stats;
 
 std::vector<TimedPose> route(const std::string& world, std::size_t scans = 0) {
   return samplePath(builtinScenario(world).waypoints, PathOptions{}, scans);

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <exception>
 #include <filesystem>
 #include <initializer_list>
@@ -78,5 +80,17 @@ template <typename F>
   }
   return ::testing::AssertionFailure() << "no exception";
 }
+
+/// Running mean and (population) standard deviation of a sample.
+struct Stats {
+  double n = 0, sum = 0, sum2 = 0;
+  void add(double v) {
+    n += 1;
+    sum += v;
+    sum2 += v * v;
+  }
+  double mean() const { return sum / n; }
+  double stddev() const { return std::sqrt(std::max(0.0, sum2 / n - mean() * mean())); }
+};
 
 }  // namespace lidar2d::test
