@@ -40,9 +40,13 @@ TEST(SlamOptionTable, EveryOptionHasANameUnitHelpAndARangeHoldingItsDefault) {
     EXPECT_TRUE(names.insert(opt.name()).second) << "duplicate name";
     EXPECT_TRUE(fields.insert(std::string(opt.field)).second) << "duplicate field";
     EXPECT_EQ(findSlamOption(opt.name()), &opt);
-    // Angles: radians in the struct, degrees in the name.
-    EXPECT_EQ(opt.isAngle(), opt.field.ends_with("_rad"));
-    EXPECT_EQ(opt.isAngle(), opt.name().ends_with("_deg"));
+    // Angles and angular rates: radians in the struct, degrees in the name.
+    const bool radians = opt.field.ends_with("_rad") || opt.field.find("_rad_per_") != std::string_view::npos;
+    EXPECT_EQ(opt.isAngle(), radians);
+    EXPECT_EQ(opt.isAngle(), opt.name().ends_with("_deg") || opt.name().find("_deg_per_") != std::string::npos);
+    if (opt.isAngle()) {
+      EXPECT_EQ(opt.name().find("_rad"), std::string::npos) << opt.name();
+    }
     EXPECT_EQ(opt.rangeError(defaults), std::nullopt);
     if (!opt.isFlag()) {
       const double v = std::visit([](auto x) { return static_cast<double>(x); }, opt.get(defaults));

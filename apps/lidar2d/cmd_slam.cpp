@@ -174,6 +174,8 @@ void run(const SlamArgs& a) {
   j["matched"] = s.matched;
   j["unmatched"] = s.unmatched;
   j["correlative_fallbacks"] = s.correlative_fallbacks;
+  j["prior_overridden"] = s.prior_overridden;
+  j["prior_kept"] = s.prior_kept;
   j["degenerate_scans"] = s.degenerate;
   j["loop_searches"] = s.loop_searches;
   j["loop_closures_accepted"] = s.loop_accepted;
@@ -189,6 +191,7 @@ void run(const SlamArgs& a) {
   j["ms_per_scan_mean"] = slam_seconds * 1e3 / static_cast<double>(num_scans);
   j["ms_per_scan_median"] = eval::percentile(per_scan, 0.5);
   j["ms_per_scan_p95"] = eval::percentile(per_scan, 0.95);
+  j["ms_per_scan_p99"] = eval::percentile(per_scan, 0.99);
   j["ms_per_scan_max"] = eval::percentile(per_scan, 1.0);
   j["used_odometry"] = options.use_odometry;
   j["pose_frame"] = a.laser_frame ? "laser" : "robot";

@@ -165,9 +165,12 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
   row("pose-graph optimisations", fmt::format("{} ({:.2f} s)", j.value("optimizations", 0), j.value("optimization_s", 0.0)));
   row("time", fmt::format("read + slam {:.2f} s, map {:.2f} s", j.value("slam_s", 0.0),
                           j.value("map_s", 0.0)));
-  row("time per scan", fmt::format("mean {:.2f} ms, median {:.2f} ms, p95 {:.2f} ms, max {:.1f} ms",
+  row("time per scan", fmt::format("mean {:.2f} ms, median {:.2f} ms, p95 {:.2f} ms, p99 {:.2f} ms, max {:.1f} ms",
                                    j.value("ms_per_scan_mean", 0.0), j.value("ms_per_scan_median", 0.0),
-                                   j.value("ms_per_scan_p95", 0.0), j.value("ms_per_scan_max", 0.0)));
+                                   j.value("ms_per_scan_p95", 0.0), j.value("ms_per_scan_p99", 0.0),
+                                   j.value("ms_per_scan_max", 0.0)));
+  row("motion prior", fmt::format("{} matches taken against it on strong scan evidence, {} contradicting it rejected",
+                                  j.value("prior_overridden", 0), j.value("prior_kept", 0)));
   row("map", fmt::format("{} x {} cells of {} m", W, H, res));
   html << "</table>\n";
   html << "<h2>Map and trajectory</h2>\n<p class=\"legend\"><span style=\"background:#1f77b4\"></span>trajectory"

@@ -5,6 +5,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "src/slam/internal/points.hpp"
@@ -18,58 +19,18 @@ using registration::IcpTarget;
 SE2 FrontEnd::firstPose(const Frame& f) const { return opt.use_odometry && f.T_odom_robot ? *f.T_odom_robot : SE2(); }
 
 FrontEnd::Prediction FrontEnd::predict(const Frame& f) {
-  // Odometry when present and sane, else constant velocity (identity across gaps).
-  Prediction p;
-  SE2& delta = p.delta;
-  bool& odom_trusted = p.odom_trusted;
-  bool& time_ok = p.time_ok;
-  if (have_prev) {
-    const double dt = f.time - time_prev;
-    if (dt < 0.0) {
-      s_.event(f, fmt::format("time goes backwards by {:.3f} s", -dt));
-      time_ok = false;
-    } else if (dt > opt.time_gap_s) {
-      s_.event(f, fmt::format("gap of {:.1f} s in the log", dt));
-      time_ok = false;
-    }
-  }
-  if (opt.use_odometry && f.T_odom_robot) {
-    if (odometry_missing) {
-      s_.event(f, fmt::format("odometry back after {} scans without it", odometry_missing_count));
-      odometry_missing = false;
-    }
-    odometry_seen = true;
-    if (have_prev && odom_prev) {
-      const SE2 d = odom_prev->inverse() * *f.T_odom_robot;
-      if (!d.isFinite() || d.translation().norm() > opt.odometry_jump_m ||
-          std::abs(d.theta()) > opt.odometry_jump_rad) {
-        s_.event(f, fmt::format("odometry jumps by {:.2f} m / {:.1f} deg: not used for this scan",
-                                d.translation().norm(), std::abs(d.theta()) / kDeg));
-      } else {
-        delta = d;
-        odom_trusted = true;
-      }
-    }
-  } else if (opt.use_odometry && odometry_seen) {
-    if (!odometry_missing) s_.event(f, "scans without odometry from here: constant-velocity prediction");
-    odometry_missing = true;
-    ++odometry_missing_count;
-  }
-  if (have_prev && !odom_trusted) delta = time_ok ? velocityStep() : SE2();
-  return p;
+  return prior_.predict(f, [&](std::string what) { s_.event(f, std::move(what)); });
 }
 
 FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Prediction& p) {
   Tracked out;
   const SE2 T_pred = T_local_prev * p.delta;
-  bool used_fallback = false;
   std::vector<SE2> alternatives;
-  const SE2 pred_delta = T_local_prev.inverse() * T_pred;
-  if (pred_delta.translation().norm() > opt.alternative_start_m ||
-      std::abs(pred_delta.theta()) > opt.alternative_start_rad) {
+  if (p.delta.translation().norm() > opt.alternative_start_m || std::abs(p.delta.theta()) > opt.alternative_start_rad) {
     alternatives.push_back(T_local_prev);
-    if (p.odom_trusted) alternatives.push_back(T_local_prev * (recent_steps.empty() ? SE2() : recent_steps.back()));
+    if (p.source == PriorSource::kOdometry) alternatives.push_back(T_local_prev * last_step.value_or(SE2()));
   }
+  if (p.implausible_odometry) alternatives.push_back(T_local_prev * *p.implausible_odometry);
   // Also the poses of a few earlier scans: a scan logged late (the Intel bag has runs of them,
   // up to a second old while the robot turns at 40 deg/s) was taken near one of them, tens of
   // degrees from the prediction (constant velocity, or odometry interpolated at its wrong
@@ -85,14 +46,32 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
   // Tried below 90% explained without odometry (the prediction is only a guess), below 80% with
   // it: on freiburg-079 the 80-90% band tried ICP thousands of times and never won, while on
   // Intel 0.7 to 0.8 held the result under changes of other parameters (0.5 did not).
-  const double earlier_below = p.odom_trusted ? kEarlierWithOdometry : kConfirmExplained;
-  std::optional<SE2> T_match =
-      frontEndMatch(pts, T_pred, alternatives, earlier, earlier_below, out.degenerate, out.dir, used_fallback);
-  if (used_fallback) ++s_.stats.correlative_fallbacks;
+  const double earlier_below = p.source == PriorSource::kOdometry ? kEarlierWithOdometry : kConfirmExplained;
+  const MatchOutcome m = frontEndMatch(pts, p, T_pred, alternatives, earlier, earlier_below);
+  if (m.used_fallback) ++s_.stats.correlative_fallbacks;
   out.T_local_robot = T_pred;
-  if (T_match) {
-    out.T_local_robot = *T_match;
+  out.degenerate = m.degenerate;
+  out.dir = m.dir;
+  if (m.overrode_prior) {
+    ++s_.stats.prior_overridden;
+    const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * *m.T);
+    s_.event(f, fmt::format("the scan overrides the {} prior by {:.2f} m / {:.1f} deg ({:.1f} sigmas): its match "
+                            "explains {:.0f}% of the scan, the best within the prior {:.0f}%",
+                            toString(p.source), d.translation().norm(), std::abs(d.theta()) / kDeg,
+                            p.distance(T_local_prev.inverse() * *m.T), 100.0 * m.explained, 100.0 * m.explained_in_gate));
+  }
+  if (m.rejected && !m.T) {
+    ++s_.stats.prior_kept;
+    const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * m.rejected->res.T_target_source);
+    s_.event(f, fmt::format("a match {:.2f} m / {:.1f} deg ({:.1f} sigmas) from the {} prior explains only {:.0f}% "
+                            "of the scan: the prior is kept",
+                            d.translation().norm(), std::abs(d.theta()) / kDeg, m.rejected->sigmas,
+                            toString(p.source), 100.0 * m.rejected->explained));
+  }
+  if (m.T) {
+    out.T_local_robot = *m.T;
     out.matched = true;
+    out.overrode_prior = m.overrode_prior;
     consecutive_failures = 0;
     ++s_.stats.matched;
     if (out.degenerate) ++s_.stats.degenerate;
@@ -119,17 +98,15 @@ void FrontEnd::addNode(std::size_t n, bool restart) {
 }
 
 void FrontEnd::remember(const Frame& f, const SE2& T_local, bool first, bool time_ok) {
+  const SE2 step = first ? SE2() : T_local_prev.inverse() * T_local;
+  prior_.remember(f, step, first, time_ok);
   if (!first) {
-    if (!time_ok) recent_steps.clear();
-    recent_steps.push_back(time_ok ? T_local_prev.inverse() * T_local : SE2());
-    if (recent_steps.size() > kVelocitySteps) recent_steps.pop_front();
+    last_step = time_ok ? std::optional<SE2>(step) : std::nullopt;
     recent_poses.push_back(T_local);
     if (recent_poses.size() > kEarlierBack.back()) recent_poses.pop_front();
   }
   T_local_prev = T_local;
   have_prev = true;
-  time_prev = f.time;
-  if (f.T_odom_robot) odom_prev = f.T_odom_robot;
 }
 
 void FrontEnd::rebuildLocalMap() {
@@ -144,86 +121,103 @@ void FrontEnd::rebuildLocalMap() {
   local_grid.reset();
 }
 
-/// The constant-velocity step: the component-wise median (x, y, theta) of the last
-/// `kVelocitySteps` steps, identity before the first. Not the last step alone: a scan stamped out
-/// of order (the Intel bag has some) matches 0.1-0.2 m behind its neighbours, and repeating that
-/// step along a corridor - where the scan cannot correct the prediction's translation along it
-/// (degeneracy) - drove the estimate backwards by that much on every scan until the corridor
-/// ended (metres of error without odometry).
-SE2 FrontEnd::velocityStep() const {
-  if (recent_steps.empty()) return SE2();
-  std::array<std::array<double, kVelocitySteps>, 3> v{};
-  const std::size_t n = recent_steps.size();
-  for (std::size_t i = 0; i < n; ++i) {
-    v[0][i] = recent_steps[i].x();
-    v[1][i] = recent_steps[i].y();
-    v[2][i] = recent_steps[i].theta();
-  }
-  auto median = [n](std::array<double, kVelocitySteps>& a) {
-    const auto mid = a.begin() + static_cast<std::ptrdiff_t>(n / 2);
-    std::nth_element(a.begin(), mid, a.begin() + static_cast<std::ptrdiff_t>(n));
-    return *mid;
-  };
-  return SE2(median(v[0]), median(v[1]), median(v[2]));
-}
-
-/// Front-end match of `pts` against the local map from `T_pred`. Returns the pose, or nothing
-/// when the scan could not be matched; sets `degenerate`/`dir` (local frame) and `used_fallback`.
-/// `alternatives`: other starting points, tried when the prediction is not confirmed. `earlier`:
-/// the poses of earlier scans, tried when the best match still explains under `earlier_below`.
-std::optional<SE2> FrontEnd::frontEndMatch(const Points2& pts, const SE2& T_pred, const std::vector<SE2>& alternatives,
-                                           const std::vector<SE2>& earlier, double earlier_below, bool& degenerate,
-                                           Eigen::Vector2d& dir, bool& used_fallback) {
-  degenerate = false;
-  used_fallback = false;
-  if (!local_target || local_target->size() < opt.min_points || pts.size() < opt.min_points) return std::nullopt;
-  auto tryFrom = [&](const SE2& init, registration::Result& out, double& explained) {
-    out = opt.front_end_likelihood_field ? registration::matchLikelihoodField(*local_field, pts, init, local_lf)
-                                         : alignIcp(*local_target, pts, init, icp);
+/// Front-end match of `pts` against the local map from `T_pred`, the prediction `p` after the
+/// previous pose. `alternatives`: other starting points, tried when the prediction is not
+/// confirmed. `earlier`: the poses of earlier scans, tried when the best match still explains
+/// under `earlier_below`.
+///
+/// Every match is weighed against the prior: within `prior_gate_sigmas` of the prediction, the
+/// match explaining the most points wins (or about as many with a clearly lower cost); a match
+/// beyond the gate wins only on strong evidence: it explains at least `prior_override_explained`
+/// of the scan and clearly more than the best one within the gate.
+FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
+                                               const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
+                                               double earlier_below) {
+  MatchOutcome out;
+  if (!local_target || local_target->size() < opt.min_points || pts.size() < opt.min_points) return out;
+  auto tryFrom = [&](const SE2& init) {
+    Candidate c;
+    c.res = opt.front_end_likelihood_field ? registration::matchLikelihoodField(*local_field, pts, init, local_lf)
+                                           : alignIcp(*local_target, pts, init, icp);
     const bool ok =
-        out.status == registration::Status::kConverged || out.status == registration::Status::kMaxIterations;
-    explained = ok && out.T_target_source.isFinite()
-                    ? explainedFraction(*local_target, pts, out.T_target_source, opt.match_inlier_distance_m)
-                    : 0.0;
+        c.res.status == registration::Status::kConverged || c.res.status == registration::Status::kMaxIterations;
+    const bool finite = c.res.T_target_source.isFinite();
+    if (ok && finite)
+      c.overlap = overlapWith(*local_target, pts, c.res.T_target_source, opt.match_inlier_distance_m, kOverlapM);
+    c.explained = c.overlap.explained;
+    c.sigmas = finite ? p.distance(T_local_prev.inverse() * c.res.T_target_source)
+                      : std::numeric_limits<double>::infinity();
+    return c;
   };
-  registration::Result res;
-  double explained = 0.0;
-  tryFrom(T_pred, res, explained);
+  // Another start's result replaces the best so far when it explains clearly more points (5% of
+  // the scan), or about as many with a clearly lower residual cost.
+  auto better = [](const Candidate& c, const Candidate& best) {
+    return c.explained > best.explained + 0.05 ||
+           (c.explained > best.explained - 0.05 && c.res.final_cost < 0.8 * best.res.final_cost);
+  };
+  std::optional<Candidate> in_gate, beyond_gate;
+  auto consider = [&](Candidate c) {
+    std::optional<Candidate>& pool = c.sigmas <= opt.prior_gate_sigmas ? in_gate : beyond_gate;
+    if (!pool || better(c, *pool)) pool = std::move(c);
+  };
+  auto bestExplained = [&] { return in_gate ? in_gate->explained : 0.0; };
+  consider(tryFrom(T_pred));
   // Other starting points (no motion, constant velocity) when the prediction may be wrong: wheel
   // odometry interpolated at badly stamped scans can be tens of degrees off, and ICP from there
-  // settles in a wrong minimum that still explains much of the scan. Another start wins when its
-  // result explains clearly more points (5% of the scan) than the prediction's, or about as many
-  // with a clearly lower residual cost.
+  // settles in a wrong minimum that still explains much of the scan.
   // Only when the prediction was not confirmed: the match moved it or explains too little.
-  const SE2 correction = T_pred.inverse() * res.T_target_source;
-  const bool confirmed = explained >= kConfirmExplained && correction.translation().norm() <= 0.05 &&
-                         std::abs(correction.theta()) <= 2.0 * kDeg;
-  auto consider = [&](const SE2& start) {
-    registration::Result r;
-    double e = 0.0;
-    tryFrom(start, r, e);
-    if (e > explained + 0.05 || (e > explained - 0.05 && r.final_cost < 0.8 * res.final_cost)) {
-      res = r;
-      explained = e;
-    }
-  };
+  bool confirmed = false;
+  if (in_gate) {
+    const SE2 correction = T_pred.inverse() * in_gate->res.T_target_source;
+    confirmed = in_gate->explained >= kConfirmExplained && correction.translation().norm() <= 0.05 &&
+                std::abs(correction.theta()) <= 2.0 * kDeg;
+  }
   if (!confirmed) {
-    for (const SE2& alt : alternatives) consider(alt);
+    for (const SE2& alt : alternatives) consider(tryFrom(alt));
     // Earlier scans' poses only while the match explains too little: where they won on Intel
     // (with odometry) the prediction's match explained a median 41% of the scan, a few up to 89%.
-    if (explained < earlier_below)
-      for (const SE2& start : earlier) consider(start);
+    if (bestExplained() < earlier_below)
+      for (const SE2& start : earlier) consider(tryFrom(start));
   }
-  if (explained < opt.min_explained_fraction) {
-    // Olson's correlative search over a window around the prediction, then ICP from its answer.
+  // The correlative search (Olson) over a window of three sigmas of the prior (at least the
+  // fallback window, at most the search cap), then ICP from its answer: when the matches so far
+  // explain too little, or when the prior is wider than ICP's basin of convergence and nothing
+  // confirmed a match yet.
+  const bool wide = p.sigma_m > kIcpBasinM || p.sigma_rad > kIcpBasinRad;
+  if (bestExplained() < opt.min_explained_fraction || (wide && bestExplained() < kConfirmExplained)) {
     if (!local_grid)
       local_grid = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(local_points, fallback));
-    const auto cr = registration::matchCorrelative(*local_grid, pts, T_pred, fallback);
-    used_fallback = true;
-    if (!cr.T_search.isFinite()) return std::nullopt;
-    tryFrom(cr.T_search, res, explained);
-    if (explained < opt.min_explained_fraction) return std::nullopt;
+    registration::CorrelativeOptions window = fallback;
+    window.linear_window_m =
+        std::clamp(3.0 * p.sigma_m, opt.fallback_linear_window_m, std::max(opt.fallback_linear_window_m,
+                                                                           opt.search_max_linear_window_m));
+    window.angular_window_rad =
+        std::clamp(3.0 * p.sigma_rad, opt.fallback_angular_window_rad,
+                   std::max(opt.fallback_angular_window_rad, opt.search_max_angular_window_rad));
+    const auto cr = registration::matchCorrelative(*local_grid, pts, T_pred, window);
+    out.used_fallback = true;
+    if (cr.T_search.isFinite()) consider(tryFrom(cr.T_search));
   }
+  out.explained_in_gate = bestExplained();
+  const Candidate* win = nullptr;
+  // Within the gate of a prior narrower than ICP's basin, the prior vouches for the match where the
+  // scan sees new ground (a keyframe log): the share explained counts only the points that overlap
+  // the local map, as long as enough of them do. Not under a wide prior (after a gap, without
+  // odometry): there a partial match may be another place.
+  const bool vouched = in_gate && !wide && in_gate->overlap.overlap >= kMinOverlap &&
+                       in_gate->overlap.explained_in_overlap >= opt.min_explained_fraction;
+  if (in_gate && (in_gate->explained >= opt.min_explained_fraction || vouched))
+    win = &*in_gate;
+  if (beyond_gate && beyond_gate->explained >= std::max(opt.prior_override_explained, opt.min_explained_fraction) &&
+      beyond_gate->explained >= bestExplained() + kOverrideMargin) {
+    win = &*beyond_gate;
+    out.overrode_prior = true;
+  } else if (beyond_gate && beyond_gate->explained >= opt.min_explained_fraction && !win) {
+    out.rejected = beyond_gate;
+  }
+  if (!win) return out;
+  out.explained = win->explained;
+  const registration::Result& res = win->res;
   SE2 T = res.T_target_source;
   // Degeneracy (Zhang, Kaess & Singh 2016): the translational block of the information matrix per
   // matched point; a weak eigen-direction is not pinned by the scan, so the translation along it
@@ -232,13 +226,14 @@ std::optional<SE2> FrontEnd::frontEndMatch(const Points2& pts, const SE2& T_pred
     const Eigen::Matrix2d Ht = res.information.topLeftCorner<2, 2>() / static_cast<double>(res.num_inliers);
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(Ht);
     if (es.info() == Eigen::Success && es.eigenvalues()(0) < opt.degeneracy_threshold) {
-      degenerate = true;
-      dir = es.eigenvectors().col(0).normalized();
-      const Eigen::Vector2d t = T.translation() - dir * dir.dot(T.translation() - T_pred.translation());
+      out.degenerate = true;
+      out.dir = es.eigenvectors().col(0).normalized();
+      const Eigen::Vector2d t = T.translation() - out.dir * out.dir.dot(T.translation() - T_pred.translation());
       T = SE2(t, T.theta());
     }
   }
-  return T;
+  out.T = T;
+  return out;
 }
 
 }  // namespace lidar2d::slam::internal

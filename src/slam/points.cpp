@@ -59,3 +59,25 @@ double explainedFraction(const registration::IcpTarget& target, const Points2& p
 }
 
 }  // namespace lidar2d::slam::internal
+
+namespace lidar2d::slam::internal {
+
+Overlap overlapWith(const registration::IcpTarget& target, const Points2& pts, const SE2& T, double inlier_m,
+                    double overlap_m) {
+  Overlap o;
+  if (pts.empty()) return o;
+  std::size_t inliers = 0, overlapping = 0;
+  for (const auto& p : pts) {
+    double d2 = 0.0;
+    if (target.nearest(T * p, &d2) >= target.size()) continue;
+    if (d2 <= overlap_m * overlap_m) ++overlapping;
+    if (d2 <= inlier_m * inlier_m) ++inliers;
+  }
+  const auto n = static_cast<double>(pts.size());
+  o.explained = static_cast<double>(inliers) / n;
+  o.overlap = static_cast<double>(overlapping) / n;
+  o.explained_in_overlap = overlapping > 0 ? static_cast<double>(inliers) / static_cast<double>(overlapping) : 0.0;
+  return o;
+}
+
+}  // namespace lidar2d::slam::internal

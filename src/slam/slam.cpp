@@ -132,7 +132,7 @@ struct Slam::Impl {
         rec.is_node = true;
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
-                prediction.odom_trusted);
+                prediction.source == internal::PriorSource::kOdometry);
       } else {
         rec.node = state.nodes.size() - 1;
         rec.T_node_scan = rel;

@@ -28,7 +28,13 @@ std::string SlamOption::name() const {
   std::string n(field);
   for (char& c : n)
     if (c == '.') c = '_';
-  if (isAngle() && n.ends_with("_rad")) n.replace(n.size() - 4, 4, "_deg");
+  // The radians of an angle (or of an angular rate, "_rad_per_s") are degrees in the name.
+  if (isAngle())
+    for (std::size_t at = n.find("_rad"); at != std::string::npos; at = n.find("_rad", at + 1))
+      if (at + 4 == n.size() || n[at + 4] == '_') {
+        n.replace(at, 4, "_deg");
+        break;
+      }
   return n;
 }
 

@@ -50,9 +50,25 @@ struct SlamOptions {
   double fallback_linear_window_m = 1.0;
   double fallback_angular_window_rad = 30.0 * kDeg;
   double degeneracy_threshold = 0.04;
-  double odometry_jump_m = 1.5;
-  double odometry_jump_rad = 60.0 * kDeg;
+  double search_max_linear_window_m = 3.0;
+  double search_max_angular_window_rad = 180.0 * kDeg;
   double time_gap_s = 2.0;
+
+  // --- motion prior: the prediction of each scan's pose and its uncertainty ---
+  double prior_odometry_sigma_m = 0.05;
+  double prior_odometry_sigma_per_m = 0.1;
+  double prior_odometry_sigma_m_per_s = 0.01;
+  double prior_odometry_sigma_rad = 1.0 * kDeg;
+  double prior_odometry_sigma_per_turn = 0.1;
+  double prior_odometry_sigma_rad_per_m = 2.0 * kDeg;
+  double prior_velocity_sigma_m = 0.1;
+  double prior_velocity_sigma_m_per_s = 1.0;
+  double prior_velocity_sigma_rad = 5.0 * kDeg;
+  double prior_velocity_sigma_rad_per_s = 45.0 * kDeg;
+  double max_speed_m_per_s = 5.0;
+  double max_turn_rate_rad_per_s = 360.0 * kDeg;
+  double prior_gate_sigmas = 4.0;
+  double prior_override_explained = 0.8;
 
   // --- submaps ---
   int submap_nodes = 30;
@@ -146,7 +162,8 @@ struct SlamOption {
   /// The name in YAML configs, docs and summary.json: `field` with '_' for '.', and `_deg` for the
   /// `_rad` of an angle ("node_min_rotation_deg", "graph_threads").
   std::string name() const;
-  bool isAngle() const { return unit == "deg"; }
+  /// An angle or an angular rate ("deg", "deg/s", "deg/m"): radians in SlamOptions.
+  bool isAngle() const { return unit == "deg" || unit.starts_with("deg/"); }
   bool isFlag() const { return std::holds_alternative<bool& (*)(SlamOptions&)>(ref); }
   /// The value in `unit`. An angle is the shortest decimal number of degrees that `set` turns back
   /// into exactly the same radians (30, not 29.999999999999996), when there is one.
@@ -206,18 +223,52 @@ inline constexpr SlamOption kSlamOptionTable[] = {
     {LIDAR2D_SLAM_FIELD(alternative_start_rad), "front end", "deg", OptionRange::atLeast(0),
      "... or turns more than this"},
     {LIDAR2D_SLAM_FIELD(fallback_linear_window_m), "front end", "m", OptionRange::above(0),
-     "half-width of the correlative search window around the prediction"},
+     "smallest half-width of the correlative search window around the prediction (the window is three "
+     "sigmas of the motion prior, at least this)"},
     {LIDAR2D_SLAM_FIELD(fallback_angular_window_rad), "front end", "deg", OptionRange::above(0),
-     "its angular half-width"},
+     "its smallest angular half-width"},
     {LIDAR2D_SLAM_FIELD(degeneracy_threshold), "front end", "fraction", OptionRange::atLeast(0),
      "smallest eigenvalue of the translational information per matched point (the share of line normals "
      "along the weakest direction) below which the translation along it is taken from the prediction"},
-    {LIDAR2D_SLAM_FIELD(odometry_jump_m), "front end", "m", OptionRange::above(0),
-     "an odometry step longer than this is not trusted"},
-    {LIDAR2D_SLAM_FIELD(odometry_jump_rad), "front end", "deg", OptionRange::above(0),
-     "... nor one turning more than this"},
+    {LIDAR2D_SLAM_FIELD(search_max_linear_window_m), "front end", "m", OptionRange::above(0),
+     "largest half-width of that window (an uncertain prior, after a gap or without odometry)"},
+    {LIDAR2D_SLAM_FIELD(search_max_angular_window_rad), "front end", "deg", {0.0, true, 180.0, false},
+     "its largest angular half-width"},
     {LIDAR2D_SLAM_FIELD(time_gap_s), "front end", "s", OptionRange::above(0),
-     "scans further apart in time are reported as a gap"},
+     "scans further apart in time than this and than five times the log's usual interval are reported as "
+     "a gap"},
+    {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_m), "motion prior", "m", OptionRange::above(0),
+     "sigma of an odometry step's translation (x and y): this ..."},
+    {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_per_m), "motion prior", "m/m", OptionRange::atLeast(0),
+     "... plus this share of the distance ..."},
+    {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_m_per_s), "motion prior", "m/s", OptionRange::atLeast(0),
+     "... plus this much per second the step took"},
+    {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_rad), "motion prior", "deg", OptionRange::above(0),
+     "sigma of an odometry step's rotation: this ..."},
+    {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_per_turn), "motion prior", "rad/rad", OptionRange::atLeast(0),
+     "... plus this share of the turn ..."},
+    {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_rad_per_m), "motion prior", "deg/m", OptionRange::atLeast(0),
+     "... plus this much per metre travelled"},
+    {LIDAR2D_SLAM_FIELD(prior_velocity_sigma_m), "motion prior", "m", OptionRange::above(0),
+     "sigma of the constant-velocity prediction's translation (no odometry, or odometry not plausible): "
+     "this ..."},
+    {LIDAR2D_SLAM_FIELD(prior_velocity_sigma_m_per_s), "motion prior", "m/s", OptionRange::atLeast(0),
+     "... plus this much per second since the previous scan"},
+    {LIDAR2D_SLAM_FIELD(prior_velocity_sigma_rad), "motion prior", "deg", OptionRange::above(0),
+     "sigma of its rotation: this ..."},
+    {LIDAR2D_SLAM_FIELD(prior_velocity_sigma_rad_per_s), "motion prior", "deg/s", OptionRange::atLeast(0),
+     "... plus this much per second since the previous scan"},
+    {LIDAR2D_SLAM_FIELD(max_speed_m_per_s), "motion prior", "m/s", OptionRange::above(0),
+     "an odometry step faster than this over the time it took is not plausible: the constant-velocity "
+     "prior replaces it, and the scan decides between the two"},
+    {LIDAR2D_SLAM_FIELD(max_turn_rate_rad_per_s), "motion prior", "deg/s", OptionRange::above(0),
+     "... nor one turning faster than this"},
+    {LIDAR2D_SLAM_FIELD(prior_gate_sigmas), "motion prior", "sigmas", OptionRange::above(0),
+     "a match farther from the prediction than this (Mahalanobis distance under the prior) contradicts the "
+     "prior ..."},
+    {LIDAR2D_SLAM_FIELD(prior_override_explained), "motion prior", "fraction", OptionRange::fraction(),
+     "... and is taken only when it explains at least this share of the scan and clearly more (0.1) than "
+     "the best match within the gate; else the prior wins"},
     {LIDAR2D_SLAM_FIELD(submap_nodes), "submaps", "nodes", OptionRange::atLeast(2), "nodes per submap"},
     {LIDAR2D_SLAM_FIELD(loop_search_radius_m), "loop closure", "m", OptionRange::above(0),
      "finished submaps whose centre is nearer than this to the node are candidates"},

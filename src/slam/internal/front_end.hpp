@@ -1,6 +1,8 @@
 #pragma once
 // SLAM's front end: each scan matched against a local map of the last few nodes, in the drift-prone
-// "local" frame, from a prediction (odometry when present and sane, else constant velocity).
+// "local" frame, from the motion prior's prediction (motion_prior.hpp), searched over a window
+// sized to the prior's uncertainty; a match that contradicts the prior is taken only on strong
+// scan evidence.
 
 #include <Eigen/Core>
 #include <array>
@@ -10,6 +12,8 @@
 #include <optional>
 #include <vector>
 
+#include "src/slam/internal/motion_prior.hpp"
+#include "src/slam/internal/points.hpp"
 #include "src/slam/internal/state.hpp"
 
 namespace lidar2d::slam::internal {
@@ -19,16 +23,16 @@ class FrontEnd {
   /// Reads the options and settings of `s`, and its nodes when the local map is rebuilt; records
   /// events and counters there.
   explicit FrontEnd(SlamState& s)
-      : s_(s), opt(s.opt), icp(s.match.icp), local_lf(s.match.local_lf), fallback(s.match.fallback) {}
+      : s_(s),
+        opt(s.opt),
+        icp(s.match.icp),
+        local_lf(s.match.local_lf),
+        fallback(s.match.fallback),
+        prior_(s.opt) {}
   FrontEnd(const FrontEnd&) = delete;
   FrontEnd& operator=(const FrontEnd&) = delete;
 
-  /// The motion predicted since the previous scan.
-  struct Prediction {
-    SE2 delta;                  ///< T_prev_cur (identity for the first scan)
-    bool odom_trusted = false;  ///< from odometry (else constant velocity)
-    bool time_ok = true;        ///< no gap and time not going backwards since the previous scan
-  };
+  using Prediction = MotionPrediction;
   /// The scan's match.
   struct Tracked {
     SE2 T_local_robot;  ///< the match, or the prediction when unmatched
@@ -36,6 +40,7 @@ class FrontEnd {
     bool degenerate = false;
     Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
     bool restart = false;                           ///< tracking lost: the local map restarts at this scan
+    bool overrode_prior = false;                    ///< the match contradicts the prior (strong scan evidence)
   };
 
   /// True once a scan was remembered.
@@ -43,7 +48,7 @@ class FrontEnd {
   /// Where the first scan anchors the local frame: its odometry pose (so the map lines up with
   /// it), or the origin.
   SE2 firstPose(const Frame& f) const;
-  /// The prediction for `f`; records events on time and odometry.
+  /// The prediction for `f` (MotionPrior::predict); records its events.
   Prediction predict(const Frame& f);
   /// Matches `pts` (robot frame, voxel-filtered) of `f`, a scan after the first; counts matched,
   /// unmatched, degenerate scans and correlative fallbacks, and records failures as events.
@@ -56,17 +61,46 @@ class FrontEnd {
   void remember(const Frame& f, const SE2& T_local, bool first, bool time_ok);
 
  private:
-  static constexpr std::size_t kVelocitySteps = 5;     // steps behind the constant-velocity prediction
   static constexpr double kConfirmExplained = 0.9;     // a match explaining this much confirms its start
   static constexpr double kEarlierWithOdometry = 0.8;  // see frontEndMatch's `earlier`
+  // A prior wider than this (sigma) is beyond ICP's basin of convergence: the correlative search
+  // runs unless a match is confirmed.
+  static constexpr double kIcpBasinM = 0.3;
+  static constexpr double kIcpBasinRad = 10.0 * kDeg;
+  // A match beyond the prior's gate must explain this much more of the scan than the best within.
+  static constexpr double kOverrideMargin = 0.1;
+  // A scan point this near the local map overlaps it (ICP's own reach, icp_max_correspondence_m's
+  // default); a match within the prior's gate is judged on the overlapping points when at least
+  // kMinOverlap of the scan overlaps.
+  static constexpr double kOverlapM = 0.5;
+  static constexpr double kMinOverlap = 0.3;
   // Which earlier scans' poses are starting points (scans back, ascending).
   static constexpr std::array<std::size_t, 4> kEarlierBack{2, 4, 8, 16};
 
+  /// One match of the scan: its result, the share of the scan it explains and its distance from
+  /// the prediction in sigmas.
+  struct Candidate {
+    registration::Result res;
+    double explained = 0.0;
+    double sigmas = 0.0;
+    Overlap overlap;
+  };
+  /// What frontEndMatch found.
+  struct MatchOutcome {
+    std::optional<SE2> T;       ///< the pose, or nothing when the scan was not matched
+    bool degenerate = false;
+    Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame
+    bool used_fallback = false;                     ///< the correlative search ran
+    bool overrode_prior = false;                    ///< T contradicts the prior (taken on scan evidence)
+    std::optional<Candidate> rejected;              ///< a match contradicting the prior, without the evidence
+    double explained = 0.0;                         ///< the share of the scan T explains
+    double explained_in_gate = 0.0;                 ///< the best match within the prior's gate explained this
+  };
+
   void rebuildLocalMap();
-  SE2 velocityStep() const;
-  std::optional<SE2> frontEndMatch(const Points2& pts, const SE2& T_pred, const std::vector<SE2>& alternatives,
-                                   const std::vector<SE2>& earlier, double earlier_below, bool& degenerate,
-                                   Eigen::Vector2d& dir, bool& used_fallback);
+  MatchOutcome frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
+                             const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
+                             double earlier_below);
 
   SlamState& s_;
   const SlamOptions& opt;
@@ -74,15 +108,10 @@ class FrontEnd {
   const registration::LikelihoodFieldOptions& local_lf;
   const registration::CorrelativeOptions& fallback;
 
+  MotionPrior prior_;
   bool have_prev = false;
   SE2 T_local_prev;
-  std::optional<SE2> odom_prev;
-  bool odometry_seen = false, odometry_missing = false;
-  std::size_t odometry_missing_count = 0;
-  double time_prev = 0.0;
-  // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
-  // constant-velocity prediction is their component-wise median (`velocityStep`).
-  std::deque<SE2> recent_steps;
+  std::optional<SE2> last_step;  // the front end's last step (robot frame) when time went forward
   std::deque<SE2> recent_poses;  // the front end's poses of the last kEarlierBack.back() scans, oldest first
   int consecutive_failures = 0;
   std::deque<std::size_t> local_nodes;

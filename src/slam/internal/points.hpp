@@ -18,4 +18,14 @@ Points2 voxelFilter(const Points2& pts, double cell_m);
 /// points.
 double explainedFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T, double inlier_m);
 
+/// How much of a scan a target explains where they overlap.
+struct Overlap {
+  double explained = 0.0;  ///< share of the points within `inlier_m` of the target (explainedFraction)
+  double overlap = 0.0;    ///< share of the points within `overlap_m` of the target (the rest see new ground)
+  double explained_in_overlap = 0.0;  ///< explained / overlap (0 when nothing overlaps)
+};
+/// The Overlap of `pts` moved by T with `target`.
+Overlap overlapWith(const registration::IcpTarget& target, const Points2& pts, const SE2& T, double inlier_m,
+                    double overlap_m);
+
 }  // namespace lidar2d::slam::internal

@@ -1,0 +1,146 @@
+#include "src/slam/internal/motion_prior.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <vector>
+
+namespace lidar2d::slam::internal {
+
+const char* toString(PriorSource s) {
+  switch (s) {
+    case PriorSource::kNone:
+      return "none";
+    case PriorSource::kOdometry:
+      return "odometry";
+    case PriorSource::kConstantVelocity:
+      return "constant velocity";
+  }
+  return "unknown";
+}
+
+double MotionPrediction::distance(const SE2& step) const {
+  const SE2 r = delta.inverse() * step;
+  const double a = r.translation().norm() / sigma_m;
+  const double b = r.theta() / sigma_rad;
+  return std::sqrt(a * a + b * b);
+}
+
+double MotionPrior::usualInterval() const {
+  if (recent_intervals_.empty()) return 0.0;
+  std::vector<double> v(recent_intervals_.begin(), recent_intervals_.end());
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+MotionPrediction MotionPrior::predictImpl(const Frame& f) {
+  MotionPrediction p;
+  const bool odometry = opt_.use_odometry && f.T_odom_robot.has_value();
+  if (!have_prev_) {
+    odometry_seen_ = odometry;
+    return p;
+  }
+  const double dt = f.time - time_prev_;
+  const double usual = usualInterval();
+  if (!(dt >= 0.0)) {
+    notes_.push_back(fmt::format("time goes backwards by {:.3f} s", -dt));
+    p.time_ok = false;
+  } else if (dt > opt_.time_gap_s && (usual <= 0.0 || dt > 5.0 * usual)) {
+    // Relative to the log's usual interval: keyframe logs are seconds apart on every scan.
+    notes_.push_back(fmt::format("gap of {:.1f} s in the log", dt));
+    p.time_ok = false;
+  }
+  // The time the step took: its stamps' difference, or the usual interval when the stamps do not
+  // say (repeated or going backwards); 0 when no interval is known at all (every stamp equal).
+  p.dt = dt > 0.0 && std::isfinite(dt) ? dt : usual;
+
+  if (odometry) {
+    if (odometry_missing_) {
+      notes_.push_back(fmt::format("odometry back after {} scans without it", odometry_missing_count_));
+      odometry_missing_ = false;
+    }
+    odometry_seen_ = true;
+    if (odom_prev_) {
+      const SE2 d = odom_prev_->inverse() * *f.T_odom_robot;
+      const double dist = d.translation().norm(), turn = std::abs(d.theta());
+      bool plausible = d.isFinite();
+      // Plausible against the time the step took, not against fixed per-step limits: a gap of
+      // seconds during a turn is a long step, and keyframe logs hold metres between scans.
+      if (plausible && p.dt > 0.0)
+        plausible = dist <= opt_.max_speed_m_per_s * p.dt && turn <= opt_.max_turn_rate_rad_per_s * p.dt;
+      if (plausible) {
+        p.delta = d;
+        p.source = PriorSource::kOdometry;
+        p.sigma_m = opt_.prior_odometry_sigma_m + opt_.prior_odometry_sigma_per_m * dist +
+                    opt_.prior_odometry_sigma_m_per_s * p.dt;
+        p.sigma_rad = opt_.prior_odometry_sigma_rad + opt_.prior_odometry_sigma_per_turn * turn +
+                      opt_.prior_odometry_sigma_rad_per_m * dist;
+      } else {
+        notes_.push_back(
+            d.isFinite()
+                ? fmt::format("odometry step of {:.2f} m / {:.1f} deg in {:.2f} s is not plausible: "
+                              "constant-velocity prior, the scan decides",
+                              dist, turn / kDeg, p.dt)
+                : std::string("odometry step is not finite: constant-velocity prior"));
+        if (d.isFinite()) p.implausible_odometry = d;
+      }
+    }
+  } else if (opt_.use_odometry && odometry_seen_) {
+    if (!odometry_missing_) notes_.push_back("scans without odometry from here: constant-velocity prediction");
+    odometry_missing_ = true;
+    ++odometry_missing_count_;
+  }
+  if (p.source != PriorSource::kOdometry) {
+    p.source = PriorSource::kConstantVelocity;
+    p.delta = p.time_ok ? velocityStep() : SE2();
+    // Without an interval (every stamp equal) a second per step: the wide end.
+    const double t = p.dt > 0.0 ? p.dt : 1.0;
+    p.sigma_m = opt_.prior_velocity_sigma_m + opt_.prior_velocity_sigma_m_per_s * t;
+    p.sigma_rad = opt_.prior_velocity_sigma_rad + opt_.prior_velocity_sigma_rad_per_s * t;
+  }
+  return p;
+}
+
+void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool time_ok) {
+  if (!first) {
+    if (!time_ok) recent_steps_.clear();
+    recent_steps_.push_back(time_ok ? step : SE2());
+    if (recent_steps_.size() > kVelocitySteps) recent_steps_.pop_front();
+    const double dt = f.time - time_prev_;
+    if (dt > 0.0 && std::isfinite(dt)) {
+      recent_intervals_.push_back(dt);
+      if (recent_intervals_.size() > kIntervals) recent_intervals_.pop_front();
+    }
+  }
+  have_prev_ = true;
+  time_prev_ = f.time;
+  if (f.T_odom_robot) odom_prev_ = f.T_odom_robot;
+}
+
+/// The constant-velocity step: the component-wise median (x, y, theta) of the last
+/// `kVelocitySteps` steps, identity before the first. Not the last step alone: a scan stamped out
+/// of order (the Intel bag has some) matches 0.1-0.2 m behind its neighbours, and repeating that
+/// step along a corridor - where the scan cannot correct the prediction's translation along it
+/// (degeneracy) - drove the estimate backwards by that much on every scan until the corridor
+/// ended (metres of error without odometry).
+SE2 MotionPrior::velocityStep() const {
+  if (recent_steps_.empty()) return SE2();
+  std::array<std::array<double, kVelocitySteps>, 3> v{};
+  const std::size_t n = recent_steps_.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    v[0][i] = recent_steps_[i].x();
+    v[1][i] = recent_steps_[i].y();
+    v[2][i] = recent_steps_[i].theta();
+  }
+  auto median = [n](std::array<double, kVelocitySteps>& a) {
+    const auto mid = a.begin() + static_cast<std::ptrdiff_t>(n / 2);
+    std::nth_element(a.begin(), mid, a.begin() + static_cast<std::ptrdiff_t>(n));
+    return *mid;
+  };
+  return SE2(median(v[0]), median(v[1]), median(v[2]));
+}
+
+}  // namespace lidar2d::slam::internal
