@@ -8,6 +8,7 @@
 #include <limits>
 #include <string>
 
+#include "lidar2d/degeneracy/degeneracy.hpp"
 #include "src/slam/internal/points.hpp"
 
 namespace lidar2d::slam::internal {
@@ -62,7 +63,7 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
   }
   if (m.rejected && !m.T) {
     ++s_.stats.prior_kept;
-    const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * m.rejected->res.T_target_source);
+    const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * m.rejected->T);
     s_.event(f, fmt::format("a match {:.2f} m / {:.1f} deg ({:.1f} sigmas) from the {} prior explains only {:.0f}% "
                             "of the scan: the prior is kept",
                             d.translation().norm(), std::abs(d.theta()) / kDeg, m.rejected->sigmas,
@@ -128,8 +129,8 @@ void FrontEnd::rebuildLocalMap() {
 ///
 /// Every match is weighed against the prior: within `prior_gate_sigmas` of the prediction, the
 /// match explaining the most points wins (or about as many with a clearly lower cost); a match
-/// beyond the gate wins only on strong evidence: it explains at least `prior_override_explained`
-/// of the scan and clearly more than the best one within the gate.
+/// beyond the gate wins only when its log-posterior (`prior_nats_per_point` per explained point,
+/// minus half its squared Mahalanobis distance) beats the best one within the gate.
 FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
                                                const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
                                                double earlier_below) {
@@ -145,20 +146,34 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
     if (ok && finite)
       c.overlap = overlapWith(*local_target, pts, c.res.T_target_source, opt.match_inlier_distance_m, kOverlapM);
     c.explained = c.overlap.explained;
-    c.sigmas = finite ? p.distance(T_local_prev.inverse() * c.res.T_target_source)
-                      : std::numeric_limits<double>::infinity();
+    c.T = c.res.T_target_source;
+    if (finite) remapDegenerate(c, T_pred);
+    // Weighed against the prior after remapping: along a corridor ICP slides anywhere, and that
+    // slide says nothing against the prediction.
+    c.sigmas = finite ? p.distance(T_local_prev.inverse() * c.T) : std::numeric_limits<double>::infinity();
     return c;
   };
   // Another start's result replaces the best so far when it explains clearly more points (5% of
-  // the scan), or about as many with a clearly lower residual cost.
+  // the scan), or about as many and pins every direction where the best does not (a degenerate
+  // match keeps the prediction along the corridor, a guess after a gap), or about as many with a
+  // clearly lower residual cost.
   auto better = [](const Candidate& c, const Candidate& best) {
-    return c.explained > best.explained + 0.05 ||
-           (c.explained > best.explained - 0.05 && c.res.final_cost < 0.8 * best.res.final_cost);
+    if (c.explained > best.explained + 0.05) return true;
+    if (c.explained <= best.explained - 0.05) return false;
+    if (c.degenerate != best.degenerate) return !c.degenerate;
+    return c.res.final_cost < 0.8 * best.res.final_cost;
   };
   std::optional<Candidate> in_gate, beyond_gate;
+  // The log-posterior of a match, up to a constant: the scan's evidence (nats per explained point)
+  // plus the Gaussian prior's log-density.
+  const double nats = opt.prior_nats_per_point * static_cast<double>(pts.size());
+  auto logPosterior = [&](const Candidate& c) { return nats * c.explained - 0.5 * c.sigmas * c.sigmas; };
   auto consider = [&](Candidate c) {
-    std::optional<Candidate>& pool = c.sigmas <= opt.prior_gate_sigmas ? in_gate : beyond_gate;
-    if (!pool || better(c, *pool)) pool = std::move(c);
+    if (c.sigmas <= opt.prior_gate_sigmas) {
+      if (!in_gate || better(c, *in_gate)) in_gate = std::move(c);
+    } else if (!beyond_gate || logPosterior(c) > logPosterior(*beyond_gate)) {
+      beyond_gate = std::move(c);
+    }
   };
   auto bestExplained = [&] { return in_gate ? in_gate->explained : 0.0; };
   consider(tryFrom(T_pred));
@@ -208,8 +223,10 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
                        in_gate->overlap.explained_in_overlap >= opt.min_explained_fraction;
   if (in_gate && (in_gate->explained >= opt.min_explained_fraction || vouched))
     win = &*in_gate;
-  if (beyond_gate && beyond_gate->explained >= std::max(opt.prior_override_explained, opt.min_explained_fraction) &&
-      beyond_gate->explained >= bestExplained() + kOverrideMargin) {
+  // A match beyond the gate wins when the evidence outweighs the prior: a higher log-posterior
+  // than the best match within the gate (or than the prediction itself, explaining nothing).
+  if (beyond_gate && beyond_gate->explained >= opt.min_explained_fraction &&
+      logPosterior(*beyond_gate) > (in_gate ? logPosterior(*in_gate) : 0.0)) {
     win = &*beyond_gate;
     out.overrode_prior = true;
   } else if (beyond_gate && beyond_gate->explained >= opt.min_explained_fraction && !win) {
@@ -217,23 +234,24 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   }
   if (!win) return out;
   out.explained = win->explained;
-  const registration::Result& res = win->res;
-  SE2 T = res.T_target_source;
-  // Degeneracy (Zhang, Kaess & Singh 2016): the translational block of the information matrix per
-  // matched point; a weak eigen-direction is not pinned by the scan, so the translation along it
-  // is taken from the prediction (solution remapping) instead of whatever the solver slid to.
-  if (res.num_inliers > 0) {
-    const Eigen::Matrix2d Ht = res.information.topLeftCorner<2, 2>() / static_cast<double>(res.num_inliers);
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(Ht);
-    if (es.info() == Eigen::Success && es.eigenvalues()(0) < opt.degeneracy_threshold) {
-      out.degenerate = true;
-      out.dir = es.eigenvectors().col(0).normalized();
-      const Eigen::Vector2d t = T.translation() - out.dir * out.dir.dot(T.translation() - T_pred.translation());
-      T = SE2(t, T.theta());
-    }
-  }
-  out.T = T;
+  out.degenerate = win->degenerate;
+  out.dir = win->dir;
+  out.T = win->T;
   return out;
+}
+
+/// Degeneracy (Zhang, Kaess & Singh 2016): the translational block of the information matrix per
+/// matched point; a weak eigen-direction is not pinned by the scan, so the translation along it is
+/// taken from the prediction (solution remapping) instead of whatever the solver slid to.
+void FrontEnd::remapDegenerate(Candidate& c, const SE2& T_pred) const {
+  const registration::Result& res = c.res;
+  if (res.num_inliers == 0) return;
+  const Eigen::Matrix2d Ht = res.information.topLeftCorner<2, 2>() / static_cast<double>(res.num_inliers);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(Ht);
+  if (es.info() != Eigen::Success || !(es.eigenvalues()(0) < opt.degeneracy_threshold)) return;
+  c.degenerate = true;
+  c.dir = es.eigenvectors().col(0).normalized();
+  c.T = degeneracy::remapPose(T_pred, c.T, degeneracy::projectorRemovingDirection(std::atan2(c.dir.y(), c.dir.x())));
 }
 
 }  // namespace lidar2d::slam::internal

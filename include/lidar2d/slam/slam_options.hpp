@@ -64,11 +64,11 @@ struct SlamOptions {
   double prior_velocity_sigma_m = 0.1;
   double prior_velocity_sigma_m_per_s = 1.0;
   double prior_velocity_sigma_rad = 5.0 * kDeg;
-  double prior_velocity_sigma_rad_per_s = 45.0 * kDeg;
+  double prior_velocity_sigma_rad_per_s = 100.0 * kDeg;
   double max_speed_m_per_s = 5.0;
   double max_turn_rate_rad_per_s = 360.0 * kDeg;
   double prior_gate_sigmas = 4.0;
-  double prior_override_explained = 0.8;
+  double prior_nats_per_point = 1.0;
 
   // --- submaps ---
   int submap_nodes = 30;
@@ -266,9 +266,9 @@ inline constexpr SlamOption kSlamOptionTable[] = {
     {LIDAR2D_SLAM_FIELD(prior_gate_sigmas), "motion prior", "sigmas", OptionRange::above(0),
      "a match farther from the prediction than this (Mahalanobis distance under the prior) contradicts the "
      "prior ..."},
-    {LIDAR2D_SLAM_FIELD(prior_override_explained), "motion prior", "fraction", OptionRange::fraction(),
-     "... and is taken only when it explains at least this share of the scan and clearly more (0.1) than "
-     "the best match within the gate; else the prior wins"},
+    {LIDAR2D_SLAM_FIELD(prior_nats_per_point), "motion prior", "nats", OptionRange::above(0),
+     "... and wins only when its log-posterior beats the best match within the gate: this much "
+     "log-likelihood per point it explains, minus half its squared distance in sigmas"},
     {LIDAR2D_SLAM_FIELD(submap_nodes), "submaps", "nodes", OptionRange::atLeast(2), "nodes per submap"},
     {LIDAR2D_SLAM_FIELD(loop_search_radius_m), "loop closure", "m", OptionRange::above(0),
      "finished submaps whose centre is nearer than this to the node are candidates"},

@@ -66,9 +66,7 @@ class FrontEnd {
   // A prior wider than this (sigma) is beyond ICP's basin of convergence: the correlative search
   // runs unless a match is confirmed.
   static constexpr double kIcpBasinM = 0.3;
-  static constexpr double kIcpBasinRad = 10.0 * kDeg;
-  // A match beyond the prior's gate must explain this much more of the scan than the best within.
-  static constexpr double kOverrideMargin = 0.1;
+  static constexpr double kIcpBasinRad = 20.0 * kDeg;
   // A scan point this near the local map overlaps it (ICP's own reach, icp_max_correspondence_m's
   // default); a match within the prior's gate is judged on the overlapping points when at least
   // kMinOverlap of the scan overlaps.
@@ -84,6 +82,9 @@ class FrontEnd {
     double explained = 0.0;
     double sigmas = 0.0;
     Overlap overlap;
+    SE2 T;  ///< the result, remapped along a degenerate direction (remapDegenerate)
+    bool degenerate = false;
+    Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
   };
   /// What frontEndMatch found.
   struct MatchOutcome {
@@ -98,6 +99,7 @@ class FrontEnd {
   };
 
   void rebuildLocalMap();
+  void remapDegenerate(Candidate& c, const SE2& T_pred) const;
   MatchOutcome frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
                              const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
                              double earlier_below);
