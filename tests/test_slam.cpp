@@ -126,6 +126,8 @@ TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
   EXPECT_LT(e.rms, odo.rms / 5);
   EXPECT_GT(slam->stats().loop_accepted, 0u);
   EXPECT_EQ(slam->stats().unmatched, 0u);
+  EXPECT_EQ(slam->stats().fragments, 1u);
+  EXPECT_EQ(slam->stats().odometry_wins, 0u);
   // Every scan is attached to a node and nodes are a subset of the scans.
   const auto traj = slam->trajectory();
   std::size_t nodes = 0;
@@ -268,6 +270,11 @@ TEST(Slam, KidnappedRobotIsReportedAndTheRunContinues) {
   for (const auto& ev : slam->events()) all += ev.what + "\n";
   EXPECT_NE(all.find("lost track"), std::string::npos) << all;
   for (const auto& p : est) EXPECT_TRUE(p.isFinite());
+  // Each fragment that no loop closure tied to the first is reported.
+  std::size_t reported = 0;
+  for (const auto& ev : slam->events()) reported += ev.what.starts_with("fragment from node") ? 1 : 0;
+  EXPECT_GE(slam->stats().fragments, 1u);
+  EXPECT_EQ(reported + 1, slam->stats().fragments) << all;
 }
 
 TEST(Slam, FramesWithFewPointsArePredicted) {

@@ -176,6 +176,8 @@ void run(const SlamArgs& a) {
   j["correlative_fallbacks"] = s.correlative_fallbacks;
   j["prior_overridden"] = s.prior_overridden;
   j["prior_kept"] = s.prior_kept;
+  j["fragments"] = s.fragments;
+  j["odometry_wins"] = s.odometry_wins;
   j["degenerate_scans"] = s.degenerate;
   j["loop_searches"] = s.loop_searches;
   j["loop_closures_accepted"] = s.loop_accepted;

@@ -1,5 +1,9 @@
 #include "src/slam/internal/graph.hpp"
 
+#include "src/slam/internal/motion_prior.hpp"
+
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <utility>
@@ -57,6 +61,65 @@ void optimize(SlamState& s, int iterations) {
   s.nodes_since_optimization = 0;
   s.loops_since_optimization = 0;
   s.searched_loop_pending = false;
+}
+
+void checkAtEnd(SlamState& s) {
+  const std::size_t N = s.nodes.size();
+  if (N < 2) {
+    s.stats.fragments = N;
+    return;
+  }
+  std::vector<char> restart(N, 0);
+  for (std::size_t r : s.restarts) restart[r] = 1;
+  bool added = false;
+  for (std::size_t n = 1; n < N; ++n) {
+    if (!restart[n] || !s.node_odometry[n - 1] || !s.node_odometry[n]) continue;
+    const SE2 odo = s.node_odometry[n - 1]->inverse() * *s.node_odometry[n];
+    const SE2 est = s.nodes[n - 1].T_world_robot.inverse() * s.nodes[n].T_world_robot;
+    const MotionPrediction p = odometryPrediction(s.opt, odo, s.nodes[n].time - s.nodes[n - 1].time);
+    const double sigmas = p.distance(est);
+    if (!(sigmas > s.opt.prior_gate_sigmas)) continue;
+    Constraint c;
+    c.kind = Constraint::Kind::kOdometry;
+    c.from = n - 1;
+    c.to = n;
+    c.T_from_to = odo;
+    s.addEdge(std::move(c), diagSqrtInfo(p.sigma_m, p.sigma_rad), 0.0);
+    s.events.push_back({s.scans[s.nodes[n].scan].frame_index, s.nodes[n].time,
+                        fmt::format("odometry wins from node {} to {}: the estimate contradicted it by {:.1f} sigmas "
+                                    "where tracking was lost (no scan evidence)",
+                                    n - 1, n, sigmas)});
+    ++s.stats.odometry_wins;
+    added = true;
+  }
+  if (added) optimize(s, s.opt.graph.max_iterations);
+
+  // Fragments: union of the stretches between restarts through accepted loop closures.
+  std::vector<std::size_t> fragment_of(N, 0), first_node{0};
+  for (std::size_t n = 1; n < N; ++n) {
+    fragment_of[n] = fragment_of[n - 1] + (restart[n] ? 1 : 0);
+    if (restart[n]) first_node.push_back(n);
+  }
+  std::vector<std::size_t> parent(first_node.size());
+  for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = i;
+  auto find = [&](std::size_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  for (const Constraint& c : s.constraints)
+    if (c.kind == Constraint::Kind::kLoop && c.accepted) parent[find(fragment_of[c.from])] = find(fragment_of[c.to]);
+  std::size_t fragments = 0;
+  for (std::size_t i = 0; i < parent.size(); ++i) {
+    if (find(i) != i) continue;
+    ++fragments;
+    if (find(i) == find(0)) continue;
+    const std::size_t a = first_node[i];
+    s.events.push_back({s.scans[s.nodes[a].scan].frame_index, s.nodes[a].time,
+                        fmt::format("fragment from node {} (after lost tracking) is tied to the first one only by "
+                                    "the prediction: no loop closure verified its place",
+                                    a)});
+  }
+  s.stats.fragments = fragments;
 }
 
 void optimizeIfDue(SlamState& s) {

@@ -28,6 +28,18 @@ double MotionPrediction::distance(const SE2& step) const {
   return std::sqrt(a * a + b * b);
 }
 
+MotionPrediction odometryPrediction(const SlamOptions& opt, const SE2& odo, double dt) {
+  MotionPrediction p;
+  const double dist = odo.translation().norm(), turn = std::abs(odo.theta());
+  p.delta = odo;
+  p.source = PriorSource::kOdometry;
+  p.dt = std::max(0.0, dt);
+  p.sigma_m = opt.prior_odometry_sigma_m + opt.prior_odometry_sigma_per_m * dist + opt.prior_odometry_sigma_m_per_s * p.dt;
+  p.sigma_rad =
+      opt.prior_odometry_sigma_rad + opt.prior_odometry_sigma_per_turn * turn + opt.prior_odometry_sigma_rad_per_m * dist;
+  return p;
+}
+
 double MotionPrior::usualInterval() const {
   if (recent_intervals_.empty()) return 0.0;
   std::vector<double> v(recent_intervals_.begin(), recent_intervals_.end());
@@ -72,12 +84,10 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       if (plausible && p.dt > 0.0)
         plausible = dist <= opt_.max_speed_m_per_s * p.dt && turn <= opt_.max_turn_rate_rad_per_s * p.dt;
       if (plausible) {
-        p.delta = d;
-        p.source = PriorSource::kOdometry;
-        p.sigma_m = opt_.prior_odometry_sigma_m + opt_.prior_odometry_sigma_per_m * dist +
-                    opt_.prior_odometry_sigma_m_per_s * p.dt;
-        p.sigma_rad = opt_.prior_odometry_sigma_rad + opt_.prior_odometry_sigma_per_turn * turn +
-                      opt_.prior_odometry_sigma_rad_per_m * dist;
+        const bool time_ok = p.time_ok;
+        const double step_dt = p.dt;
+        p = odometryPrediction(opt_, d, step_dt);
+        p.time_ok = time_ok;
       } else {
         notes_.push_back(
             d.isFinite()

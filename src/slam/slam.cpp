@@ -175,6 +175,7 @@ struct Slam::Impl {
                : state.node_path_m[n - 1] +
                      (state.nodes[n - 1].T_local_robot.translation() - T_local.translation()).norm());
     descriptors.describeNode(raw);
+    if (restart) state.restarts.push_back(n);
     if (n > 0) internal::addSequentialConstraints(state, n, restart, degenerate, dir_local);
 
     front_end.addNode(n, restart);
@@ -201,6 +202,7 @@ void Slam::finish() {
   internal::SlamState& s = impl_->state;
   impl_->loops.expirePending();
   internal::optimize(s, s.opt.graph.max_iterations);
+  internal::checkAtEnd(s);
   impl_->finished = true;
   s.stats.nodes = s.nodes.size();
   s.stats.submaps = s.submaps.size();

@@ -19,6 +19,16 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool de
 /// local frame follows the newest node.
 void optimize(SlamState& s, int iterations);
 
+/// The end-of-run checks, after the final optimisation:
+/// - never worse than odometry: where the link between two consecutive nodes is only the prediction
+///   (the front end had lost track) and the optimised estimate contradicts their odometry beyond the
+///   motion prior's gate, odometry wins (a constraint as strong as the prior), with an event, and the
+///   graph is optimised again;
+/// - fragments: the stretches between restarts that no accepted loop closure ties together; each
+///   fragment beyond the first is reported as an event. Sets stats.fragments and
+///   stats.odometry_wins.
+void checkAtEnd(SlamState& s);
+
 /// Optimises when due after a new node: at once after a descriptor closure, optimize_every_nodes
 /// nodes after a searched closure, 10x as many after other closures.
 void optimizeIfDue(SlamState& s);

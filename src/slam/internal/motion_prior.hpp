@@ -42,6 +42,9 @@ struct MotionPrediction {
   double distance(const SE2& step) const;
 };
 
+/// The odometry prediction of step `odo` that took `dt` seconds: its sigmas under `opt`.
+MotionPrediction odometryPrediction(const SlamOptions& opt, const SE2& odo, double dt);
+
 class MotionPrior {
  public:
   explicit MotionPrior(const SlamOptions& opt) : opt_(opt) {}

@@ -81,6 +81,7 @@ struct SlamState {
   std::vector<std::optional<SE2>> node_odometry;            // trusted odometry poses (odometry constraints)
   std::vector<std::vector<localization::Line>> node_lines;  // robot frame, longest first (descriptor loops)
   std::vector<double> node_path_m;                          // front-end path length from the first node [m]
+  std::vector<std::size_t> restarts;                        // nodes where the front end restarted (lost track)
   std::vector<Submap> submaps;
   std::vector<Constraint> constraints;
   std::vector<PoseGraphEdge> edges;  // of the accepted constraints
