@@ -75,6 +75,7 @@ nlohmann::json summarise(const InfoArgs& args) {
   nlohmann::json j;
   j["file"] = args.log;
   j["format"] = io::toString(source->format());
+  j["container"] = notes.container;
   j["scans"] = scans;
   j["beams"] = beams_first;
   j["beams_min"] = scans ? beams_min : 0;
@@ -113,7 +114,9 @@ nlohmann::json summarise(const InfoArgs& args) {
 
 void printText(const nlohmann::json& j) {
   auto& o = std::cout;
-  o << "file:        " << j["file"].get<std::string>() << " (" << j["format"].get<std::string>() << ")\n";
+  o << "file:        " << j["file"].get<std::string>() << " (" << j["format"].get<std::string>();
+  if (!j["container"].get<std::string>().empty()) o << ": " << j["container"].get<std::string>();
+  o << ")\n";
   o << "scans:       " << j["scans"] << " from " << j["scan_source"].get<std::string>() << "\n";
   o << "beams:       " << j["beams"];
   if (j["beams_min"] != j["beams_max"]) o << " (varies " << j["beams_min"] << ".." << j["beams_max"] << ")";
