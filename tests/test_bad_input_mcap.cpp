@@ -70,10 +70,10 @@ TEST(BadMcap, EveryTruncationIsOneError) {
   const std::string full = bytes(fixture("chunked_zstd.mcap"));
   test::TempDir tmp;
   const fs::path f = tmp / "cut.mcap";
-  // Every cut in the magic, header and first chunk, then every 7th byte, then the file's last bytes
-  // (Data End, summary, Footer, closing magic).
+  // Every cut in the magic, the Header and the start of the first chunk, then every 29th byte, then
+  // every cut in the file's last bytes (Data End, summary, Footer, closing magic).
   std::vector<std::size_t> cuts;
-  for (std::size_t n = 1; n < full.size(); n += (n < 1200 || n + 120 > full.size()) ? 1 : 7) cuts.push_back(n);
+  for (std::size_t n = 1; n < full.size(); n += (n < 300 || n + 120 > full.size()) ? 1 : 29) cuts.push_back(n);
   for (const std::size_t n : cuts) {
     test::writeFile(f, full.substr(0, n));
     try {
