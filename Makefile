@@ -35,7 +35,7 @@ test-asan: $(ASAN_BUILD)/CMakeCache.txt
 DATA_DIR ?= $(if $(LIDAR2D_DATA_DIR),$(LIDAR2D_DATA_DIR),../shared/data)
 test-tsan-bags: build
 	$(CXX) -std=c++20 -O1 -g -fsanitize=thread -I. -Iinclude tests/tsan/ros1_bag_threads.cpp \
-	  src/io/internal/ros1_bag.cpp src/core/error.cpp -lfmt -lbz2 -llz4 -o $(BUILD)/tsan_ros1_bag
+	  src/io/internal/ros1_bag.cpp src/io/internal/decompress.cpp src/core/error.cpp -lfmt -lbz2 -llz4 -lzstd -o $(BUILD)/tsan_ros1_bag
 	TSAN_OPTIONS=halt_on_error=1 $(BUILD)/tsan_ros1_bag $(wildcard $(DATA_DIR)/raw/*.bag $(DATA_DIR)/bags/*.bag) \
 	  $(BUILD)/tests/fixtures/tf_chain.bag $(BUILD)/tests/fixtures/many_chunks.bag
 

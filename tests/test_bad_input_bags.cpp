@@ -211,7 +211,7 @@ TEST(BadBagsCli, Ros2FolderWithoutDb3) {
   const fs::path dir = tmp / "bag";
   fs::create_directory(dir);
   test::writeFile(dir / "metadata.yaml", "rosbag2_bagfile_information:\n  version: 4\n  storage_identifier: sqlite3\n");
-  expectCliError({"info", dir.string()}, dir.string(), "ROS2 bag folder holds no .db3 file");
+  expectCliError({"info", dir.string()}, dir.string(), "ROS2 bag folder holds no .db3 or .mcap file");
 }
 
 TEST(BadBagsCli, Db3WithoutTopicsTable) {

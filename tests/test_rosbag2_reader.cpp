@@ -5,6 +5,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <sqlite3.h>
+#include <zstd.h>
 
 #include <cmath>
 #include <cstring>
@@ -315,6 +316,88 @@ TEST(Rosbag2Reader, NoOdometryAndNoTf) {
   n = 0;
   while (src->next()) ++n;
   EXPECT_EQ(n, 1u);
+}
+
+// ---- split and compressed bags (rosbag2's FILE and MESSAGE modes, compressed here with libzstd's
+// ZSTD_compress as rosbag2's zstd compressor does) ----
+
+std::vector<std::uint8_t> zstdCompress(const std::vector<std::uint8_t>& in) {
+  std::vector<std::uint8_t> out(ZSTD_compressBound(in.size()));
+  const std::size_t n = ZSTD_compress(out.data(), out.size(), in.data(), in.size(), 1);
+  if (ZSTD_isError(n)) throw std::runtime_error("ZSTD_compress");
+  out.resize(n);
+  return out;
+}
+
+enum class Mode { kSingle, kSplit, kFile, kMessage };
+
+/// A bag folder with the same messages in each mode: /tf_static, /odom at 10, 11, 12 s and /scan
+/// at 10.5 and 11.5 s; split after the first scan (except kSingle and kMessage).
+fs::path writeBag(const fs::path& dir, Mode mode) {
+  fs::create_directory(dir);
+  auto pack = [&](const std::vector<std::uint8_t>& d) { return mode == Mode::kMessage ? zstdCompress(d) : d; };
+  const bool split = mode == Mode::kSplit || mode == Mode::kFile;
+  std::vector<std::string> files;
+  for (int part = 0; part < (split ? 2 : 1); ++part) {
+    const std::string name = "bag_" + std::to_string(part) + ".db3";
+    {
+      TestDb db(dir / name);
+      db.topic(1, "/scan", "sensor_msgs/msg/LaserScan");
+      db.topic(2, "/odom", "nav_msgs/msg/Odometry");
+      db.topic(3, "/tf_static", "tf2_msgs/msg/TFMessage");
+      if (part == 0) {
+        db.message(3, 9.0, pack(cdrTf({{"base_link", "laser", 0.1, 0.0, 0.0, kPi / 2}})));
+        db.message(2, 10.0, pack(cdrOdom(10.0, 0.0, 0.0, 0.0)));
+        db.message(1, 10.5, pack(cdrScan(10.5, "laser", {1.0f, 2.0f})));
+      }
+      if (part == 1 || !split) {
+        db.message(2, 11.0, pack(cdrOdom(11.0, 1.0, 0.0, 0.5)));
+        db.message(1, 11.5, pack(cdrScan(11.5, "laser", {3.0f, 4.0f})));
+        db.message(2, 12.0, pack(cdrOdom(12.0, 2.0, 1.0, 1.0)));
+      }
+    }
+    if (mode == Mode::kFile) {
+      const std::string raw = test::readFile(dir / name);
+      const auto z = zstdCompress(std::vector<std::uint8_t>(raw.begin(), raw.end()));
+      test::writeFile(dir / (name + ".zstd"), std::string(z.begin(), z.end()));
+      fs::remove(dir / name);
+      files.push_back(name + ".zstd");
+    } else {
+      files.push_back(name);
+    }
+  }
+  std::string meta = "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: sqlite3\n  relative_file_paths:\n";
+  for (const auto& f : files) meta += "    - " + f + "\n";
+  meta += mode == Mode::kFile      ? "  compression_format: zstd\n  compression_mode: FILE\n"
+          : mode == Mode::kMessage ? "  compression_format: zstd\n  compression_mode: MESSAGE\n"
+                                   : "  compression_format: \"\"\n  compression_mode: \"\"\n";
+  test::writeFile(dir / "metadata.yaml", meta);
+  return dir;
+}
+
+TEST(Rosbag2Reader, SplitAndCompressedDb3BagsGiveTheSameFrames) {
+  test::TempDir tmp;
+  const char* containers[] = {"sqlite3 storage", "sqlite3 storage, 2 files",
+                              "sqlite3 storage, 2 files, zstd-compressed by file",
+                              "sqlite3 storage, zstd-compressed by message"};
+  for (const Mode mode : {Mode::kSingle, Mode::kSplit, Mode::kFile, Mode::kMessage}) {
+    SCOPED_TRACE(static_cast<int>(mode));
+    const fs::path dir = writeBag(tmp / ("bag" + std::to_string(static_cast<int>(mode))), mode);
+    auto src = openLog(dir.string());
+    std::vector<Frame> frames;
+    while (auto f = src->next()) frames.push_back(std::move(*f));
+    ASSERT_EQ(frames.size(), 2u);
+    EXPECT_EQ(src->notes().container, containers[static_cast<int>(mode)]);
+    EXPECT_TRUE(src->notes().warnings.empty());
+    // Odometry halfway between (0,0,0)-(1,0,0.5) and (1,0,0.5)-(2,1,1); laser turned +90 deg.
+    EXPECT_NEAR(frames[0].time, 10.5, 1e-9);
+    EXPECT_EQ(frames[0].scan.ranges()[0], 1.0);
+    EXPECT_TRUE(IsNearPose(SE2(0.5, 0.0, 0.25), *frames[0].T_odom_robot, 1e-9, 1e-7));
+    EXPECT_NEAR(frames[1].time, 11.5, 1e-9);
+    EXPECT_EQ(frames[1].scan.ranges()[1], 4.0);
+    EXPECT_TRUE(IsNearPose(SE2(1.5, 0.5, 0.75), *frames[1].T_odom_robot, 1e-9, 1e-7));
+    EXPECT_TRUE(IsNearPose(SE2(0.1, 0.0, kPi / 2), frames[1].T_robot_laser, 1e-12, 1e-9));
+  }
 }
 
 // ---- CDR decoder ----

@@ -6,7 +6,7 @@ PKGS="build-essential make cmake pkg-config git
   libeigen3-dev libceres-dev libnanoflann-dev
   libopencv-core-dev libopencv-imgproc-dev libpng-dev
   libcli11-dev libspdlog-dev libfmt-dev libyaml-cpp-dev nlohmann-json3-dev
-  zlib1g-dev libbz2-dev liblz4-dev libsqlite3-dev
+  zlib1g-dev libbz2-dev liblz4-dev libzstd-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-rosbag
   chromium"

@@ -75,6 +75,7 @@ nlohmann::json summarise(const InfoArgs& args) {
   nlohmann::json j;
   j["file"] = args.log;
   j["format"] = io::toString(source->format());
+  j["container"] = notes.container;
   j["scans"] = scans;
   j["beams"] = beams_first;
   j["beams_min"] = scans ? beams_min : 0;
@@ -113,7 +114,9 @@ nlohmann::json summarise(const InfoArgs& args) {
 
 void printText(const nlohmann::json& j) {
   auto& o = std::cout;
-  o << "file:        " << j["file"].get<std::string>() << " (" << j["format"].get<std::string>() << ")\n";
+  o << "file:        " << j["file"].get<std::string>() << " (" << j["format"].get<std::string>();
+  if (!j["container"].get<std::string>().empty()) o << ": " << j["container"].get<std::string>();
+  o << ")\n";
   o << "scans:       " << j["scans"] << " from " << j["scan_source"].get<std::string>() << "\n";
   o << "beams:       " << j["beams"];
   if (j["beams_min"] != j["beams_max"]) o << " (varies " << j["beams_min"] << ".." << j["beams_max"] << ")";
@@ -141,7 +144,7 @@ void printText(const nlohmann::json& j) {
 void addInfoCommand(CLI::App& app) {
   auto args = std::make_shared<InfoArgs>();
   auto* sub = app.add_subcommand("info", "Summarise a log: scans, beams, field of view, duration, odometry/truth");
-  sub->add_option("LOG", args->log, "CARMEN log (.log/.clf, plain or .gz), ROS1 bag, or ROS2 bag")->required();
+  sub->add_option("LOG", args->log, "CARMEN log (.log/.clf, plain or .gz), ROS1 bag, or ROS2 bag (folder with metadata.yaml, .db3 or .mcap file)")->required();
   sub->add_flag("--json", args->json, "print JSON instead of text");
   addReaderOptions(sub, args->reader);
   sub->callback([args] {

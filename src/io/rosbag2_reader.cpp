@@ -1,26 +1,36 @@
-// ROS2 bag reader for the sqlite3 storage (rosbag2's default before Iron): Debian 12 packages no
-// rosbag2 library, so the .db3 database is read with libsqlite3 and the CDR messages are decoded by
-// internal/ros_messages.cpp. Tables (rosbag2_storage_default_plugins, sqlite_statements):
-//   topics(id, name, type, serialization_format, offered_qos_profiles)
-//   messages(id, topic_id, timestamp, data)   -- timestamp: receive time [ns], data: CDR blob
-// The database is opened read-only with the URI parameter immutable=1: the recorder leaves bags in
-// WAL mode, and a plain read-only open would still create -wal/-shm files beside them (or fail in a
-// read-only folder).
+// ROS2 bag reader: a bag folder (metadata.yaml listing one or more files) or a single .db3 / .mcap
+// file. The storage of each file (sqlite3 or MCAP, internal/ros2_storage.hpp) is recognised by its
+// first bytes; the files of a split bag are read one after the other in the order metadata.yaml
+// lists them (rosbag2 splits by time). Bags compressed by rosbag2 itself (compression_format zstd)
+// are read in both modes: FILE (each listed file is a zstd file, decompressed into a temporary
+// folder that is removed with the reader) and MESSAGE (each message's data is a zstd frame). The CDR
+// messages are decoded by internal/ros_messages.cpp.
+//
+// metadata.yaml fields relied on (rosbag2_storage's BagMetadata / yaml.hpp, versions 4 to 9), under
+// rosbag2_bagfile_information: storage_identifier ("sqlite3", "mcap"), relative_file_paths (relative
+// to the folder; bags of version < 4 wrote them with the folder's name in front, so a path that
+// does not exist is also tried as a bare file name), compression_format ("" or "zstd") and
+// compression_mode ("", NONE, FILE or MESSAGE, any case, as rosbag2_compression parses it).
 
 #include <fmt/format.h>
-#include <sqlite3.h>
+#include <stdlib.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
-#include <map>
+#include <fstream>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
+#include "src/io/internal/decompress.hpp"
 #include "src/io/internal/readers.hpp"
+#include "src/io/internal/ros2_storage.hpp"
 #include "src/io/internal/ros_frames.hpp"
 #include "src/io/internal/ros_messages.hpp"
 
@@ -34,253 +44,281 @@ constexpr const char* kOdometryType = "nav_msgs/msg/Odometry";
 constexpr const char* kTfType = "tf2_msgs/msg/TFMessage";
 constexpr double kTfSearchWindowS = 30.0;  // how much of /tf to search for the mounting (see ROS1)
 constexpr int kMaxTfMessages = 100000;
+/// A message decompressed in MESSAGE mode may be at most this large [bytes].
+constexpr std::uint64_t kMaxMessageBytes = std::uint64_t{1} << 30;
+/// A file decompressed in FILE mode may be at most this many times its compressed size (plus
+/// 64 MiB): recorded sensor data compresses by a few times, a zstd bomb by thousands.
+constexpr std::uint64_t kMaxFileRatio = 1000;
 
-/// The .db3 file of a bag given as a folder (metadata.yaml) or directly as the database file.
-fs::path findDatabase(const std::string& path) {
-  std::error_code ec;
-  if (!fs::is_directory(path, ec)) return path;
+enum class Compression { kNone, kFile, kMessage };
+
+/// What a bag path names: its files in reading order, and how rosbag2 compressed them.
+struct BagLayout {
   std::vector<fs::path> files;
+  Compression compression = Compression::kNone;
+  std::string storage;  // storage_identifier from metadata.yaml, "" when not stated
+};
+
+std::string yamlString(const YAML::Node& info, const char* key, const std::string& meta) {
+  const YAML::Node n = info[key];
+  if (!n || n.IsNull()) return "";
+  if (!n.IsScalar())
+    throw badInput(fmt::format("{} must be a string", key), {meta, static_cast<std::size_t>(n.Mark().line + 1), key});
+  return n.as<std::string>();
+}
+
+BagLayout readLayout(const std::string& path) {
+  std::error_code ec;
+  BagLayout layout;
+  if (!fs::is_directory(path, ec)) {
+    layout.files.push_back(path);
+    return layout;
+  }
   const fs::path meta = fs::path(path) / "metadata.yaml";
   if (fs::exists(meta, ec)) {
+    YAML::Node info;
     try {
-      const YAML::Node info = YAML::LoadFile(meta.string())["rosbag2_bagfile_information"];
-      if (info) {
-        const std::string storage = info["storage_identifier"] ? info["storage_identifier"].as<std::string>() : "";
-        if (!storage.empty() && storage != "sqlite3")
+      info = YAML::LoadFile(meta.string())["rosbag2_bagfile_information"];
+    } catch (const YAML::Exception& e) {
+      throw badInput(fmt::format("not a readable rosbag2 metadata file: {}", e.msg),
+                     {meta.string(), static_cast<std::size_t>(e.mark.line + 1)});
+    }
+    if (info) {
+      try {
+        layout.storage = yamlString(info, "storage_identifier", meta.string());
+        if (!layout.storage.empty() && layout.storage != "sqlite3" && layout.storage != "mcap")
           throw Error(ErrorKind::kUnsupported,
-                      fmt::format("ROS2 bag storage '{}' is not supported (only sqlite3 .db3 bags)", storage),
+                      fmt::format("ROS2 bag storage '{}' is not supported (only sqlite3 and mcap)", layout.storage),
                       {meta.string(), 0, "storage_identifier"});
-        const std::string compression =
-            info["compression_format"] ? info["compression_format"].as<std::string>() : "";
-        if (!compression.empty())
+        const std::string format = yamlString(info, "compression_format", meta.string());
+        std::string mode = yamlString(info, "compression_mode", meta.string());
+        std::transform(mode.begin(), mode.end(), mode.begin(), [](unsigned char c) { return std::toupper(c); });
+        if (mode == "FILE")
+          layout.compression = Compression::kFile;
+        else if (mode == "MESSAGE")
+          layout.compression = Compression::kMessage;
+        else if (!mode.empty() && mode != "NONE")
+          throw badInput(fmt::format("unknown compression_mode '{}' (rosbag2 writes NONE, FILE or MESSAGE)", mode),
+                         {meta.string(), 0, "compression_mode"});
+        if (layout.compression != Compression::kNone && format != "zstd")
           throw Error(ErrorKind::kUnsupported,
-                      fmt::format("compressed ROS2 bags ({}) are not supported; decompress with 'ros2 bag convert'",
-                                  compression),
+                      fmt::format("ROS2 bag compression '{}' is not supported (only zstd)", format),
                       {meta.string(), 0, "compression_format"});
-        for (const auto& f : info["relative_file_paths"]) files.push_back(fs::path(path) / f.as<std::string>());
+        if (const YAML::Node files = info["relative_file_paths"]) {
+          if (!files.IsSequence())
+            throw badInput("relative_file_paths must be a list of file names",
+                           {meta.string(), static_cast<std::size_t>(files.Mark().line + 1), "relative_file_paths"});
+          for (const auto& f : files) {
+            fs::path p = fs::path(path) / f.as<std::string>();
+            if (!fs::exists(p, ec) && fs::exists(fs::path(path) / p.filename(), ec)) p = fs::path(path) / p.filename();
+            if (!fs::exists(p, ec))
+              throw ioError(fmt::format("no such file: {} (listed in relative_file_paths)", p.string()),
+                            {meta.string(), static_cast<std::size_t>(f.Mark().line + 1), "relative_file_paths"});
+            layout.files.push_back(p);
+          }
+        }
+      } catch (const YAML::Exception& e) {
+        throw badInput(fmt::format("not a readable rosbag2 metadata file: {}", e.msg),
+                       {meta.string(), static_cast<std::size_t>(e.mark.line + 1)});
       }
-    } catch (const YAML::Exception&) {
-      files.clear();  // unreadable metadata: fall back to the folder's .db3 files
     }
   }
-  if (files.empty()) {
+  if (layout.files.empty()) {  // no metadata.yaml, or one without relative_file_paths
     for (const auto& e : fs::directory_iterator(path, ec))
-      if (e.path().extension() == ".db3") files.push_back(e.path());
-    std::sort(files.begin(), files.end());
+      if (e.path().extension() == ".db3" || e.path().extension() == ".mcap") layout.files.push_back(e.path());
+    std::sort(layout.files.begin(), layout.files.end());
   }
-  if (files.empty()) throw badInput("ROS2 bag folder holds no .db3 file", {path});
-  if (files.size() > 1)
-    throw Error(ErrorKind::kUnsupported,
-                fmt::format("ROS2 bag split into {} files is not supported (only single-file bags)", files.size()),
-                {path});
-  if (!fs::exists(files.front(), ec)) throw ioError("no such file (listed in metadata.yaml)", {files.front().string()});
-  return files.front();
+  if (layout.files.empty()) throw badInput("ROS2 bag folder holds no .db3 or .mcap file", {path});
+  return layout;
 }
 
-/// "file:" URI of a path with immutable=1 (RFC 3986 escaping of the characters SQLite's URI parser
-/// treats specially).
-std::string immutableUri(const fs::path& file) {
-  std::string uri = "file:";
-  for (const unsigned char c : fs::absolute(file).string()) {
-    if (c == '%' || c == '?' || c == '#' || c < 0x20 || c >= 0x7f)
-      uri += fmt::format("%{:02X}", c);
-    else
-      uri += static_cast<char>(c);
-  }
-  uri += "?immutable=1";
-  return uri;
+bool startsWithMcapMagic(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  char head[5] = {};
+  in.read(head, sizeof head);
+  return in.gcount() == 5 && std::memcmp(head, "\x89MCAP", 5) == 0;
 }
 
-struct DbCloser {
-  void operator()(sqlite3* db) const { sqlite3_close_v2(db); }
+/// A temporary folder for decompressed files, removed with everything in it when destroyed.
+class ScratchDir {
+ public:
+  ScratchDir() {
+    std::string t = (fs::temp_directory_path() / "lidar2d-bag-XXXXXX").string();
+    if (!mkdtemp(t.data()))
+      throw ioError(fmt::format("cannot create a temporary folder for decompressing: {}", std::strerror(errno)), {t});
+    path_ = t;
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
 };
-struct StmtCloser {
-  void operator()(sqlite3_stmt* s) const { sqlite3_finalize(s); }
-};
-using DbPtr = std::unique_ptr<sqlite3, DbCloser>;
-using StmtPtr = std::unique_ptr<sqlite3_stmt, StmtCloser>;
 
 class Ros2Source final : public RosMessageSource {
  public:
-  Ros2Source(std::string path, const ReaderOptions& options)
-      : RosMessageSource(std::move(path)), db_file_(findDatabase(path_).string()) {
-    std::error_code ec;
-    if (fs::exists(db_file_ + "-wal", ec) && fs::file_size(db_file_ + "-wal", ec) > 0)
-      notes_.warnings.push_back(
-          "a -wal file lies beside the database; its messages (not yet checkpointed) are not read");
-    sqlite3* db = nullptr;
-    const int rc = sqlite3_open_v2(immutableUri(db_file_).c_str(), &db, SQLITE_OPEN_READONLY | SQLITE_OPEN_URI, nullptr);
-    db_.reset(db);
-    if (rc != SQLITE_OK)
-      throw ioError(fmt::format("cannot open as SQLite database: {}", db ? sqlite3_errmsg(db) : sqlite3_errstr(rc)),
-                    {db_file_});
+  Ros2Source(std::string path, const ReaderOptions& options) : RosMessageSource(std::move(path)) {
+    const BagLayout layout = readLayout(path_);
+    compression_ = layout.compression;
+    bool mcap = false;
+    for (std::size_t i = 0; i < layout.files.size(); ++i) {
+      const fs::path& file = layout.files[i];
+      fs::path readable = file;
+      if (compression_ == Compression::kFile) {
+        if (!scratch_) scratch_.emplace();
+        std::error_code ec;
+        const std::uint64_t size = fs::file_size(file, ec);
+        readable = scratch_->path() / fmt::format("{}_{}", i, file.stem().string());
+        decompressZstdFile(file, readable, size * kMaxFileRatio + (std::uint64_t{64} << 20),
+                           {"not a readable zstd-compressed bag file (compression_mode FILE): ", {file.string()}});
+      }
+      const bool is_mcap = startsWithMcapMagic(readable);
+      mcap = mcap || is_mcap;
+      if (!is_mcap) {
+        std::error_code ec;
+        if (fs::exists(readable.string() + "-wal", ec) && fs::file_size(readable.string() + "-wal", ec) > 0)
+          notes_.warnings.push_back(fmt::format(
+              "a -wal file lies beside {}; its messages (not yet checkpointed) are not read", file.filename().string()));
+      }
+      files_.push_back(is_mcap ? openMcapStorage(readable.string(), file.string())
+                               : openSqliteStorage(readable.string(), file.string()));
+    }
+    const char* how[] = {"", ", zstd-compressed by file", ", zstd-compressed by message"};
+    notes_.container = fmt::format("{} storage{}{}", mcap ? "mcap" : "sqlite3",
+                                   files_.size() > 1 ? fmt::format(", {} files", files_.size()) : "",
+                                   how[static_cast<int>(compression_)]);
+    mergeTopics();
     setUp(options);
   }
 
   LogFormat format() const override { return LogFormat::kRosbag2; }
 
  private:
-  bool feed() override {
-    const int rc = sqlite3_step(stream_.get());
-    if (rc == SQLITE_DONE) {
-      stream_.reset();
-      return false;
-    }
-    if (rc != SQLITE_ROW) fail("reading messages");
-    consume(stream_.get());
-    return true;
-  }
-
+  /// A topic over all files of the bag: its index in each file's topics (nullopt where absent).
   struct Topic {
-    std::int64_t id = 0;
     RosTopicInfo info;
     std::string serialization;
+    std::vector<std::optional<std::size_t>> in_file;
   };
 
-  [[noreturn]] void fail(const char* doing) const {
-    const int code = sqlite3_errcode(db_.get());
-    const std::string msg = fmt::format("{}: {}", doing, sqlite3_errmsg(db_.get()));
-    if (code == SQLITE_NOTADB || code == SQLITE_CORRUPT || code == SQLITE_ERROR)
-      throw badInput(fmt::format("not a readable ROS2 bag database ({})", msg), {db_file_});
-    throw ioError(msg, {db_file_});
-  }
-
-  StmtPtr prepare(const std::string& sql, const char* doing) {
-    sqlite3_stmt* s = nullptr;
-    if (sqlite3_prepare_v2(db_.get(), sql.c_str(), -1, &s, nullptr) != SQLITE_OK) {
-      sqlite3_finalize(s);
-      fail(doing);
+  void mergeTopics() {
+    for (std::size_t f = 0; f < files_.size(); ++f) {
+      const auto& topics = files_[f]->topics();
+      for (std::size_t i = 0; i < topics.size(); ++i) {
+        const Ros2Topic& t = topics[i];
+        auto it = std::find_if(topics_.begin(), topics_.end(), [&](const Topic& m) { return m.info.name == t.info.name; });
+        if (it == topics_.end()) {
+          topics_.push_back({{t.info.name, t.info.type, 0}, t.serialization, std::vector<std::optional<std::size_t>>(files_.size())});
+          it = topics_.end() - 1;
+        } else if (it->info.type != t.info.type) {
+          throw badInput(fmt::format("topic {} has type {} here but {} in an earlier file of the bag", t.info.name,
+                                     t.info.type, it->info.type),
+                         {files_[f]->file()});
+        }
+        it->info.count += t.info.count;
+        it->in_file[f] = i;
+      }
     }
-    return StmtPtr(s);
-  }
-
-  static std::string text(sqlite3_stmt* s, int col) {
-    const auto* p = sqlite3_column_text(s, col);
-    return p ? reinterpret_cast<const char*>(p) : "";
-  }
-
-  static std::span<const std::uint8_t> blob(sqlite3_stmt* s, int col) {
-    const void* p = sqlite3_column_blob(s, col);
-    const int n = sqlite3_column_bytes(s, col);
-    if (!p || n <= 0) return {};
-    return {static_cast<const std::uint8_t*>(p), static_cast<std::size_t>(n)};
-  }
-
-  std::vector<Topic> listTopics() {
-    // A database without the rosbag2 tables is reported as such rather than as an SQL error.
-    {
-      auto s = prepare("SELECT name FROM sqlite_master WHERE type='table' AND name IN ('topics','messages')",
-                       "reading the schema");
-      int tables = 0;
-      int rc;
-      while ((rc = sqlite3_step(s.get())) == SQLITE_ROW) ++tables;
-      if (rc != SQLITE_DONE) fail("reading the schema");
-      if (tables < 2) throw badInput("not a ROS2 bag: the database has no 'topics' and 'messages' tables", {db_file_});
-    }
-    std::vector<Topic> topics;
-    auto s = prepare("SELECT id, name, type, serialization_format FROM topics ORDER BY id", "reading the topics");
-    int rc;
-    while ((rc = sqlite3_step(s.get())) == SQLITE_ROW)
-      topics.push_back({sqlite3_column_int64(s.get(), 0), {text(s.get(), 1), text(s.get(), 2), 0}, text(s.get(), 3)});
-    if (rc != SQLITE_DONE) fail("reading the topics");
-    // One pass over the messages table's topic ids (blobs stay on their overflow pages).
-    auto c = prepare("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id", "counting messages");
-    while ((rc = sqlite3_step(c.get())) == SQLITE_ROW) {
-      const std::int64_t id = sqlite3_column_int64(c.get(), 0);
-      for (auto& t : topics)
-        if (t.id == id) t.info.count = static_cast<std::uint64_t>(sqlite3_column_int64(c.get(), 1));
-    }
-    if (rc != SQLITE_DONE) fail("counting messages");
-    return topics;
   }
 
   void checkCdr(const Topic& t) const {
     if (t.serialization != "cdr")
       throw Error(ErrorKind::kUnsupported,
                   fmt::format("topic {} is serialized as '{}'; only cdr is supported", t.info.name, t.serialization),
-                  {db_file_});
+                  {path_});
   }
 
-  RosMessageRef ref(std::int64_t id, const std::string& topic) const {
-    return {db_file_, fmt::format("message id {} on {}", id, topic)};
+  /// The message's bytes, decompressed in MESSAGE mode (into buffer_).
+  std::span<const std::uint8_t> payload(const Ros2Storage& file, const Ros2Message& m) {
+    if (compression_ != Compression::kMessage) return m.data;
+    buffer_ = decompress(Codec::kZstd, m.data, kMaxMessageBytes, /*exact=*/false,
+                         {fmt::format("not a readable zstd-compressed message (compression_mode MESSAGE): the {}: ",
+                                      file.where(m)),
+                          {file.file()}});
+    return buffer_;
   }
 
-  /// Runs `f(id, timestamp, data)` on the messages of one topic in time order, at most `limit`,
-  /// until f returns false.
+  RosMessageRef ref(const Ros2Storage& file, const Ros2Message& m) const { return {file.file(), file.where(m)}; }
+
+  /// Runs `f(ref, time, data)` on the messages of the topics `wanted` (indices into topics_), file
+  /// after file, at most `limit`, until f returns false.
   template <typename F>
-  void forEachMessage(const Topic& t, int limit, F&& f) {
-    auto s = prepare("SELECT id, timestamp, data FROM messages WHERE topic_id = ?1 ORDER BY timestamp, id LIMIT ?2",
-                     "reading messages");
-    sqlite3_bind_int64(s.get(), 1, t.id);
-    sqlite3_bind_int(s.get(), 2, limit);
-    int rc;
-    while ((rc = sqlite3_step(s.get())) == SQLITE_ROW)
-      if (!f(sqlite3_column_int64(s.get(), 0), sqlite3_column_int64(s.get(), 1), blob(s.get(), 2))) return;
-    if (rc != SQLITE_DONE) fail("reading messages");
+  void forEachMessage(const std::vector<std::size_t>& wanted, int limit, F&& f) {
+    int n = 0;
+    for (std::size_t i = 0; i < files_.size(); ++i) {
+      Ros2Storage& file = *files_[i];
+      std::vector<std::size_t> ids;
+      for (const std::size_t t : wanted)
+        if (topics_[t].in_file[i]) ids.push_back(*topics_[t].in_file[i]);
+      if (ids.empty()) continue;
+      file.start(ids);
+      Ros2Message m;
+      while (file.next(m)) {
+        if (n++ >= limit || !f(ref(file, m), m.time, payload(file, m))) return;
+      }
+    }
   }
+
+  std::size_t indexOf(const Topic& t) const { return static_cast<std::size_t>(&t - topics_.data()); }
 
   void setUp(const ReaderOptions& options) {
-    const std::vector<Topic> topics = listTopics();
-    const auto pick = pickScanAndOdometry(topics, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
+    const auto pick = pickScanAndOdometry(topics_, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
     checkCdr(*pick.scan);
-    scan_topic_ = *pick.scan;
+    scan_topic_ = indexOf(*pick.scan);
     size_hint_ = static_cast<std::size_t>(pick.scan->info.count);
     if (pick.odom) {
       checkCdr(*pick.odom);
-      odom_topic_ = *pick.odom;
+      odom_topic_ = indexOf(*pick.odom);
     }
 
     std::string laser_frame;
-    forEachMessage(scan_topic_, 1, [&](std::int64_t id, std::int64_t, std::span<const std::uint8_t> data) {
-      laser_frame = decodeLaserScan(data, RosWire::kCdr, ref(id, scan_topic_.info.name)).frame_id;
+    forEachMessage({scan_topic_}, 1, [&](const RosMessageRef& r, RosNanos, std::span<const std::uint8_t> data) {
+      laser_frame = decodeLaserScan(data, RosWire::kCdr, r).frame_id;
       return false;
     });
     std::vector<std::string> robot_frames{"base_link", "base_footprint"};
     if (odom_topic_) {
-      forEachMessage(*odom_topic_, 1, [&](std::int64_t id, std::int64_t, std::span<const std::uint8_t> data) {
-        const auto m = decodeOdometry(data, RosWire::kCdr, ref(id, odom_topic_->info.name));
+      forEachMessage({*odom_topic_}, 1, [&](const RosMessageRef& r, RosNanos, std::span<const std::uint8_t> data) {
+        const auto m = decodeOdometry(data, RosWire::kCdr, r);
         if (!m.child_frame_id.empty()) robot_frames = {m.child_frame_id};
         return false;
       });
     }
-    const RosMount mount = findMount(topics, robot_frames, laser_frame);
-    describeRosSources(notes_, scan_topic_.info.name, kLaserScanType, laser_frame, mount,
-                       odom_topic_ ? odom_topic_->info.name : std::string(), kOdometryType, robot_frames.front());
+    const RosMount mount = findMount(robot_frames, laser_frame);
+    describeRosSources(notes_, topics_[scan_topic_].info.name, kLaserScanType, laser_frame, mount,
+                       odom_topic_ ? topics_[*odom_topic_].info.name : std::string(), kOdometryType,
+                       robot_frames.front());
     assembler_ = RosFrameAssembler(mount.T_robot_laser, odom_topic_.has_value());
-
-    // The recorder's index on timestamp (timestamp_idx) lets SQLite stream this in order without
-    // sorting; ties keep insertion order through the id.
-    stream_ = prepare("SELECT id, topic_id, timestamp, data FROM messages WHERE topic_id IN (?1, ?2) "
-                      "ORDER BY timestamp, id",
-                      "reading messages");
-    sqlite3_bind_int64(stream_.get(), 1, scan_topic_.id);
-    sqlite3_bind_int64(stream_.get(), 2, odom_topic_ ? odom_topic_->id : scan_topic_.id);
   }
 
-  RosMount findMount(const std::vector<Topic>& topics, const std::vector<std::string>& robot_frames,
-                     const std::string& laser_frame) {
+  RosMount findMount(const std::vector<std::string>& robot_frames, const std::string& laser_frame) {
     RosTfTree tree;
-    auto tfTopic = [&](const std::string& name) -> const Topic* {
-      for (const auto& t : topics)
-        if (t.info.name == name && t.info.type == kTfType && t.serialization == "cdr") return &t;
-      return nullptr;
+    auto tfTopic = [&](const std::string& name) -> std::optional<std::size_t> {
+      for (const auto& t : topics_)
+        if (t.info.name == name && t.info.type == kTfType && t.serialization == "cdr") return indexOf(t);
+      return std::nullopt;
     };
     RosMount mount;
     std::string source;
-    if (const Topic* st = tfTopic("/tf_static"); st && !laser_frame.empty()) {
-      forEachMessage(*st, kMaxTfMessages, [&](std::int64_t id, std::int64_t, std::span<const std::uint8_t> data) {
-        for (const auto& t : decodeTfMessage(data, RosWire::kCdr, ref(id, st->info.name))) tree.add(t);
+    if (const auto st = tfTopic("/tf_static"); st && !laser_frame.empty()) {
+      forEachMessage({*st}, kMaxTfMessages, [&](const RosMessageRef& r, RosNanos, std::span<const std::uint8_t> data) {
+        for (const auto& t : decodeTfMessage(data, RosWire::kCdr, r)) tree.add(t);
         return true;
       });
       mount = findRosMount(tree, robot_frames, laser_frame);
       source = "/tf_static";
     }
-    if (const Topic* dyn = tfTopic("/tf"); dyn && !mount.found && !laser_frame.empty()) {
-      std::optional<std::int64_t> t0;
-      forEachMessage(*dyn, kMaxTfMessages, [&](std::int64_t id, std::int64_t ts, std::span<const std::uint8_t> data) {
+    if (const auto dyn = tfTopic("/tf"); dyn && !mount.found && !laser_frame.empty()) {
+      std::optional<RosNanos> t0;
+      forEachMessage({*dyn}, kMaxTfMessages, [&](const RosMessageRef& r, RosNanos ts, std::span<const std::uint8_t> data) {
         if (!t0) t0 = ts;
         if (static_cast<double>(ts - *t0) * 1e-9 > kTfSearchWindowS) return false;
-        for (const auto& t : decodeTfMessage(data, RosWire::kCdr, ref(id, dyn->info.name))) tree.add(t);
+        for (const auto& t : decodeTfMessage(data, RosWire::kCdr, r)) tree.add(t);
         mount = findRosMount(tree, robot_frames, laser_frame);
         return !mount.found;
       });
@@ -290,23 +328,45 @@ class Ros2Source final : public RosMessageSource {
     return mount;
   }
 
-  void consume(sqlite3_stmt* s) {
-    const std::int64_t id = sqlite3_column_int64(s, 0);
-    const std::int64_t topic_id = sqlite3_column_int64(s, 1);
-    const RosNanos bag_time = sqlite3_column_int64(s, 2);
-    const auto data = blob(s, 3);
-    if (topic_id == scan_topic_.id) {
-      pushScan(data, RosWire::kCdr, ref(id, scan_topic_.info.name), bag_time);
-    } else if (odom_topic_ && topic_id == odom_topic_->id) {
-      pushOdometry(data, RosWire::kCdr, ref(id, odom_topic_->info.name), bag_time);
+  bool feed() override {
+    while (current_ < files_.size()) {
+      Ros2Storage& file = *files_[current_];
+      if (!streaming_) {
+        std::vector<std::size_t> ids;
+        for (const std::optional<std::size_t> t : {std::optional<std::size_t>(scan_topic_), odom_topic_})
+          if (t && topics_[*t].in_file[current_]) ids.push_back(*topics_[*t].in_file[current_]);
+        if (ids.empty()) {
+          ++current_;
+          continue;
+        }
+        file.start(ids);
+        streaming_ = true;
+      }
+      Ros2Message m;
+      if (!file.next(m)) {
+        streaming_ = false;
+        ++current_;
+        continue;
+      }
+      const auto data = payload(file, m);
+      if (m.topic == topics_[scan_topic_].in_file[current_])
+        pushScan(data, RosWire::kCdr, ref(file, m), m.time);
+      else
+        pushOdometry(data, RosWire::kCdr, ref(file, m), m.time);
+      return true;
     }
+    return false;
   }
 
-  std::string db_file_;
-  DbPtr db_;
-  StmtPtr stream_;
-  Topic scan_topic_;
-  std::optional<Topic> odom_topic_;
+  std::optional<ScratchDir> scratch_;  // declared first: removed after the storages are closed
+  std::vector<std::unique_ptr<Ros2Storage>> files_;
+  Compression compression_ = Compression::kNone;
+  std::vector<Topic> topics_;
+  std::size_t scan_topic_ = 0;
+  std::optional<std::size_t> odom_topic_;
+  std::vector<std::uint8_t> buffer_;
+  std::size_t current_ = 0;
+  bool streaming_ = false;
 };
 
 }  // namespace

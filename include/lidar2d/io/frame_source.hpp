@@ -15,7 +15,8 @@ namespace lidar2d::io {
 enum class LogFormat {
   kCarmen,   ///< CARMEN text log (.log/.clf), plain or gzip-compressed
   kRosbag1,  ///< ROS1 bag, format 2.0 or 1.2
-  kRosbag2,  ///< ROS2 sqlite3 bag (a folder with metadata.yaml, or a .db3 file)
+  kRosbag2,  ///< ROS2 bag: a folder with metadata.yaml (sqlite3 or MCAP storage, split or compressed
+             ///< by rosbag2), or a single .db3 or .mcap file
 };
 
 /// Printable name of a format ("carmen", "rosbag1", "rosbag2").
@@ -60,6 +61,7 @@ struct SourceNotes {
   std::string scan_source;   ///< e.g. "FLASER" or "/scan"
   std::string odom_source;   ///< e.g. "ODOM lines (interpolated)", "/odom", or empty if none
   std::string truth_source;  ///< e.g. "FLASER pose (corrected log)", "TRUEPOS", or empty if none
+  std::string container;     ///< how the log is stored when there is a choice, e.g. "mcap storage, 2 files"
   std::vector<std::string> warnings;  ///< e.g. "timestamps repeat (12 times)"
 };
 

@@ -1,8 +1,6 @@
 #include "src/io/internal/ros1_bag.hpp"
 
-#include <bzlib.h>
 #include <fmt/format.h>
-#include <lz4frame.h>
 
 #include <algorithm>
 #include <cstring>
@@ -15,6 +13,7 @@
 #include <utility>
 
 #include "lidar2d/core/error.hpp"
+#include "src/io/internal/decompress.hpp"
 
 namespace lidar2d::io::internal {
 namespace {
@@ -104,83 +103,6 @@ struct FileRecord {
   std::vector<std::uint8_t> header;
   Fields fields;
   std::uint64_t pos = 0, data_at = 0, data_len = 0, end = 0;
-};
-
-/// The decompressed bytes of a chunk. `size` is what the chunk header states; more or fewer bytes
-/// are an error. The buffer grows with the output instead of being allocated at `size` up front,
-/// so a corrupt size cannot allocate gigabytes.
-class Decompressed {
- public:
-  Decompressed(std::uint64_t size, const std::string& where, const std::string& path)
-      : size_(size), where_(where), path_(path) {}
-
-  std::vector<std::uint8_t> bz2(std::vector<std::uint8_t>& in) {
-    bz_stream s{};
-    if (BZ2_bzDecompressInit(&s, 0, 0) != BZ_OK) fail("bzip2 could not start");
-    struct End {
-      bz_stream* s;
-      ~End() { BZ2_bzDecompressEnd(s); }
-    } end{&s};
-    s.next_in = reinterpret_cast<char*>(in.data());
-    s.avail_in = static_cast<unsigned>(in.size());
-    for (;;) {
-      grow();
-      s.next_out = reinterpret_cast<char*>(out_.data() + produced_);
-      s.avail_out = static_cast<unsigned>(out_.size() - produced_);
-      const unsigned before_in = s.avail_in, before_out = s.avail_out;
-      const int rc = BZ2_bzDecompress(&s);
-      produced_ = out_.size() - s.avail_out;
-      if (rc == BZ_STREAM_END) break;
-      if (rc != BZ_OK) fail(fmt::format("corrupt bz2 data (bzip2 error {})", rc));
-      if (s.avail_in == before_in && s.avail_out == before_out) {
-        if (s.avail_in == 0) fail("the bz2 data ends early (truncated)");
-        fail(fmt::format("it decompresses to more than the {} bytes its header states", size_));
-      }
-    }
-    return finish();
-  }
-
-  // roslz4 writes the standard LZ4 frame format (magic 0x184D2204), which liblz4 reads.
-  std::vector<std::uint8_t> lz4(const std::vector<std::uint8_t>& in) {
-    LZ4F_dctx* raw = nullptr;
-    if (LZ4F_isError(LZ4F_createDecompressionContext(&raw, LZ4F_VERSION))) fail("lz4 could not start");
-    std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> ctx(raw, &LZ4F_freeDecompressionContext);
-    std::size_t consumed = 0;
-    for (;;) {
-      grow();
-      std::size_t dst = out_.size() - produced_, src = in.size() - consumed;
-      const std::size_t rc =
-          LZ4F_decompress(ctx.get(), out_.data() + produced_, &dst, in.data() + consumed, &src, nullptr);
-      if (LZ4F_isError(rc)) fail(fmt::format("corrupt lz4 data ({})", LZ4F_getErrorName(rc)));
-      produced_ += dst;
-      consumed += src;
-      if (rc == 0) break;  // the frame is complete
-      if (dst == 0 && src == 0) {
-        if (consumed == in.size()) fail("the lz4 data ends early (truncated)");
-        fail(fmt::format("it decompresses to more than the {} bytes its header states", size_));
-      }
-    }
-    return finish();
-  }
-
- private:
-  void grow() {
-    if (produced_ < out_.size() || out_.size() >= size_) return;
-    out_.resize(std::min<std::uint64_t>(size_, std::max<std::uint64_t>(out_.size() * 2, std::uint64_t{1} << 20)));
-  }
-  std::vector<std::uint8_t> finish() {
-    if (produced_ != size_)
-      fail(fmt::format("it decompresses to {} bytes, not the {} its header states", produced_, size_));
-    return std::move(out_);
-  }
-  [[noreturn]] void fail(const std::string& why) const {
-    throw badInput(fmt::format("not a readable ROS1 bag: the {}: {}", where_, why), {path_});
-  }
-
-  std::uint64_t size_;
-  std::string where_, path_;
-  std::vector<std::uint8_t> out_;
-  std::uint64_t produced_ = 0;
 };
 
 }  // namespace
@@ -480,10 +402,11 @@ std::unique_ptr<Ros1Bag::CachedChunk> Ros1Bag::decode(std::uint32_t chunk_no, st
   auto c = std::make_unique<CachedChunk>();
   c->chunk = chunk_no;
   const std::string where = fmt::format("chunk at byte {}", chunk.pos);
+  const DecompressContext context{fmt::format("not a readable ROS1 bag: the {}: ", where), {path_}};
   if (chunk.compression == "bz2")
-    c->data = Decompressed(chunk.size, where, path_).bz2(raw);
+    c->data = decompress(Codec::kBz2, raw, chunk.size, /*exact=*/true, context);
   else if (chunk.compression == "lz4")
-    c->data = Decompressed(chunk.size, where, path_).lz4(raw);
+    c->data = decompress(Codec::kLz4, raw, chunk.size, /*exact=*/true, context);
   else
     c->data = std::move(raw);
 
