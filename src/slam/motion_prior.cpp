@@ -65,8 +65,8 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     notes_.push_back(fmt::format("gap of {:.1f} s in the log", dt));
     p.time_ok = false;
   }
-  // The time the step took: its stamps' difference, or the usual interval when the stamps do not
-  // say (repeated or going backwards); 0 when no interval is known at all (every stamp equal).
+  // The time the step took (for the sigmas): its stamps' difference, or the usual interval when
+  // the stamps do not say (repeated or going backwards); 0 when no interval is known at all.
   p.dt = dt > 0.0 && std::isfinite(dt) ? dt : usual;
 
   if (odometry) {
@@ -80,9 +80,12 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       const double dist = d.translation().norm(), turn = std::abs(d.theta());
       bool plausible = d.isFinite();
       // Plausible against the time the step took, not against fixed per-step limits: a gap of
-      // seconds during a turn is a long step, and keyframe logs hold metres between scans.
-      if (plausible && p.dt > 0.0)
-        plausible = dist <= opt_.max_speed_m_per_s * p.dt && turn <= opt_.max_turn_rate_rad_per_s * p.dt;
+      // seconds during a turn is a long step, and keyframe logs hold metres between scans. At
+      // least the usual interval: a scan stamped a millisecond after the previous one (the Intel
+      // bag has runs of them) was not taken then.
+      const double took = std::max(p.dt, usual);
+      if (plausible && took > 0.0)
+        plausible = dist <= opt_.max_speed_m_per_s * took && turn <= opt_.max_turn_rate_rad_per_s * took;
       if (plausible) {
         const bool time_ok = p.time_ok;
         const double step_dt = p.dt;
