@@ -243,10 +243,11 @@ class Ros2Source final : public RosMessageSource {
         return false;
       });
     }
-    const RosMount mount = findMount(topics, robot_frames, laser_frame);
+    // A mounting given by the options replaces tf's: tf is not read (openLog applies that one).
+    const RosMount mount = options.laser_mount ? RosMount() : findMount(topics, robot_frames, laser_frame);
     describeRosSources(notes_, scan_topic_.info.name, kLaserScanType, laser_frame, mount,
                        odom_topic_ ? odom_topic_->info.name : std::string(), kOdometryType, robot_frames.front());
-    assembler_ = RosFrameAssembler(mount.T_robot_laser, odom_topic_.has_value());
+    assembler_ = RosFrameAssembler(rosFrameMount(mount, options, path_, notes_.warnings), odom_topic_.has_value());
 
     // The recorder's index on timestamp (timestamp_idx) lets SQLite stream this in order without
     // sorting; ties keep insertion order through the id.
@@ -259,7 +260,7 @@ class Ros2Source final : public RosMessageSource {
 
   RosMount findMount(const std::vector<Topic>& topics, const std::vector<std::string>& robot_frames,
                      const std::string& laser_frame) {
-    RosTfTree tree;
+    RosTfTree tree(path_);
     auto tfTopic = [&](const std::string& name) -> const Topic* {
       for (const auto& t : topics)
         if (t.info.name == name && t.info.type == kTfType && t.serialization == "cdr") return &t;
