@@ -27,6 +27,7 @@ namespace lidar2d::io {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 using lidar2d::test::IsNearPose;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -319,6 +320,48 @@ TEST(Rosbag1Reader, FixtureTopicOverrides) {
   // Without odometry the robot frame is looked up as base_link or base_footprint.
   EXPECT_THAT(notes.warnings.back(), HasSubstr("no transform from 'base_link' or 'base_footprint' to the scans' "
                                                "frame 'laser_rear'"));
+}
+
+// flipped.bag: lasers with roll = pi and with pitch = pi (see tools/make-test-bags.py) give the
+// robot-frame points of the upright laser at the same place; each is recognised as upside down.
+TEST(Rosbag1Reader, FixtureUpsideDownLasersGiveTheUprightRobotFramePoints) {
+  auto read = [](const std::string& topic) {
+    ReaderOptions o;
+    o.scan_topic = topic;
+    auto src = openLog(fixture("flipped.bag"), o);
+    std::vector<Frame> frames;
+    while (auto f = src->next()) frames.push_back(std::move(*f));
+    return std::make_pair(frames, src->notes());
+  };
+  const auto [up, up_notes] = read("/scan_up");
+  ASSERT_EQ(up.size(), 5u);
+  EXPECT_FALSE(up[0].laser_upside_down);
+  EXPECT_THAT(up_notes.scan_source, Not(HasSubstr("upside down")));
+  for (const std::string topic : {"/scan_roll", "/scan_pitch"}) {
+    SCOPED_TRACE(topic);
+    const auto [flipped, notes] = read(topic);
+    ASSERT_EQ(flipped.size(), up.size());
+    EXPECT_THAT(notes.scan_source, HasSubstr("upside down"));
+    for (std::size_t k = 0; k < up.size(); ++k) {
+      EXPECT_TRUE(flipped[k].laser_upside_down);
+      const Points2 a = up[k].scan.toPoints(up[k].T_robot_laser), b = flipped[k].scan.toPoints(flipped[k].T_robot_laser);
+      ASSERT_EQ(a.size(), 8u);
+      ASSERT_EQ(b.size(), a.size());
+      for (std::size_t i = 0; i < a.size(); ++i) EXPECT_LT((a[i] - b[i]).norm(), 1e-5) << k << " " << i;
+    }
+  }
+  // The same scan read as upright (the mounting replaced by the options) is the mirror image: the
+  // points differ, by up to metres.
+  ReaderOptions o;
+  o.scan_topic = "/scan_roll";
+  o.laser_mount = LaserMount::planar(up[0].T_robot_laser);
+  auto src = openLog(fixture("flipped.bag"), o);
+  const auto f = src->next();
+  ASSERT_TRUE(f.has_value());
+  const Points2 a = up[0].scan.toPoints(up[0].T_robot_laser), b = f->scan.toPoints(f->T_robot_laser);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) worst = std::max(worst, (a[i] - b[i]).norm());
+  EXPECT_GT(worst, 1.0);
 }
 
 // ---- shared pieces on synthetic input ----
