@@ -103,12 +103,14 @@ TEST(RplidarFlipped, SlamMapAgreesWithTheGridmapOnlyWithTheFlip) {
   test::TempDir dir;
   const std::string bag = test::dataFile(kBag).string();
   const std::string flipped = (dir / "flipped").string(), upright = (dir / "upright").string();
-  auto r = test::runCli({"slam", bag, "--laser-mount", "0.2,0,0,flipped", "-o", flipped});
+  // config.yaml's tf_laser2robot: x 0.2 m, 180 degrees about y (the course's filter.py reads a beam
+  // (x, y) as (0.2 - x, y) on the robot). Read as upright: the same place, the mirror left out.
+  auto r = test::runCli({"slam", bag, "--laser-mount", "0.2,0,0,0,180,0", "-o", flipped});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = test::runCli({"slam", bag, "--laser-mount", "0.2,0,0", "-o", upright});
+  r = test::runCli({"slam", bag, "--laser-mount", "0.2,0,180", "-o", upright});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   // The same poses, mapped again: the walls of `lidar2d map` must sit on gridmap.png's too.
-  r = test::runCli({"map", bag, "--laser-mount", "0.2,0,0,flipped", "--poses", flipped + "/trajectory.txt", "-o",
+  r = test::runCli({"map", bag, "--laser-mount", "0.2,0,0,0,180,0", "--poses", flipped + "/trajectory.txt", "-o",
                     (dir / "remap").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
 
