@@ -27,6 +27,7 @@ namespace lidar2d::io {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 using lidar2d::test::IsNearPose;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -321,6 +322,48 @@ TEST(Rosbag1Reader, FixtureTopicOverrides) {
                                                "frame 'laser_rear'"));
 }
 
+// flipped.bag: lasers with roll = pi and with pitch = pi (see tools/make-test-bags.py) give the
+// robot-frame points of the upright laser at the same place; each is recognised as upside down.
+TEST(Rosbag1Reader, FixtureUpsideDownLasersGiveTheUprightRobotFramePoints) {
+  auto read = [](const std::string& topic) {
+    ReaderOptions o;
+    o.scan_topic = topic;
+    auto src = openLog(fixture("flipped.bag"), o);
+    std::vector<Frame> frames;
+    while (auto f = src->next()) frames.push_back(std::move(*f));
+    return std::make_pair(frames, src->notes());
+  };
+  const auto [up, up_notes] = read("/scan_up");
+  ASSERT_EQ(up.size(), 5u);
+  EXPECT_FALSE(up[0].laser_upside_down);
+  EXPECT_THAT(up_notes.scan_source, Not(HasSubstr("upside down")));
+  for (const std::string topic : {"/scan_roll", "/scan_pitch"}) {
+    SCOPED_TRACE(topic);
+    const auto [flipped, notes] = read(topic);
+    ASSERT_EQ(flipped.size(), up.size());
+    EXPECT_THAT(notes.scan_source, HasSubstr("upside down"));
+    for (std::size_t k = 0; k < up.size(); ++k) {
+      EXPECT_TRUE(flipped[k].laser_upside_down);
+      const Points2 a = up[k].scan.toPoints(up[k].T_robot_laser), b = flipped[k].scan.toPoints(flipped[k].T_robot_laser);
+      ASSERT_EQ(a.size(), 8u);
+      ASSERT_EQ(b.size(), a.size());
+      for (std::size_t i = 0; i < a.size(); ++i) EXPECT_LT((a[i] - b[i]).norm(), 1e-5) << k << " " << i;
+    }
+  }
+  // The same scan read as upright (the mounting replaced by the options) is the mirror image: the
+  // points differ, by up to metres.
+  ReaderOptions o;
+  o.scan_topic = "/scan_roll";
+  o.laser_mount = LaserMount::planar(up[0].T_robot_laser);
+  auto src = openLog(fixture("flipped.bag"), o);
+  const auto f = src->next();
+  ASSERT_TRUE(f.has_value());
+  const Points2 a = up[0].scan.toPoints(up[0].T_robot_laser), b = f->scan.toPoints(f->T_robot_laser);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) worst = std::max(worst, (a[i] - b[i]).norm());
+  EXPECT_GT(worst, 1.0);
+}
+
 // ---- shared pieces on synthetic input ----
 
 std::vector<std::uint8_t> ros1Scan() {
@@ -401,6 +444,11 @@ internal::RosTransformStamped edge(const std::string& parent, const std::string&
   return t;
 }
 
+/// The planar pose of a 3D transform whose z axis is the parent's.
+SE2 planar(const Eigen::Isometry3d& T) {
+  return LaserMount::fromTransform(T.translation(), Eigen::Quaterniond(T.rotation())).T_robot_laser();
+}
+
 TEST(RosTfTree, ComposesChainsThroughTheCommonAncestor) {
   internal::RosTfTree tree;
   tree.add(edge("odom", "base_link", 5.0, 5.0, 1.0));
@@ -411,20 +459,20 @@ TEST(RosTfTree, ComposesChainsThroughTheCommonAncestor) {
       T_base_camera(-0.3, 0.1, std::numbers::pi);
   auto l = tree.lookup("base_link", "laser");
   ASSERT_TRUE(l.has_value());
-  EXPECT_TRUE(IsNearPose(T_base_plate * T_plate_laser, l->T_from_to, 1e-12, 1e-9));
+  EXPECT_TRUE(IsNearPose(T_base_plate * T_plate_laser, planar(l->T_from_to), 1e-12, 1e-9));
   EXPECT_EQ(l->chain, (std::vector<std::string>{"base_link", "plate", "laser"}));
   // Reverse direction and a sibling branch (laser -> plate -> base_link -> camera).
   l = tree.lookup("laser", "base_link");
   ASSERT_TRUE(l.has_value());
-  EXPECT_TRUE(IsNearPose((T_base_plate * T_plate_laser).inverse(), l->T_from_to, 1e-12, 1e-9));
+  EXPECT_TRUE(IsNearPose((T_base_plate * T_plate_laser).inverse(), planar(l->T_from_to), 1e-12, 1e-9));
   l = tree.lookup("laser", "camera");
   ASSERT_TRUE(l.has_value());
-  EXPECT_TRUE(IsNearPose((T_base_plate * T_plate_laser).inverse() * T_base_camera, l->T_from_to, 1e-12, 1e-9));
+  EXPECT_TRUE(IsNearPose((T_base_plate * T_plate_laser).inverse() * T_base_camera, planar(l->T_from_to), 1e-12, 1e-9));
   EXPECT_EQ(l->chain, (std::vector<std::string>{"laser", "plate", "base_link", "camera"}));
   EXPECT_FALSE(tree.lookup("base_link", "nowhere").has_value());
   // A later transform of the same child replaces the earlier one (tf2's static buffer).
   tree.add(edge("plate", "laser", 0.0, 0.0, 0.0));
-  EXPECT_TRUE(IsNearPose(T_base_plate, tree.lookup("base_link", "laser")->T_from_to, 1e-12, 1e-9));
+  EXPECT_TRUE(IsNearPose(T_base_plate, planar(tree.lookup("base_link", "laser")->T_from_to), 1e-12, 1e-9));
 }
 
 TEST(RosTfTree, CyclesDoNotHang) {
@@ -436,18 +484,78 @@ TEST(RosTfTree, CyclesDoNotHang) {
   EXPECT_TRUE(tree.lookup("a", "c").has_value());
 }
 
-TEST(RosTfTree, MountReportsTilt) {
+// A chain is composed in 3D before it is projected: through a plate turned upside down (roll pi),
+// a laser turned +30 degrees on the plate points at -30 degrees on the robot, mirrored. Projecting
+// each transform first would give +30 degrees and an upright laser.
+TEST(RosTfTree, ChainThroughAnUpsideDownPlateIsComposedIn3D) {
   internal::RosTfTree tree;
-  tree.add(edge("base_link", "laser", 0.1, 0.0, 0.3, 0.5));
+  tree.add(edge("base_link", "plate", 0.1, 0.0, 0.0, std::numbers::pi));
+  tree.add(edge("plate", "laser", 0.2, 0.05, 30 * kDeg));
   const auto m = internal::findRosMount(tree, {"base_link"}, "laser");
   ASSERT_TRUE(m.found);
-  EXPECT_NEAR(m.max_tilt, 0.5, 1e-9);
-  EXPECT_NEAR(m.T_robot_laser.theta(), 0.3, 1e-9);
+  EXPECT_TRUE(m.mount.upsideDown());
+  EXPECT_NEAR(m.mount.tilt(), 0.0, 1e-9);
+  // The plate mirrors y: the laser's origin (0.2, 0.05) on the plate is (0.3, -0.05) on the robot.
+  EXPECT_TRUE(IsNearPose(SE2(0.3, -0.05, -30 * kDeg), m.mount.T_robot_laser(), 1e-12, 1e-9));
   std::vector<std::string> warnings;
-  auto copy = m;
-  internal::noteRosMount(copy, "/tf_static", {"base_link"}, "laser", warnings);
+  auto noted = m;
+  internal::noteRosMount(noted, "/tf_static", {"base_link"}, "laser", warnings);
+  EXPECT_TRUE(warnings.empty());
+  EXPECT_THAT(noted.description, HasSubstr("base_link -> plate -> laser from /tf_static, upside down"));
+}
+
+TEST(RosTfTree, BadQuaternionOnTheChainIsAnErrorNamingTheTransform) {
+  internal::RosTfTree tree("x.bag");
+  auto bad = edge("base_link", "laser", 0.1, 0.0, 0.0);
+  bad.transform.qw = 0.0;  // all zero: no rotation at all
+  tree.add(bad);
+  auto elsewhere = edge("odom", "base_link", 0.0, 0.0, 0.0);
+  elsewhere.transform.qx = std::numeric_limits<double>::quiet_NaN();
+  tree.add(elsewhere);
+  EXPECT_TRUE(test::throwsError([&] { (void)tree.lookup("base_link", "laser"); }, ErrorKind::kBadInput,
+                                {"x.bag", "tf base_link -> laser", "not of unit length"}));
+  // The NaN transform is above the robot frame: not on the robot -> laser chain, so not read.
+  tree.add(edge("base_link", "laser", 0.1, 0.0, 0.0));
+  EXPECT_TRUE(tree.lookup("base_link", "laser").has_value());
+  EXPECT_TRUE(test::throwsError([&] { (void)tree.lookup("odom", "laser"); }, ErrorKind::kBadInput,
+                                {"tf odom -> base_link", "non-finite"}));
+}
+
+// A mounting tilted beyond the tolerance is refused, or projected with a warning when allowed;
+// within the tolerance its tilt is dropped.
+TEST(RosTfTree, TiltedMountIsRefusedOrProjected) {
+  internal::RosTfTree tree;
+  tree.add(edge("base_link", "laser", 0.1, 0.0, 0.3, 0.5));
+  auto m = internal::findRosMount(tree, {"base_link"}, "laser");
+  ASSERT_TRUE(m.found);
+  EXPECT_NEAR(m.mount.tilt(), 0.5, 1e-9);
+  EXPECT_NEAR(m.mount.T_robot_laser().theta(), 0.3, 1e-9);
+  std::vector<std::string> warnings;
+  ReaderOptions o;
+  EXPECT_TRUE(test::throwsError([&] { (void)internal::rosFrameMount(m, o, "x.bag", warnings); }, ErrorKind::kBadInput,
+                                {"x.bag", "tf base_link -> laser", "tilted by 28.6 deg", "--allow-tilted"}));
+  o.allow_tilted_laser = true;
+  const LaserMount projected = internal::rosFrameMount(m, o, "x.bag", warnings);
+  EXPECT_NEAR(projected.tilt(), 0.5, 1e-9);
   ASSERT_EQ(warnings.size(), 1u);
   EXPECT_THAT(warnings[0], HasSubstr("tilted by 28.6 deg"));
+  EXPECT_THAT(warnings[0], HasSubstr("projected onto the floor plane"));
+  // 1 degree of tilt is within the default tolerance: level, no warning.
+  tree.add(edge("base_link", "laser", 0.1, 0.0, 0.3, 1.0 * kDeg));
+  m = internal::findRosMount(tree, {"base_link"}, "laser");
+  warnings.clear();
+  o.allow_tilted_laser = false;
+  const LaserMount level = internal::rosFrameMount(m, o, "x.bag", warnings);
+  EXPECT_EQ(level.tilt(), 0.0);
+  EXPECT_FALSE(level.upsideDown());
+  EXPECT_TRUE(IsNearPose(SE2(0.1, 0.0, 0.3), level.T_robot_laser(), 1e-12, 1e-9));
+  EXPECT_TRUE(warnings.empty());
+  // A steeper laser than LaserMount::kMaxProjectableTilt is refused even when tilts are allowed.
+  tree.add(edge("base_link", "laser", 0.1, 0.0, 0.3, 60.0 * kDeg));
+  m = internal::findRosMount(tree, {"base_link"}, "laser");
+  o.allow_tilted_laser = true;
+  EXPECT_TRUE(test::throwsError([&] { (void)internal::rosFrameMount(m, o, "x.bag", warnings); }, ErrorKind::kBadInput,
+                                {"tilted by 60.0 deg", "more than the 45 deg"}));
 }
 
 LaserScan tinyScan(double t) {
@@ -460,7 +568,7 @@ LaserScan tinyScan(double t) {
 }
 
 TEST(RosFrameAssembler, InterpolatesAndHoldsNearest) {
-  internal::RosFrameAssembler a(SE2(0.1, 0.0, 0.0), true);
+  internal::RosFrameAssembler a(LaserMount::planar(SE2(0.1, 0.0, 0.0)), true);
   a.pushScan(tinyScan(0.5), 0.5);  // before the first odometry message (0.7 s away)
   a.pushScan(tinyScan(1.5), 1.5);
   EXPECT_FALSE(a.pop().has_value());  // waits for odometry at or after 0.5
@@ -488,7 +596,7 @@ TEST(RosFrameAssembler, InterpolatesAndHoldsNearest) {
 }
 
 TEST(RosFrameAssembler, LookAheadIsBounded) {
-  internal::RosFrameAssembler a(SE2(), true);
+  internal::RosFrameAssembler a(LaserMount(), true);
   a.pushOdometry(0.0, SE2());
   for (std::size_t i = 0; i < internal::RosFrameAssembler::kMaxPendingScans; ++i) {
     a.pushScan(tinyScan(1.0 + static_cast<double>(i)), 1.0 + static_cast<double>(i));
@@ -503,7 +611,7 @@ TEST(RosFrameAssembler, LookAheadIsBounded) {
 }
 
 TEST(RosFrameAssembler, OutOfOrderOdometryIsSorted) {
-  internal::RosFrameAssembler a(SE2(), true);
+  internal::RosFrameAssembler a(LaserMount(), true);
   a.pushOdometry(2.0, SE2(2.0, 0.0, 0.0));
   a.pushOdometry(1.0, SE2(1.0, 0.0, 0.0));
   a.pushScan(tinyScan(1.5), 1.5);

@@ -7,6 +7,8 @@
 #include <sqlite3.h>
 #include <zstd.h>
 
+#include <Eigen/Geometry>
+
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -57,8 +59,13 @@ class CdrWriter {
     put<std::uint32_t>(static_cast<std::uint32_t>(ns % 1000000000));
     return str(frame);
   }
-  CdrWriter& pose(double x, double y, double z, double yaw) {
-    for (double v : {x, y, z, 0.0, 0.0, std::sin(yaw / 2), std::cos(yaw / 2)}) put<double>(v);
+  CdrWriter& pose(double x, double y, double z, double yaw) { return pose(x, y, z, 0.0, 0.0, yaw); }
+  /// A pose with its rotation as roll, pitch, yaw (q = q_yaw * q_pitch * q_roll, as tf's setRPY).
+  CdrWriter& pose(double x, double y, double z, double roll, double pitch, double yaw) {
+    const Eigen::Quaterniond q = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+                                 Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+                                 Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX());
+    for (double v : {x, y, z, q.x(), q.y(), q.z(), q.w()}) put<double>(v);
     return *this;
   }
   const std::vector<std::uint8_t>& bytes() const { return b_; }
@@ -69,10 +76,10 @@ class CdrWriter {
 };
 
 std::vector<std::uint8_t> cdrScan(double t, const std::string& frame, const std::vector<float>& ranges,
-                                  bool big_endian = false) {
+                                  bool big_endian = false, float angle_min = -1.0f) {
   CdrWriter w(big_endian);
   w.header(t, frame);
-  for (float v : {-1.0f, 0.0f, 0.5f, 0.0f, 0.1f, 0.1f, 20.0f}) w.put<float>(v);
+  for (float v : {angle_min, 0.0f, 0.5f, 0.0f, 0.1f, 0.1f, 20.0f}) w.put<float>(v);
   w.put<std::uint32_t>(static_cast<std::uint32_t>(ranges.size()));
   for (float r : ranges) w.put<float>(r);
   w.put<std::uint32_t>(0);
@@ -397,6 +404,77 @@ TEST(Rosbag2Reader, SplitAndCompressedDb3BagsGiveTheSameFrames) {
     EXPECT_EQ(frames[1].scan.ranges()[1], 4.0);
     EXPECT_TRUE(IsNearPose(SE2(1.5, 0.5, 0.75), *frames[1].T_odom_robot, 1e-9, 1e-7));
     EXPECT_TRUE(IsNearPose(SE2(0.1, 0.0, kPi / 2), frames[1].T_robot_laser, 1e-12, 1e-9));
+  }
+}
+
+// A laser mounted upside down (tf with roll = pi, or with pitch = pi) that sees the same room as an
+// upright one at the same place gives the same robot-frame points. The upright laser's beams are at
+// -1, -0.5, .., 1 rad; the rolled one's beam b points at -b, so the same layout sees them in reverse
+// order; the pitched one's beam b points at pi - b, so its beams start at pi - 1. A tilted laser is
+// refused, or read with its ranges shortened when tilts are allowed.
+TEST(Rosbag2Reader, UpsideDownLaserGivesTheUprightRobotFramePoints) {
+  const std::vector<float> ranges{1.0f, 2.5f, 4.0f, 3.0f, 1.5f};
+  const std::vector<float> reversed(ranges.rbegin(), ranges.rend());
+  struct Case {
+    std::string name;
+    double roll, pitch;
+    std::vector<float> ranges;
+    float angle_min;
+  };
+  const std::vector<Case> cases{{"upright", 0.0, 0.0, ranges, -1.0f},
+                                {"roll", kPi, 0.0, reversed, -1.0f},
+                                {"pitch", 0.0, kPi, reversed, static_cast<float>(kPi - 1.0)},
+                                {"tilted", 10.0 * kPi / 180, 0.0, ranges, -1.0f}};
+  test::TempDir tmp;
+  std::vector<std::vector<Frame>> frames;
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.name);
+    const fs::path db_path = tmp / (c.name + ".db3");
+    {
+      TestDb db(db_path);
+      db.topic(1, "/scan", "sensor_msgs/msg/LaserScan");
+      db.topic(2, "/tf_static", "tf2_msgs/msg/TFMessage");
+      CdrWriter tf;
+      tf.put<std::uint32_t>(1).header(1.0, "base_link").str("laser").pose(0.2, 0.1, 0.3, c.roll, c.pitch, 0.4);
+      db.message(2, 1.0, tf.bytes());
+      for (int k = 0; k < 3; ++k) db.message(1, 2.0 + k, cdrScan(2.0 + k, "laser", c.ranges, false, c.angle_min));
+    }
+    if (c.name == "tilted") {
+      EXPECT_TRUE(test::throwsError([&] { (void)openLog(db_path.string()); }, ErrorKind::kBadInput,
+                                    {"tf base_link -> laser", "tilted by 10.0 deg", "--allow-tilted"}));
+      ReaderOptions o;
+      o.allow_tilted_laser = true;
+      auto src = openLog(db_path.string(), o);
+      const auto f = src->next();
+      ASSERT_TRUE(f.has_value());
+      EXPECT_NEAR(f->laser_tilt_rad, 10.0 * kPi / 180, 1e-9);
+      // Rolled by 10 degrees: beam a's direction leaves the plane by asin(sin a sin 10 deg).
+      for (std::size_t i = 0; i < ranges.size(); ++i) {
+        const double a = -1.0 + 0.5 * static_cast<double>(i), s = std::sin(a) * std::sin(10.0 * kPi / 180);
+        EXPECT_NEAR(f->scan.ranges()[i], ranges[i] * std::sqrt(1.0 - s * s), 1e-6) << i;
+      }
+      EXPECT_THAT(src->notes().warnings.back(), HasSubstr("projected onto the floor plane"));
+      continue;
+    }
+    auto src = openLog(db_path.string());
+    frames.emplace_back();
+    while (auto f = src->next()) frames.back().push_back(std::move(*f));
+    ASSERT_EQ(frames.back().size(), 3u);
+    EXPECT_EQ(frames.back()[0].laser_upside_down, c.name != "upright");
+    if (c.name != "upright") {
+      EXPECT_THAT(src->notes().scan_source, HasSubstr("upside down"));
+    }
+  }
+  ASSERT_EQ(frames.size(), 3u);
+  for (std::size_t c = 1; c < frames.size(); ++c) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      const Points2 up = frames[0][k].scan.toPoints(frames[0][k].T_robot_laser);
+      const Points2 flipped = frames[c][k].scan.toPoints(frames[c][k].T_robot_laser);
+      ASSERT_EQ(up.size(), ranges.size());
+      ASSERT_EQ(flipped.size(), up.size());
+      for (std::size_t i = 0; i < up.size(); ++i)
+        EXPECT_LT((up[i] - flipped[i]).norm(), 1e-6) << cases[c].name << " scan " << k << " beam " << i;
+    }
   }
 }
 

@@ -17,6 +17,14 @@ Fixtures:
   NaN, inf, 0.05 (below range_min), 10.0 (= range_max), 2.0, 3.0.
 - no_scan.bag: /odom (3 messages) and /chatter (std_msgs/String), no LaserScan.
 - corrupt_scan.bag: /scan with 2 messages; the second states 1000 ranges but holds 3.
+- flipped.bag: three lasers at the same place (x 0.2, y 0.1, z 0.3) seeing the same room, in
+  /tf_static: base_link -> laser_up (yaw 0.4), laser_roll (roll pi, yaw 0.4) and laser_pitch
+  (pitch pi, yaw 0.4). Topics /scan_up, /scan_roll, /scan_pitch, 5 messages each at stamps
+  20.0 + 0.1 k, 8 beams (increment pi/8, range_min 0.1, range_max 10). /scan_up: ranges
+  1 + 0.5 j + 0.01 k (j = 0..7) at angles -7 pi/16 + j pi/8. The upside-down lasers see the same
+  points with the ranges reversed: the rolled one's beam b points at 0.4 - b, so its beams start at
+  -7 pi/16 as well; the pitched one's points at 0.4 + pi - b, so its beams start at 9 pi/16.
+  No odometry.
 - many_chunks.bag (bz2, one message per chunk): /odom, 60 messages at stamps 50.0 + 0.05 i with
   x = 0.1 i (so x = 2 (t - 50)), plus a repeat of the first at the same bag time; /scan, 30 messages at
   stamps 50.02 + 0.1 k with ranges 1 + 0.01 k + 0.1 j (j = 0..7). Written in a shuffled order
@@ -117,6 +125,35 @@ def tf_chain(path):
                   laser_scan(k, stamp_of(bag_t), "laser_rear", [1.0] * 8), bag_t)
 
 
+def quat_rpy(roll, pitch, yaw):
+    """q = q_yaw * q_pitch * q_roll (tf's setRPY), as (x, y, z, w)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)
+
+
+def flipped(path):
+    with rosbag.Bag(path, "w") as bag:
+        b = struct.pack("<I", 3)
+        for child, roll, pitch, yaw in (("laser_up", 0.0, 0.0, 0.4), ("laser_roll", math.pi, 0.0, 0.4),
+                                        ("laser_pitch", 0.0, math.pi, 0.4)):
+            b += header(0, stamp_of(19.0), "base_link") + s(child)
+            b += struct.pack("<7d", 0.2, 0.1, 0.3, *quat_rpy(roll, pitch, yaw))
+        write(bag, "/tf_static", "tf2_msgs/TFMessage", b, 19.0)
+        for k in range(5):
+            t = 20.0 + 0.1 * k
+            ranges = [1.0 + 0.5 * j + 0.01 * k for j in range(8)]
+            for topic, frame, rs, a0 in (("/scan_up", "laser_up", ranges, -7 * math.pi / 16),
+                                         ("/scan_roll", "laser_roll", ranges[::-1], -7 * math.pi / 16),
+                                         ("/scan_pitch", "laser_pitch", ranges[::-1], 9 * math.pi / 16)):
+                m = header(k, stamp_of(t), frame)
+                m += struct.pack("<7f", a0, a0 + 7 * math.pi / 8, math.pi / 8, 0.0, 0.1, 0.1, 10.0)
+                m += struct.pack("<I", 8) + struct.pack("<8f", *rs) + struct.pack("<I", 0)
+                write(bag, topic, "sensor_msgs/LaserScan", m, t)
+
+
 def no_scan(path):
     with rosbag.Bag(path, "w") as bag:
         for i in range(3):
@@ -157,3 +194,4 @@ if __name__ == "__main__":
     no_scan(os.path.join(out, "no_scan.bag"))
     corrupt_scan(os.path.join(out, "corrupt_scan.bag"))
     many_chunks(os.path.join(out, "many_chunks.bag"))
+    flipped(os.path.join(out, "flipped.bag"))

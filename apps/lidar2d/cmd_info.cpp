@@ -27,7 +27,10 @@ std::string fmtDouble(double v, int digits) { return fmt::format("{:.{}f}", v, d
 double deg(double rad) { return rad * 180.0 / std::numbers::pi; }
 
 nlohmann::json summarise(const InfoArgs& args) {
-  auto source = io::openLog(args.log, args.reader);
+  // A tilted laser is reported, not refused: info reads it as --allow-tilted would and warns.
+  io::ReaderOptions reader = args.reader;
+  reader.allow_tilted_laser = true;
+  auto source = io::openLog(args.log, reader);
   std::size_t scans = 0, beams_first = 0, beams_min = std::numeric_limits<std::size_t>::max(), beams_max = 0;
   std::size_t with_odom = 0, with_truth = 0, time_repeats = 0, time_backwards = 0;
   std::size_t valid_beams = 0, total_beams = 0;
@@ -37,6 +40,8 @@ nlohmann::json summarise(const InfoArgs& args) {
   double odom_len = 0, truth_len = 0;
   std::optional<SE2> prev_odom, prev_truth;
   SE2 T_robot_laser;
+  bool upside_down = false;
+  double tilt = 0.0;
   while (auto f = source->next()) {
     const std::size_t n = f->scan.size();
     if (scans == 0) {
@@ -47,6 +52,8 @@ nlohmann::json summarise(const InfoArgs& args) {
       range_max = f->scan.rangeMax();
       t_first = f->time;
       T_robot_laser = f->T_robot_laser;
+      upside_down = f->laser_upside_down;
+      tilt = f->laser_tilt_rad;
     } else {
       if (f->time == prev_t) ++time_repeats;
       if (f->time < prev_t) ++time_backwards;
@@ -97,6 +104,8 @@ nlohmann::json summarise(const InfoArgs& args) {
   j["odometry_path_m"] = odom_len;
   j["truth_path_m"] = truth_len;
   j["laser_mount"] = {T_robot_laser.x(), T_robot_laser.y(), T_robot_laser.theta()};
+  j["laser_upside_down"] = upside_down;
+  j["laser_tilt_deg"] = deg(tilt);
   j["scan_source"] = notes.scan_source;
   j["odometry_source"] = notes.odom_source;
   j["truth_source"] = notes.truth_source;
@@ -108,6 +117,10 @@ nlohmann::json summarise(const InfoArgs& args) {
     warnings.push_back(std::to_string(time_repeats) + " scans repeat the previous scan's timestamp");
   if (!reader_told && time_backwards)
     warnings.push_back(std::to_string(time_backwards) + " scans have a timestamp earlier than the previous scan's");
+  if (tilt > 0.0 && !args.reader.allow_tilted_laser)
+    warnings.push_back(fmt::format("the laser is tilted by {:.1f} deg: the other commands refuse this log unless "
+                                   "--allow-tilted (or a --max-tilt above the tilt) is given",
+                                   deg(tilt)));
   j["warnings"] = warnings;
   return j;
 }
@@ -135,7 +148,11 @@ void printText(const nlohmann::json& j) {
   o << "\n";
   const auto& m = j["laser_mount"];
   o << "laser mount: x " << fmtDouble(m[0].get<double>(), 3) << " m, y " << fmtDouble(m[1].get<double>(), 3) << " m, theta "
-    << fmtDouble(deg(m[2].get<double>()), 2) << " deg\n";
+    << fmtDouble(deg(m[2].get<double>()), 2) << " deg";
+  if (j["laser_upside_down"].get<bool>()) o << ", upside down (scans mirrored)";
+  if (j["laser_tilt_deg"].get<double>() > 0.0)
+    o << ", tilted " << fmtDouble(j["laser_tilt_deg"].get<double>(), 1) << " deg (beams projected onto the floor plane)";
+  o << "\n";
   for (const auto& w : j["warnings"]) o << "warning:     " << w.get<std::string>() << "\n";
 }
 

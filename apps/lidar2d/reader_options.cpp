@@ -4,12 +4,51 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "commands.hpp"
 
 namespace lidar2d::cli {
+
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+// The value of --laser-mount: three comma-separated finite numbers X,Y [m],THETA [deg], then an
+// optional word 'flipped' (upside down) or 'upright'; or six numbers X,Y,Z [m],ROLL,PITCH,YAW [deg].
+LaserMount parseLaserMount(const std::string& v) {
+  constexpr const char* kExpected = "expected X,Y,THETA_DEG[,flipped] or X,Y,Z,ROLL_DEG,PITCH_DEG,YAW_DEG";
+  std::vector<std::string> fields;
+  for (std::size_t start = 0; start <= v.size();) {
+    const std::size_t end = std::min(v.find(',', start), v.size());
+    fields.push_back(v.substr(start, end - start));
+    start = end + 1;
+  }
+  std::optional<bool> flipped;
+  if (fields.size() == 4 && (fields[3] == "flipped" || fields[3] == "upright")) {
+    flipped = fields[3] == "flipped";
+    fields.pop_back();
+  }
+  std::vector<double> xs;
+  for (const std::string& field : fields) {
+    double x = 0.0;
+    const auto [ptr, ec] = std::from_chars(field.data(), field.data() + field.size(), x);
+    if (field.empty() || ec != std::errc() || ptr != field.data() + field.size() || !std::isfinite(x))
+      throw CLI::ValidationError("--laser-mount", fmt::format("'{}' is not a finite number ({})", field, kExpected));
+    xs.push_back(x);
+  }
+  if (xs.size() != 3 && !(xs.size() == 6 && !flipped))
+    throw CLI::ValidationError("--laser-mount", fmt::format("{}, got {} values", kExpected, fields.size()));
+  if (!io::laserMountOffsetOk(xs[0], xs[1]) || (xs.size() == 6 && !io::laserMountOffsetOk(xs[2], 0.0)))
+    throw CLI::ValidationError("--laser-mount", fmt::format("X, Y and Z must be within +-{:g} m of the robot's centre",
+                                                            io::kMaxLaserMountOffset));
+  if (xs.size() == 3) return LaserMount::planar(SE2(xs[0], xs[1], xs[2] * kDeg), flipped.value_or(false));
+  return LaserMount::fromRollPitchYaw(xs[0], xs[1], xs[2], xs[3] * kDeg, xs[4] * kDeg, xs[5] * kDeg);
+}
+
+}  // namespace
 
 void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
   sub->add_option("--scan-topic", options.scan_topic, "ROS bags: LaserScan topic (default: auto-detect)");
@@ -26,30 +65,18 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
       ->default_str("auto");
   sub->add_option_function<std::string>(
          "--laser-mount",
-         [&options](const std::string& v) {
-           // Three comma-separated finite numbers: x and y [m], theta [deg].
-           std::vector<double> xs;
-           std::size_t start = 0;
-           while (start <= v.size()) {
-             const std::size_t end = std::min(v.find(',', start), v.size());
-             const std::string field = v.substr(start, end - start);
-             double x = 0.0;
-             const auto [ptr, ec] = std::from_chars(field.data(), field.data() + field.size(), x);
-             if (field.empty() || ec != std::errc() || ptr != field.data() + field.size() || !std::isfinite(x))
-               throw CLI::ValidationError("--laser-mount", "'" + field + "' is not a finite number (expected X,Y,THETA_DEG)");
-             xs.push_back(x);
-             start = end + 1;
-           }
-           if (xs.size() != 3)
-             throw CLI::ValidationError("--laser-mount", "expected 3 comma-separated values X,Y,THETA_DEG, got " +
-                                                             std::to_string(xs.size()));
-           if (!io::laserMountOffsetOk(xs[0], xs[1]))
-             throw CLI::ValidationError("--laser-mount", fmt::format("X and Y must be within +-{:g} m of the robot's centre",
-                                                                     io::kMaxLaserMountOffset));
-           options.laser_mount = SE2(xs[0], xs[1], xs[2] * std::numbers::pi / 180.0);
-         },
-         "the laser's pose on the robot, X,Y [m],THETA [deg], replacing the log's (tf, CARMEN offset)")
-      ->type_name("X,Y,THETA_DEG");
+         [&options](const std::string& v) { options.laser_mount = parseLaserMount(v); },
+         "the laser's mounting on the robot, replacing the log's (tf, CARMEN offset): X,Y [m],THETA [deg], "
+         "optionally followed by ',flipped' for a laser mounted upside down (its scans mirrored), or "
+         "X,Y,Z [m],ROLL,PITCH,YAW [deg] (docs/file-formats.md, laser mounting)")
+      ->type_name("X,Y,THETA_DEG[,flipped]|X,Y,Z,R,P,Y");
+  sub->add_option("--max-tilt", options.max_laser_tilt_deg,
+                  "a scan plane tilted from the robot's plane by at most this is taken as level [deg]")
+      ->check(CLI::Range(0.0, 45.0))
+      ->default_str("2");
+  sub->add_flag("--allow-tilted", options.allow_tilted_laser,
+                "read a laser tilted by more than --max-tilt: its beams are projected onto the floor plane, each "
+                "range shortened by the tilt (default: such a log is refused)");
 }
 
 }  // namespace lidar2d::cli

@@ -190,7 +190,7 @@ void runRelations(const std::string& data_dir, const MatchBenchOptions& bo, cons
       continue;
     }
     io::ReaderOptions ro;
-    ro.laser_mount = log.laser_mount;
+    if (log.laser_mount) ro.laser_mount = LaserMount::planar(*log.laser_mount);
     auto source = io::openLog(bag, ro);
     std::vector<double> times;
     std::vector<Points2> points;

@@ -4,6 +4,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <numbers>
+#include <vector>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/frame_source.hpp"
@@ -54,27 +56,32 @@ LogFormat detectFormat(const std::string& path) {
 
 namespace {
 
-// ReaderOptions::laser_mount: the same mounting pose on every frame.
+// ReaderOptions::laser_mount: the same mounting on every frame. The readers leave the frames
+// unmounted (identity, scan as recorded) when the options give one, so it is applied here once.
 class MountOverride final : public FrameSource {
  public:
-  MountOverride(std::unique_ptr<FrameSource> inner, const SE2& mount) : inner_(std::move(inner)), mount_(mount) {}
+  MountOverride(std::unique_ptr<FrameSource> inner, const LaserMount& mount, std::vector<std::string> warnings)
+      : inner_(std::move(inner)), mount_(mount), warnings_(std::move(warnings)) {}
   std::optional<Frame> next() override {
     std::optional<Frame> f = inner_->next();
-    if (f) f->T_robot_laser = mount_;
+    if (f) internal::mountFrame(*f, mount_);  // cannot throw: applyTiltRule accepted the tilt
     return f;
   }
   LogFormat format() const override { return inner_->format(); }
   const std::string& path() const override { return inner_->path(); }
   SourceNotes notes() const override {
     SourceNotes n = inner_->notes();
-    n.scan_source += " (laser mounting given by the options, not the log)";
+    n.scan_source += mount_.upsideDown() ? " (laser mounting given by the options, upside down, not the log)"
+                                         : " (laser mounting given by the options, not the log)";
+    n.warnings.insert(n.warnings.end(), warnings_.begin(), warnings_.end());
     return n;
   }
   std::optional<std::size_t> sizeHint() const override { return inner_->sizeHint(); }
 
  private:
   std::unique_ptr<FrameSource> inner_;
-  SE2 mount_;
+  LaserMount mount_;
+  std::vector<std::string> warnings_;
 };
 
 std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOptions& options) {
@@ -91,14 +98,55 @@ std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOpt
 
 }  // namespace
 
+namespace internal {
+
+LaserMount applyTiltRule(const LaserMount& mount, const ReaderOptions& options, const ErrorLocation& where,
+                         const std::string& what, std::vector<std::string>& warnings) {
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  if (mount.tilt() <= options.max_laser_tilt_deg * kDeg) return mount.levelled();
+  const std::string tilted = fmt::format("the laser mounting {} is tilted by {:.1f} deg out of the robot's plane",
+                                         what, mount.tilt() / kDeg);
+  if (mount.tilt() > LaserMount::kMaxProjectableTilt)
+    throw badInput(fmt::format("{}, more than the {:.0f} deg that can be projected onto it: the laser does not scan "
+                               "the walls around the robot",
+                               tilted, LaserMount::kMaxProjectableTilt / kDeg),
+                   where);
+  if (!options.allow_tilted_laser)
+    throw badInput(fmt::format("{}, more than the tolerance of {:g} deg: its scans do not lie in the floor plane "
+                               "(--allow-tilted projects them onto it, --max-tilt raises the tolerance)",
+                               tilted, options.max_laser_tilt_deg),
+                   where);
+  warnings.push_back(fmt::format("{} (tolerance {:g} deg): its beams are projected onto the floor plane, each range "
+                                 "shortened by the tilt",
+                                 tilted, options.max_laser_tilt_deg));
+  return mount;
+}
+
+void mountFrame(Frame& frame, const LaserMount& mount) {
+  frame.scan = mount.project(std::move(frame.scan));
+  frame.T_robot_laser = mount.T_robot_laser();
+  frame.laser_upside_down = mount.upsideDown();
+  frame.laser_tilt_rad = mount.tilt();
+}
+
+}  // namespace internal
+
 std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options) {
-  if (options.laser_mount && (!options.laser_mount->isFinite() ||
-                              !laserMountOffsetOk(options.laser_mount->x(), options.laser_mount->y())))
-    throw invalidArgument(fmt::format("laser mounting pose must be finite, within +-{:g} m of the robot's centre",
-                                      kMaxLaserMountOffset),
-                          {"ReaderOptions", 0, "laser_mount"});
+  if (!(options.max_laser_tilt_deg >= 0.0 && options.max_laser_tilt_deg <= 45.0))
+    throw invalidArgument("the tilt tolerance must be within [0, 45] deg", {"ReaderOptions", 0, "max_laser_tilt_deg"});
+  std::vector<std::string> mount_warnings;
+  std::optional<LaserMount> mount;
+  if (options.laser_mount) {
+    const Eigen::Vector3d& t = options.laser_mount->translation3();
+    if (!laserMountOffsetOk(t.x(), t.y()) || !(std::abs(t.z()) <= kMaxLaserMountOffset))
+      throw invalidArgument(fmt::format("laser mounting must be within +-{:g} m of the robot's centre",
+                                        kMaxLaserMountOffset),
+                            {"ReaderOptions", 0, "laser_mount"});
+    mount = internal::applyTiltRule(*options.laser_mount, options, {"ReaderOptions", 0, "laser_mount"},
+                                    "given by the options", mount_warnings);
+  }
   std::unique_ptr<FrameSource> source = openFormat(path, options);
-  if (options.laser_mount) return std::make_unique<MountOverride>(std::move(source), *options.laser_mount);
+  if (mount) return std::make_unique<MountOverride>(std::move(source), *mount, std::move(mount_warnings));
   return source;
 }
 

@@ -125,16 +125,17 @@ class Ros1Source final : public RosMessageSource {
           *odom, [](auto bytes, const RosMessageRef& ref) { return decodeOdometry(bytes, RosWire::kRos1, ref); });
       if (first_odom && !first_odom->child_frame_id.empty()) robot_frames = {first_odom->child_frame_id};
     }
-    const RosMount mount = findMount(topics, robot_frames, laser_frame);
+    // A mounting given by the options replaces tf's: tf is not read (openLog applies that one).
+    const RosMount mount = options.laser_mount ? RosMount() : findMount(topics, robot_frames, laser_frame);
 
     describeRosSources(notes_, scan_topic_, kLaserScanType, laser_frame, mount, odom ? odom_topic_ : std::string(),
                        kOdometryType, robot_frames.front());
-    assembler_ = RosFrameAssembler(mount.T_robot_laser, odom != nullptr);
+    assembler_ = RosFrameAssembler(rosFrameMount(mount, options, path_, notes_.warnings), odom != nullptr);
   }
 
   RosMount findMount(const std::vector<Topic>& topics, const std::vector<std::string>& robot_frames,
                      const std::string& laser_frame) {
-    RosTfTree tree;
+    RosTfTree tree(path_);
     auto tfTopic = [&](const std::string& name) -> const Topic* {
       for (const auto& t : topics)
         if (t.info.name == name && (t.info.type == "tf2_msgs/TFMessage" || t.info.type == "tf/tfMessage") &&

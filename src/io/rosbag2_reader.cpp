@@ -289,15 +289,16 @@ class Ros2Source final : public RosMessageSource {
         return false;
       });
     }
-    const RosMount mount = findMount(robot_frames, laser_frame);
+    // A mounting given by the options replaces tf's: tf is not read (openLog applies that one).
+    const RosMount mount = options.laser_mount ? RosMount() : findMount(robot_frames, laser_frame);
     describeRosSources(notes_, topics_[scan_topic_].info.name, kLaserScanType, laser_frame, mount,
                        odom_topic_ ? topics_[*odom_topic_].info.name : std::string(), kOdometryType,
                        robot_frames.front());
-    assembler_ = RosFrameAssembler(mount.T_robot_laser, odom_topic_.has_value());
+    assembler_ = RosFrameAssembler(rosFrameMount(mount, options, path_, notes_.warnings), odom_topic_.has_value());
   }
 
   RosMount findMount(const std::vector<std::string>& robot_frames, const std::string& laser_frame) {
-    RosTfTree tree;
+    RosTfTree tree(path_);
     auto tfTopic = [&](const std::string& name) -> std::optional<std::size_t> {
       for (const auto& t : topics_)
         if (t.info.name == name && t.info.type == kTfType && t.serialization == "cdr") return indexOf(t);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "lidar2d/core/frame.hpp"
+#include "lidar2d/core/laser_mount.hpp"
 
 namespace lidar2d::io {
 
@@ -40,12 +41,21 @@ struct ReaderOptions {
   std::string carmen_laser;  ///< CARMEN: message to read ("FLASER", "RLASER", "ROBOTLASER1", ...);
                              ///< empty = the first laser message type found in the file
   CarmenPoses carmen_poses = CarmenPoses::kAuto;
-  /// The laser's mounting pose on the robot (`Frame::T_robot_laser`) for every frame, replacing
-  /// what the log says (a ROS bag's tf, a CARMEN log's front-laser offset); std::nullopt keeps the
-  /// log's. Only the mounting changes: the odometry and truth poses stay as the log gives them.
-  /// (For a log whose calibration is wrong: the fr079 bag's tf puts the laser 4 cm ahead of
-  /// base_link, the original CARMEN log 4 cm behind the robot's centre; docs/slam.md.)
-  std::optional<SE2> laser_mount;
+  /// The laser's mounting on the robot for every frame, replacing what the log says (a ROS bag's
+  /// tf, a CARMEN log's front-laser offset); std::nullopt keeps the log's. Only the mounting changes
+  /// (and with it the scan when the laser is upside down or tilted, `LaserMount::project`): the
+  /// odometry and truth poses stay as the log gives them. (For a log whose calibration is wrong or
+  /// missing: the fr079 bag's tf puts the laser 4 cm ahead of base_link, the original CARMEN log
+  /// 4 cm behind the robot's centre, docs/slam.md; CARMEN logs cannot say that a laser is upside
+  /// down.) Its tilt is subject to the rule below like the log's.
+  std::optional<LaserMount> laser_mount;
+  /// A scan plane tilted from the robot's plane by at most this is taken as level: the mounting's
+  /// tilt is dropped (`LaserMount::levelled`) [deg], in [0, 45].
+  double max_laser_tilt_deg = 2.0;
+  /// A laser tilted by more than max_laser_tilt_deg: false refuses the log (kBadInput naming the
+  /// mounting), true projects its beams onto the robot's plane (`LaserMount::project`, each range
+  /// shortened by the tilt) and says so in the notes' warnings.
+  bool allow_tilted_laser = false;
 };
 
 /// The farthest a laser may be mounted from the robot's frame origin: `ReaderOptions::laser_mount`

@@ -8,6 +8,7 @@
 #include <set>
 
 #include "lidar2d/core/error.hpp"
+#include "src/io/internal/readers.hpp"
 
 namespace lidar2d::io::internal {
 
@@ -59,12 +60,6 @@ SE2 projectToPlane(const RosTransform3& t) {
   return SE2(t.tx, t.ty, yaw);
 }
 
-double tiltOf(const RosTransform3& t) {
-  // z component of the rotated z axis: R(2,2) = 1 - 2(x^2 + y^2) for a unit quaternion.
-  const double zz = 1.0 - 2.0 * (t.qx * t.qx + t.qy * t.qy);
-  return std::acos(std::clamp(zz, -1.0, 1.0));
-}
-
 void RosTfTree::add(const RosTransformStamped& t) {
   if (t.child.empty() || t.parent.empty() || t.child == t.parent) return;
   parent_of_[t.child] = Edge{t.parent, t.transform};
@@ -75,25 +70,46 @@ bool RosTfTree::hasFrame(const std::string& frame) const {
   return std::any_of(parent_of_.begin(), parent_of_.end(), [&](const auto& kv) { return kv.second.parent == frame; });
 }
 
+Eigen::Isometry3d RosTfTree::checked(const std::string& child, const Edge& e) const {
+  const RosTransform3& t = e.T_parent_child;
+  const Eigen::Quaterniond q(t.qw, t.qx, t.qy, t.qz);
+  const Eigen::Vector3d p(t.tx, t.ty, t.tz);
+  const ErrorLocation where(file_, 0, fmt::format("tf {} -> {}", e.parent, child));
+  if (!p.allFinite() || !q.coeffs().allFinite()) throw badInput("transform has a non-finite value", where);
+  // tf2 (BufferCore::setTransform) refuses quaternions whose squared norm is off by more than 0.01.
+  if (std::abs(q.squaredNorm() - 1.0) > 0.01)
+    throw badInput(fmt::format("rotation quaternion ({:g}, {:g}, {:g}, {:g}) is not of unit length", t.qx, t.qy, t.qz,
+                               t.qw),
+                   where);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = q.normalized().toRotationMatrix();
+  T.translation() = p;
+  return T;
+}
+
 std::optional<RosTfTree::Lookup> RosTfTree::lookup(const std::string& from, const std::string& to) const {
   struct Up {
     std::string frame;
-    SE2 T_frame_start;  // the start frame in this ancestor
-    double tilt;
+    const Edge* edge;  // to the parent; nullptr at the root
   };
   // Ancestors of a frame, itself first; stops at the root or on a cycle.
   auto climb = [this](const std::string& start) {
-    std::vector<Up> ups{{start, SE2(), 0.0}};
+    std::vector<Up> ups{{start, nullptr}};
     std::set<std::string> seen{start};
     for (;;) {
       const auto it = parent_of_.find(ups.back().frame);
       if (it == parent_of_.end() || seen.count(it->second.parent)) break;
-      const SE2 T_parent_child = projectToPlane(it->second.T_parent_child);
-      ups.push_back({it->second.parent, T_parent_child * ups.back().T_frame_start,
-                     std::max(ups.back().tilt, tiltOf(it->second.T_parent_child))});
+      ups.back().edge = &it->second;
+      ups.push_back({it->second.parent, nullptr});
       seen.insert(it->second.parent);
     }
     return ups;
+  };
+  // The start frame of `ups` in its k-th ancestor, composed in 3D.
+  auto inAncestor = [this](const std::vector<Up>& ups, std::size_t k) {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    for (std::size_t m = 0; m < k; ++m) T = checked(ups[m].frame, *ups[m].edge) * T;
+    return T;
   };
   const auto from_up = climb(from);
   const auto to_up = climb(to);
@@ -102,8 +118,7 @@ std::optional<RosTfTree::Lookup> RosTfTree::lookup(const std::string& from, cons
       if (from_up[i].frame != to_up[j].frame) continue;
       Lookup l;
       // T_from_to = T_anc_from^-1 * T_anc_to
-      l.T_from_to = from_up[i].T_frame_start.inverse() * to_up[j].T_frame_start;
-      l.max_tilt = std::max(from_up[i].tilt, to_up[j].tilt);
+      l.T_from_to = inAncestor(from_up, i).inverse() * inAncestor(to_up, j);
       for (std::size_t k = 0; k <= i; ++k) l.chain.push_back(from_up[k].frame);
       for (std::size_t k = j; k-- > 0;) l.chain.push_back(to_up[k].frame);
       return l;
@@ -127,8 +142,8 @@ RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& rob
     if (const auto l = tree.lookup(robot, laser_frame)) {
       m.found = true;
       m.robot_frame = robot;
-      m.T_robot_laser = l->T_from_to;
-      m.max_tilt = l->max_tilt;
+      // Normalized by `lookup`'s checks; composing keeps it a rotation to rounding.
+      m.mount = LaserMount::fromTransform(l->T_from_to.translation(), Eigen::Quaterniond(l->T_from_to.rotation()));
       for (const auto& f : l->chain) {
         if (!m.description.empty()) m.description += " -> ";
         m.description += f;
@@ -139,13 +154,17 @@ RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& rob
   return m;
 }
 
+LaserMount rosFrameMount(const RosMount& mount, const ReaderOptions& options, const std::string& path,
+                         std::vector<std::string>& warnings) {
+  if (options.laser_mount || !mount.found) return LaserMount();
+  return applyTiltRule(mount.mount, options, {path, 0, "tf " + mount.description}, mount.description, warnings);
+}
+
 void noteRosMount(RosMount& mount, const std::string& source, const std::vector<std::string>& robot_frames,
                   const std::string& laser_frame, std::vector<std::string>& warnings) {
   if (mount.found) {
     if (mount.description.find("->") != std::string::npos) mount.description += fmt::format(" from {}", source);
-    if (mount.max_tilt > 0.05)
-      warnings.push_back(fmt::format("the laser mounting {} is tilted by {:.1f} deg out of the plane; only its yaw is used",
-                                     mount.description, mount.max_tilt * 180.0 / std::numbers::pi));
+    if (mount.mount.upsideDown()) mount.description += ", upside down";
     return;
   }
   std::string robots;
@@ -176,8 +195,8 @@ LaserScan toLaserScan(const RosLaserScanMsg& m, double time, const RosMessageRef
   }
 }
 
-RosFrameAssembler::RosFrameAssembler(SE2 T_robot_laser, bool use_odometry)
-    : T_robot_laser_(T_robot_laser), use_odometry_(use_odometry) {}
+RosFrameAssembler::RosFrameAssembler(LaserMount mount, bool use_odometry)
+    : mount_(std::move(mount)), use_odometry_(use_odometry) {}
 
 void RosFrameAssembler::pushScan(LaserScan scan, double time) { pending_.push_back({std::move(scan), time}); }
 
@@ -206,7 +225,7 @@ std::optional<Frame> RosFrameAssembler::pop() {
   f.index = next_index_++;
   f.time = t;
   f.scan = std::move(pending_.front().scan);
-  f.T_robot_laser = T_robot_laser_;
+  mountFrame(f, mount_);
   if (use_odometry_) f.T_odom_robot = interpolate(t);
   pending_.pop_front();
   prune();

@@ -3,6 +3,7 @@
 // mounting pose from tf, odometry interpolation at scan stamps, and LaserScan conversion. Only the
 // bag readers include this.
 
+#include <Eigen/Geometry>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
@@ -14,6 +15,7 @@
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/core/frame.hpp"
+#include "lidar2d/core/laser_mount.hpp"
 #include "lidar2d/core/se2.hpp"
 #include "lidar2d/io/frame_source.hpp"
 #include "src/io/internal/ros_messages.hpp"
@@ -84,26 +86,28 @@ RosTopicPick<Topic> pickScanAndOdometry(const std::vector<Topic>& topics, const 
   return pick;
 }
 
-/// Planar projection of a 3D transform: (x, y, yaw), yaw from the quaternion (ZYX convention).
+/// Planar projection of a 3D pose (odometry): (x, y, yaw), yaw from the quaternion (ZYX convention).
 SE2 projectToPlane(const RosTransform3& t);
-/// Angle between the transform's z axis and the parent's z axis [rad] (0 for a planar transform).
-double tiltOf(const RosTransform3& t);
 
 /// A tf tree built from tf2_msgs/TFMessage transforms (each child has one parent; a later transform
 /// of the same child replaces the earlier one, as tf2's static buffer does).
 class RosTfTree {
  public:
+  /// `file` names the bag in errors.
+  explicit RosTfTree(std::string file = {}) : file_(std::move(file)) {}
   void add(const RosTransformStamped& t);
   bool hasFrame(const std::string& frame) const;
   std::size_t size() const { return parent_of_.size(); }
 
   struct Lookup {
-    SE2 T_from_to;                   ///< pose of frame `to` in frame `from`, planar
+    Eigen::Isometry3d T_from_to = Eigen::Isometry3d::Identity();  ///< pose of frame `to` in frame `from`, 3D
     std::vector<std::string> chain;  ///< frames visited from `from` to `to`
-    double max_tilt = 0.0;           ///< largest tilt of a transform on the chain [rad]
   };
-  /// The transform from `from` to `to` through their common ancestor (each transform projected
-  /// to the plane, then composed), or std::nullopt when they are not connected.
+  /// The transform from `from` to `to` through their common ancestor, composed in 3D (so a chain
+  /// through an upside-down plate keeps its mirror), or std::nullopt when they are not connected.
+  /// Throws lidar2d::Error (kBadInput, field "tf PARENT -> CHILD") when a transform on the chain has
+  /// a non-finite value or a quaternion that is not of unit length (tf2's tolerance: |q|^2 within
+  /// 0.01 of 1); such a transform elsewhere in the tree is ignored, as it does not matter here.
   std::optional<Lookup> lookup(const std::string& from, const std::string& to) const;
 
  private:
@@ -111,21 +115,28 @@ class RosTfTree {
     std::string parent;
     RosTransform3 T_parent_child;
   };
+  Eigen::Isometry3d checked(const std::string& child, const Edge& e) const;
+  std::string file_;
   std::map<std::string, Edge> parent_of_;  // child -> parent edge
 };
 
-/// Finds T_robot_laser in `tree`. Tries `robot_frames` in order; returns the first that is
+/// Finds the laser mounting in `tree`. Tries `robot_frames` in order; returns the first that is
 /// connected to `laser_frame`, with a human-readable description of the chain. Identity and no
 /// chain when `laser_frame` is one of the robot frames.
 struct RosMount {
-  SE2 T_robot_laser;
+  LaserMount mount;         ///< the chain's 3D transform robot <- laser (tilt not yet ruled on)
   std::string robot_frame;
   std::string description;  ///< e.g. "base_link -> laser"; empty when not found
-  double max_tilt = 0.0;
   bool found = false;
 };
 RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& robot_frames,
                       const std::string& laser_frame);
+
+/// The mounting a ROS reader's frames get: identity when `options.laser_mount` replaces the bag's
+/// (openLog applies that one), else `mount.mount` under the tilt rule (applyTiltRule; an error
+/// names `path` and the chain).
+LaserMount rosFrameMount(const RosMount& mount, const ReaderOptions& options, const std::string& path,
+                         std::vector<std::string>& warnings);
 
 /// Fills `notes.scan_source` and, when `odom_topic` is not empty, `notes.odom_source` with the
 /// topics, their message types, frames and mounting the reader found (shared by the ROS1 and ROS2 readers).
@@ -133,8 +144,8 @@ void describeRosSources(SourceNotes& notes, const std::string& scan_topic, const
                         const std::string& laser_frame, const RosMount& mount, const std::string& odom_topic,
                         const std::string& odom_type, const std::string& robot_frame);
 /// Completes `mount.description` with the topic it came from (`source`, e.g. "/tf_static") and
-/// appends to `warnings` what the user should know: a chain tilted out of the plane (only its yaw
-/// is used), or no mounting found (identity used).
+/// whether the laser is upside down, and appends to `warnings` when no mounting was found (identity
+/// used). The tilt is ruled on by rosFrameMount.
 void noteRosMount(RosMount& mount, const std::string& source, const std::vector<std::string>& robot_frames,
                   const std::string& laser_frame, std::vector<std::string>& warnings);
 
@@ -158,7 +169,8 @@ class RosFrameAssembler {
   static constexpr std::size_t kMaxPendingScans = 512;
   static constexpr double kMaxOdomGapS = 0.5;
 
-  RosFrameAssembler(SE2 T_robot_laser, bool use_odometry);
+  /// Every frame gets `mount` (already ruled on: rosFrameMount), its scan projected with it.
+  RosFrameAssembler(LaserMount mount, bool use_odometry);
 
   /// A scan (already converted) with its frame time [s].
   void pushScan(LaserScan scan, double time);
@@ -183,7 +195,7 @@ class RosFrameAssembler {
   std::optional<SE2> interpolate(double t);
   void prune();
 
-  SE2 T_robot_laser_;
+  LaserMount mount_;
   bool use_odometry_;
   bool finished_ = false;
   std::deque<Pending> pending_;
@@ -217,7 +229,7 @@ class RosMessageSource : public FrameSource {
 
   std::string path_;
   std::optional<std::size_t> size_hint_;
-  RosFrameAssembler assembler_{SE2(), false};
+  RosFrameAssembler assembler_{LaserMount(), false};
   SourceNotes notes_;
 
  private:
