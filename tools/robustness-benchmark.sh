@@ -19,7 +19,8 @@
 # --quick uses seed 1 only; --logs keeps only the logs / worlds named (e.g. --logs intel,orebro).
 #
 # Columns: the SLAM trajectory's error, the log's own odometry's error beside it (`lidar2d eval LOG
-# --truth T --estimate-from odometry`; "not used" for --no-odometry), loop closures accepted, wall
+# --truth T --estimate-from odometry`; "not used" for --no-odometry), loop closures accepted,
+# fragments (summary.json: stretches after a lost track no loop closure tied back; 1 = one map), wall
 # time of the slam process, p99 and max milliseconds per scan from summary.json (p99 empty when the
 # summary has none), peak memory of the slam process (/usr/bin/time). A run whose slam or eval fails
 # gets a row saying so; the others still run.
@@ -73,7 +74,7 @@ run() {
   /usr/bin/time -f "%e %U %M" -o "$dir/time.txt" "$BIN" slam "$log" -o "$dir/slam" -q "${config[@]}" "$@" \
     >"$dir/slam.out" 2>"$dir/slam.err" || rc=$?
   if [ "$rc" != 0 ]; then
-    emit "| $name | slam failed (exit $rc): $(head -c 200 "$dir/slam.err" | tr '\n|' '  ') | | | | | | |"
+    emit "| $name | slam failed (exit $rc): $(head -c 200 "$dir/slam.err" | tr '\n|' '  ') | | | | | | | |"
     return 0
   fi
   "$BIN" eval "$dir/slam/trajectory.txt" --truth "$truth" >"$dir/eval.json" 2>"$dir/eval.err" || rc=$?
@@ -103,8 +104,8 @@ if o is None and os.path.exists(os.path.join(d, "odom.json")):
 wall, user, kb = open(os.path.join(d, "time.txt")).read().split()[-3:]
 p99 = s.get("ms_per_scan_p99")
 mx = s.get("ms_per_scan_max")
-print("| %s | %s | %s | %s | %s | %s | %s | %s | %d |" % (
-    name, s.get("scans", ""), slam_err, odom_err, s.get("loop_closures_accepted", ""), wall,
+print("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %d |" % (
+    name, s.get("scans", ""), slam_err, odom_err, s.get("loop_closures_accepted", ""), s.get("fragments", ""), wall,
     "" if p99 is None else "%.1f" % p99, "" if mx is None else "%.1f" % mx, int(kb) // 1024))
 PY
 }
@@ -116,8 +117,8 @@ perturb() {
 }
 
 : >"$TABLE"
-emit "| run | scans | SLAM error | odometry error | loops accepted | wall [s] | p99 [ms/scan] | max [ms/scan] | peak MB |"
-emit "|---|---|---|---|---|---|---|---|---|"
+emit "| run | scans | SLAM error | odometry error | loops accepted | fragments | wall [s] | p99 [ms/scan] | max [ms/scan] | peak MB |"
+emit "|---|---|---|---|---|---|---|---|---|---|"
 
 if want_part corrected; then
   mkdir -p "$OUT/logs"
