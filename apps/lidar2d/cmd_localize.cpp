@@ -70,6 +70,7 @@ localization::Database buildDatabase(const OccupancyImage& map, const localizati
 }
 
 void runIndex(DbArgs& a) {
+  prepareOutputFile(a.output);
   const auto t0 = Clock::now();
   a.options.fov_rad = a.fov_deg * kDeg;
   const io::MapFile map = readMapChecked(a.map);
@@ -100,6 +101,8 @@ struct LocArgs {
 };
 
 void runLocalize(const LocArgs& a) {
+  prepareOutputFile(a.output);
+  if (!a.json.empty()) prepareOutputFile(a.json);
   const auto t0 = Clock::now();
   const io::MapFile map = readMapChecked(a.map);
   std::optional<localization::Database> db;
@@ -235,9 +238,8 @@ void addLocalizeCommands(CLI::App& app) {
   sub->add_option("--db", a->db, "database from 'lidar2d localize-index' (default: built in memory)");
   sub->add_option("--json", a->json, "write a JSON summary (timings; success rate with --eval) to this file");
   sub->add_flag("--eval", a->eval, "compare with the log's truth: success (within 0.3 m and 5 deg), precision");
-  const std::map<std::string, Scans> scans{{"all", Scans::kAll}, {"even", Scans::kEven}, {"odd", Scans::kOdd}};
-  sub->add_option("--scans", a->scans, "which scans to localize: all, even or odd (0-based index in the log)")
-      ->transform(CLI::CheckedTransformer(scans, CLI::ignore_case))
+  addChoice<Scans>(sub, "--scans", a->scans, {{"all", Scans::kAll}, {"even", Scans::kEven}, {"odd", Scans::kOdd}},
+                   "which scans to localize: all, even or odd (0-based index in the log)")
       ->default_str("all");
   sub->add_option("--min-score", a->options.min_score, "decline below this score (fraction of points on obstacles)")
       ->capture_default_str();

@@ -66,6 +66,7 @@ OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map
 }
 
 void run(const MapArgs& a) {
+  prepareOutputFile(a.prefix + ".yaml");
   const auto t0 = std::chrono::steady_clock::now();
   auto map = mapping::makeMap(a.model, a.options);
   mapping::FramePoses poses = a.poses_file.empty()
@@ -117,10 +118,11 @@ void addMapCommand(CLI::App& app) {
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->prefix, "output prefix: writes PREFIX.pgm, PREFIX.yaml, PREFIX.png (+ PREFIX.surface.txt for tsdf)")
       ->required();
-  const std::map<std::string, mapping::MapModel> models{
-      {"logodds", mapping::MapModel::kLogOdds}, {"count", mapping::MapModel::kCount}, {"tsdf", mapping::MapModel::kTsdf}};
-  sub->add_option("--model", a->model, "map model: logodds, count or tsdf")
-      ->transform(CLI::CheckedTransformer(models, CLI::ignore_case))
+  addChoice<mapping::MapModel>(sub, "--model", a->model,
+                               {{"logodds", mapping::MapModel::kLogOdds},
+                                {"count", mapping::MapModel::kCount},
+                                {"tsdf", mapping::MapModel::kTsdf}},
+                               "map model: logodds, count or tsdf")
       ->default_str("logodds");
   sub->add_option("--resolution", a->options.resolution_m, "cell size [m]")->default_val(0.05);
   sub->add_option("--max-range", a->options.insert.max_range_m, "returns beyond this are treated as no return [m]")
@@ -141,11 +143,11 @@ void addMapCommand(CLI::App& app) {
   sub->add_option("--truncation", a->options.tsdf.truncation_m, "tsdf: truncation distance [m]")->default_val(0.3);
   sub->add_option("--poses", a->poses_file, "trajectory file (t x y theta or TUM) giving the pose of every scan");
   sub->add_option("--max-dt", a->max_dt, "--poses: largest timestamp difference to accept [s]")->default_val(0.001);
-  const std::map<std::string, mapping::PoseSource> sources{{"auto", mapping::PoseSource::kAuto},
-                                                           {"truth", mapping::PoseSource::kTruth},
-                                                           {"odometry", mapping::PoseSource::kOdometry}};
-  sub->add_option("--pose-source", a->pose_source, "without --poses: auto (truth if present, else odometry), truth or odometry")
-      ->transform(CLI::CheckedTransformer(sources, CLI::ignore_case))
+  addChoice<mapping::PoseSource>(sub, "--pose-source", a->pose_source,
+                                 {{"auto", mapping::PoseSource::kAuto},
+                                  {"truth", mapping::PoseSource::kTruth},
+                                  {"odometry", mapping::PoseSource::kOdometry}},
+                                 "without --poses: auto (truth if present, else odometry), truth or odometry")
       ->default_str("auto");
   sub->add_option("--prior", a->prior,
                   "prior layer overriding the sensor: a map_server YAML (aligned by world coordinates) or an image of the "

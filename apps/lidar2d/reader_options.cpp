@@ -17,12 +17,10 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
                   "ROS bags: Odometry topic (default: auto-detect; 'none' ignores odometry)");
   sub->add_option("--carmen-laser", options.carmen_laser,
                   "CARMEN logs: laser message to read, e.g. FLASER, RLASER, ROBOTLASER1 (default: first found)");
-  const std::map<std::string, io::CarmenPoses> poses{{"auto", io::CarmenPoses::kAuto},
-                                                     {"truth", io::CarmenPoses::kTruth},
-                                                     {"odometry", io::CarmenPoses::kOdometry}};
-  sub->add_option("--carmen-poses", options.carmen_poses,
-                  "CARMEN logs: meaning of the laser messages' poses: auto, truth or odometry")
-      ->transform(CLI::CheckedTransformer(poses, CLI::ignore_case))
+  addChoice<io::CarmenPoses>(
+      sub, "--carmen-poses", options.carmen_poses,
+      {{"auto", io::CarmenPoses::kAuto}, {"truth", io::CarmenPoses::kTruth}, {"odometry", io::CarmenPoses::kOdometry}},
+      "CARMEN logs: meaning of the laser messages' poses: auto, truth or odometry")
       ->default_str("auto");
   sub->add_option_function<std::string>(
          "--laser-mount",
