@@ -137,6 +137,38 @@ INSTANTIATE_TEST_SUITE_P(Models, SimMapping,
                            return std::string(toString(std::get<0>(info.param))) + "_" + std::get<1>(info.param).name;
                          });
 
+// The office is closed by its outer walls: a scan taken inside it sees nothing outside. A lost echo
+// (the simulator's dropout) reads as an error, not as "no return", so no beam clears through a wall.
+TEST(SimMapping, LostEchoesClearNothingOutsideTheBuilding) {
+  const sim::Scenario& s = data().scenario;
+  sim::SimulatorOptions o;
+  o.laser.dropout = 0.05;
+  sim::PathOptions p;
+  p.rate_hz = 2.0;
+  const auto frames = sim::simulate(s.world, sim::samplePath(s.waypoints, p), o);
+  std::size_t dropped = 0;
+  for (const Frame& f : frames)
+    for (std::size_t i = 0; i < f.scan.size(); ++i) dropped += f.scan.ranges()[i] == 0.0;
+  ASSERT_GT(dropped, 1000u);
+  for (const MapModel model : {MapModel::kLogOdds, MapModel::kCount, MapModel::kTsdf}) {
+    MapOptions mo;
+    mo.resolution_m = 0.05;
+    auto map = makeMap(model, mo);
+    for (const Frame& f : frames) map->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
+    const GridGeometry& g = map->geometry();
+    const Eigen::Vector2d lo = s.world.boundsMin(), hi = s.world.boundsMax();
+    std::size_t free_outside = 0;
+    const CellBox b = map->bounds();
+    for (int y = b.min.y; y <= b.max.y; ++y)
+      for (int x = b.min.x; x <= b.max.x; ++x) {
+        const Eigen::Vector2d c = g.centerOf({x, y});
+        const bool outside = c.x() < lo.x() - 0.1 || c.y() < lo.y() - 0.1 || c.x() > hi.x() + 0.1 || c.y() > hi.y() + 0.1;
+        free_outside += outside && map->state({x, y}) == CellState::kFree;
+      }
+    EXPECT_EQ(free_outside, 0u) << toString(model);
+  }
+}
+
 TEST(SimMapping, TsdfSurfaceIsSubCellAndBeatsOccupancyCells) {
   const sim::World& world = data().scenario.world;
   const auto tsdf = buildMap(MapModel::kTsdf);
