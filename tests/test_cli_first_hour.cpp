@@ -5,10 +5,13 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <cstdlib>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "apps/lidar2d/progress.hpp"
 #include "support/test_support.hpp"
 
 namespace lidar2d {
@@ -113,6 +116,52 @@ TEST_F(OutputPaths, UnusableOutputFailsBeforeTheWork) {
   EXPECT_EQ(slam.exit_code, 1);
   EXPECT_NE(slam.err.find("plain-file/sub"), std::string::npos) << slam.err;
   EXPECT_EQ(slam.err.find("broken-at-end.log"), std::string::npos) << slam.err;
+}
+
+// The progress line of `args` run on a pseudo-terminal (util-linux `script`), or nullopt without it.
+std::optional<std::string> onTerminal(const std::vector<std::string>& args, const fs::path& capture) {
+  if (!fs::exists("/usr/bin/script")) return std::nullopt;
+  std::string cmd = LIDAR2D_CLI_PATH;
+  for (const auto& a : args) cmd += " '" + a + "'";
+  const std::string shell = "/usr/bin/script -qec \"" + cmd + "\" /dev/null > '" + capture.string() + "' 2>&1";
+  if (std::system(shell.c_str()) != 0) return std::nullopt;
+  return test::readFile(capture);
+}
+
+TEST_F(OutputPaths, ProgressIsShownOnATerminalOnly) {
+  const std::string log = file("c.log");
+  for (const std::vector<std::string>& args : {std::vector<std::string>{"map", log, "-o", file("p-map")},
+                                              {"match", log, "-o", file("p-match.txt")},
+                                              {"degeneracy", log, "-o", file("p-deg.txt")}}) {
+    const CliResult r = runCli(args);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(r.err.find('\r'), std::string::npos) << args[0] << " drew progress into a pipe: " << r.err;
+  }
+  const auto map = onTerminal({"map", log, "-o", file("t-map")}, dir_->path() / "t-map.tty");
+  if (!map) GTEST_SKIP() << "util-linux 'script' is not available to run on a terminal";
+  EXPECT_NE(map->find("mapping "), std::string::npos) << *map;
+  EXPECT_NE(map->find(" scans/s"), std::string::npos) << *map;
+}
+
+TEST(FirstHour, ProgressShowsTimeLeftWhenTheLogKnowsItsLength) {
+  LIDAR2D_REQUIRE_DATA("bags/laser_scan_matcher_demo.bag");
+  TempDir tmp;
+  const auto out = onTerminal({"match", test::dataFile("bags/laser_scan_matcher_demo.bag").string(), "--init",
+                               "identity", "-o", (tmp / "p.txt").string()},
+                              tmp / "tty");
+  if (!out) GTEST_SKIP() << "util-linux 'script' is not available to run on a terminal";
+  EXPECT_NE(out->find("/359 pairs"), std::string::npos) << *out;
+  EXPECT_NE(out->find(" pairs/s"), std::string::npos) << *out;
+}
+
+TEST(FirstHour, ProgressTextHasRateAndTimeLeft) {
+  EXPECT_EQ(cli::progressText("mapping", 300, 1200, 10.0, "scans"),
+            "mapping [#######.......................]  25% 300/1200 scans, 30.0 scans/s, 0:30 left ");
+  EXPECT_EQ(cli::progressText("mapping", 300, std::nullopt, 10.0, "scans"), "mapping 300 scans, 30.0 scans/s ");
+  EXPECT_EQ(cli::progressText("matching", 0, 10, 0.0, "pairs"),
+            "matching [..............................]   0% 0/10 pairs ");
+  EXPECT_EQ(cli::progressText("indexing", 10, 4000, 1.0, "positions"),
+            "indexing [..............................]   0% 10/4000 positions, 10.0 positions/s, 6:39 left ");
 }
 
 nlohmann::json infoJson(const fs::path& log) {

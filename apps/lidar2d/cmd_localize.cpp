@@ -53,14 +53,11 @@ io::MapFile readMapChecked(const std::string& path) { return io::readMap(path); 
 // positions take minutes); errors name `map_path`.
 localization::Database buildDatabase(const OccupancyImage& map, const localization::DatabaseOptions& o, bool quiet,
                                      const std::string& map_path) {
-  ProgressLine line(quiet);
+  RateProgress line(quiet, "indexing", "positions", std::nullopt);
   auto report = [](std::size_t done, std::size_t total, void* user) {
-    static_cast<ProgressLine*>(user)->update(
-        [&] {
-          return fmt::format("indexing: {} of {} positions ({:.0f}%)", done, total,
-                             100.0 * static_cast<double>(done) / static_cast<double>(std::max<std::size_t>(total, 1)));
-        },
-        done == total);
+    auto* p = static_cast<RateProgress*>(user);
+    p->setTotal(total);
+    p->update(done, done == total);
   };
   try {
     return localization::Database::build(map, o, 0, line.enabled() ? +report : nullptr, &line);
@@ -129,13 +126,9 @@ void runLocalize(const LocArgs& a) {
   eval::LocalizationTally tally;
   tally.tolerance = {a.success_m, a.success_deg * kDeg};
   // Progress on a terminal (a long log takes minutes at tens of milliseconds per scan).
-  ProgressLine line(a.quiet);
-  const std::optional<std::size_t> total = source->sizeHint();
+  RateProgress progress(a.quiet, "localizing", "scans", source->sizeHint());
   while (auto f = source->next()) {
-    line.update([&] {
-      return total ? fmt::format("localizing: scan {} of {}", f->index + 1, *total)
-                   : fmt::format("localizing: scan {}", f->index + 1);
-    });
+    progress.update(f->index);
     if ((a.scans == Scans::kEven && f->index % 2 != 0) || (a.scans == Scans::kOdd && f->index % 2 != 1)) continue;
     const localization::LocalizationResult r = loc->localize(f->scan, f->T_robot_laser);
     times_ms.push_back(r.total_ms);
@@ -153,7 +146,7 @@ void runLocalize(const LocArgs& a) {
     tally.add(r.declined ? std::nullopt : std::optional<SE2>(r.T_world_robot),
               a.eval ? f->T_world_robot : std::nullopt, f->T_odom_robot);
   }
-  line.clear();
+  progress.clear();
   const std::size_t scans = tally.scans;
   if (scans == 0) throw badInput("the log has no scan to localize", ErrorLocation(a.log));
   out.commit();

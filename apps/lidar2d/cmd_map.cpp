@@ -1,7 +1,6 @@
 // lidar2d map LOG --model logodds|count|tsdf -o PREFIX: an occupancy map from known poses.
 
 #include <fmt/format.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -21,6 +20,7 @@
 #include "lidar2d/mapping/map_builder.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "map_output.hpp"
+#include "progress.hpp"
 
 namespace lidar2d::cli {
 namespace {
@@ -73,12 +73,11 @@ void run(const MapArgs& a) {
                                   ? mapping::FramePoses::fromFrames(a.pose_source, "use --poses TRAJ or --pose-source")
                                   : mapping::FramePoses::fromTrajectory(io::readTrajectory(a.poses_file), a.max_dt, a.poses_file);
   auto source = io::openLog(a.log, a.reader);
-  const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
+  RateProgress progress(a.quiet, "mapping", "scans", source->sizeHint());
   mapping::MapBuilder builder(*map, std::move(poses), {.source_name = a.log});
-  const std::size_t scans = builder.insert([&] { return source->next(); }, [progress](std::size_t done) {
-    if (progress && done % 500 == 0) std::cerr << "\rmapped " << done << " scans" << std::flush;
-  });
-  if (progress) std::cerr << "\r";
+  const std::size_t scans =
+      builder.insert([&] { return source->next(); }, [&progress](std::size_t done) { progress.update(done); });
+  progress.clear();
   if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
   OccupancyImage image = mapping::toOccupancyImage(*map);
   std::size_t overridden = 0;

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/core/trajectory.hpp"
@@ -103,7 +104,12 @@ void run(const MatchArgs& a) {
                                 T.theta(), r.converged ? 1 : 0, r.iterations);
     pairs.push_back({p.t_prev, p.t_cur, T, r.converged, r.iterations});
   };
-  const registration::SequenceSummary summary = matcher.run(next_frame, write_pair);
+  std::optional<std::size_t> total_pairs;
+  if (const auto n = source->sizeHint(); n && *n > 0) total_pairs = *n - 1;
+  RateProgress progress(a.quiet, "matching", "pairs", total_pairs);
+  const registration::SequenceSummary summary =
+      matcher.run(next_frame, write_pair, [&progress](std::size_t done) { progress.update(done); });
+  progress.clear();
   if (summary.frames < 2)
     throw badInput(fmt::format("log has {} scan(s); matching needs at least 2", summary.frames), ErrorLocation(a.log));
   out.commit();
