@@ -169,7 +169,7 @@ void printText(const nlohmann::json& j) {
 void addInfoCommand(CLI::App& app) {
   auto args = std::make_shared<InfoArgs>();
   auto* sub = app.add_subcommand("info", "Summarise a log: scans, beams, field of view, duration, odometry/truth");
-  sub->add_option("LOG", args->log, "CARMEN log (.log/.clf, plain or .gz), ROS1 bag, or ROS2 bag")->required();
+  sub->add_option("LOG", args->log, "CARMEN log (.log/.clf, plain or .gz), ROS1 bag, ROS2 bag, or range table folder")->required();
   sub->add_flag("--json", args->json, "print JSON instead of text");
   addReaderOptions(sub, args->reader);
   sub->callback([args] {

@@ -69,9 +69,12 @@ void run(const MapArgs& a) {
   prepareOutputFile(a.prefix + ".yaml");
   const auto t0 = std::chrono::steady_clock::now();
   auto map = mapping::makeMap(a.model, a.options);
-  mapping::FramePoses poses = a.poses_file.empty()
+  // With a range table given file by file, --poses is the table's poses file (its truth), read by
+  // the log reader, not a trajectory.
+  const std::string poses_file = a.reader.range_table ? std::string() : a.poses_file;
+  mapping::FramePoses poses = poses_file.empty()
                                   ? mapping::FramePoses::fromFrames(a.pose_source, "use --poses TRAJ or --pose-source")
-                                  : mapping::FramePoses::fromTrajectory(io::readTrajectory(a.poses_file), a.max_dt, a.poses_file);
+                                  : mapping::FramePoses::fromTrajectory(io::readTrajectory(poses_file), a.max_dt, poses_file);
   auto source = io::openLog(a.log, a.reader);
   RateProgress progress(a.quiet, "mapping", "scans", source->sizeHint());
   mapping::MapBuilder builder(*map, std::move(poses), {.source_name = a.log});

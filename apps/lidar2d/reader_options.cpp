@@ -3,6 +3,7 @@
 #include <charconv>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <numbers>
 #include <string>
 #include <vector>
@@ -10,6 +11,42 @@
 #include "commands.hpp"
 
 namespace lidar2d::cli {
+namespace {
+
+// --ranges R --angles A --poses P: a range table given file by file, instead of LOG (a folder
+// holding poses.txt, angles.txt and ranges.txt is simply given as LOG). The command's LOG then
+// becomes optional; after parsing, exactly one of the two must be there. A command with a --poses
+// of its own (map: a trajectory) takes it as the table's poses file when --ranges is given.
+void addRangeTableOptions(CLI::App* sub, io::ReaderOptions& options) {
+  CLI::Option* log = sub->get_option_no_throw("LOG");
+  if (!log) return;  // commands without a LOG (eval's EST) take logs by path only
+  auto files = std::make_shared<io::RangeTableFiles>();
+  auto* ranges = sub->add_option("--ranges", files->ranges,
+                                 "range table instead of LOG: one line of ranges [m] per scan (with --angles, --poses)");
+  auto* angles = sub->add_option("--angles", files->angles, "range table: one line of beam angles [rad]");
+  CLI::Option* poses = sub->get_option_no_throw("--poses");
+  if (!poses) poses = sub->add_option("--poses", files->poses, "range table: one pose x,y,theta [m, m, rad] per scan");
+  ranges->needs(angles)->needs(poses);
+  angles->needs(ranges);
+  const bool log_required = log->get_required();
+  log->required(false);
+  sub->parse_complete_callback([files, ranges, poses, log, log_required, &options] {
+    if (ranges->count() == 0) {
+      if (log_required && log->count() == 0) throw CLI::RequiredError("LOG");
+      return;
+    }
+    if (log->count() > 0)
+      throw CLI::ValidationError("LOG", "give a log or the range table's --ranges, --angles and --poses, not both");
+    files->poses = poses->as<std::string>();
+    options.range_table = *files;
+    // LOG names the table in the command's messages and outputs: the ranges file. (CLI11 writes
+    // an option's variable from its results; run_callback does so now, after parsing.)
+    log->add_result(files->ranges);
+    log->run_callback();
+  });
+}
+
+}  // namespace
 
 void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
   sub->add_option("--scan-topic", options.scan_topic, "ROS bags: LaserScan topic (default: auto-detect)");
@@ -48,6 +85,7 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
          },
          "the laser's pose on the robot, X,Y [m],THETA [deg], replacing the log's (tf, CARMEN offset)")
       ->type_name("X,Y,THETA_DEG");
+  addRangeTableOptions(sub, options);
 }
 
 }  // namespace lidar2d::cli

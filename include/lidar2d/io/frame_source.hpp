@@ -16,9 +16,12 @@ enum class LogFormat {
   kCarmen,   ///< CARMEN text log (.log/.clf), plain or gzip-compressed
   kRosbag1,  ///< ROS1 bag, format 2.0 or 1.2
   kRosbag2,  ///< ROS2 sqlite3 bag (a folder with metadata.yaml, or a .db3 file)
+  /// Plain range tables (a folder with poses.txt, angles.txt and ranges.txt, or the three files
+  /// named in ReaderOptions::range_table): the layout robotics courses and MATLAB users keep.
+  kRangeTable,
 };
 
-/// Printable name of a format ("carmen", "rosbag1", "rosbag2").
+/// Printable name of a format ("carmen", "rosbag1", "rosbag2", "range-table").
 const char* toString(LogFormat f);
 
 /// How the pose triples of CARMEN laser messages are interpreted.
@@ -30,6 +33,22 @@ enum class CarmenPoses {
   kAuto,
   kTruth,     ///< the laser messages' robot pose is ground truth; odometry from ODOM lines if any
   kOdometry,  ///< the laser messages' odometry triple is odometry; no truth unless TRUEPOS lines
+};
+
+/// The three files of a range table, each plain text (comma or blank separated numbers, '#'
+/// comment lines and blank lines skipped, plain or gzip):
+/// - `poses`: one robot pose `x y theta` [m, m, rad] per scan, in the world frame: the truth;
+/// - `angles`: one line of beam angles [rad] in the laser frame, evenly spaced, increasing;
+/// - `ranges`: one line of ranges [m] per scan, as many as there are angles; readings at or beyond
+///   `range_max_m` mean no return, 0 is an error reading (both invalid). NaN, infinite or negative
+///   values are errors.
+/// The tables hold no times: scan k gets the time k / rate_hz. The laser sits at the robot's origin.
+struct RangeTableFiles {
+  std::string poses;
+  std::string angles;
+  std::string ranges;
+  double rate_hz = 10.0;      ///< scan rate of the synthesized times [Hz], > 0
+  double range_max_m = 30.0;  ///< readings >= this are "no return" [m] (a Hokuyo UTM-30LX's 30 m)
 };
 
 /// Options of every reader; each reader ignores what does not apply to its format.
@@ -45,6 +64,8 @@ struct ReaderOptions {
   /// (For a log whose calibration is wrong: the fr079 bag's tf puts the laser 4 cm ahead of
   /// base_link, the original CARMEN log 4 cm behind the robot's centre; docs/slam.md.)
   std::optional<SE2> laser_mount;
+  /// A range table given file by file; when set, `openLog` reads it whatever its path argument.
+  std::optional<RangeTableFiles> range_table;
 };
 
 /// The farthest a laser may be mounted from the robot's frame origin: `ReaderOptions::laser_mount`
@@ -86,7 +107,8 @@ class FrameSource {
 };
 
 /// Detects the format from the file's first bytes (gzip magic -> CARMEN, "#ROSBAG V" -> ROS1,
-/// SQLite header or a folder with metadata.yaml -> ROS2). Throws `lidar2d::Error` for a missing,
+/// SQLite header or a folder with metadata.yaml -> ROS2, a folder with poses.txt, angles.txt and
+/// ranges.txt -> range table). Throws `lidar2d::Error` for a missing,
 /// unreadable or empty file, a directory that is not a ROS2 bag, or unknown content.
 LogFormat detectFormat(const std::string& path);
 
