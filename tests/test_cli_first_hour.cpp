@@ -71,7 +71,7 @@ class OutputPaths : public ::testing::Test {
               0);
     // The same log with a malformed last line: a command that reads it fails at the end of its work.
     std::string log = test::readFile(dir_->path() / "c.log");
-    test::writeFile(dir_->path() / "broken-at-end.log", log + "FLASER 3 1 1\n");
+    test::writeFile(dir_->path() / "broken-at-end.log", log + "ROBOTLASER1 0 -2.3 5.8 1.1 30 0 0 5 1 abc\n");
   }
   static void TearDownTestSuite() { delete dir_; }
   static std::string file(const std::string& name) { return (dir_->path() / name).string(); }
@@ -111,6 +111,14 @@ TEST_F(OutputPaths, UnusableOutputFailsBeforeTheWork) {
     EXPECT_NE(r.err.find("plain-file/sub"), std::string::npos) << args[0] << ": " << r.err;
     EXPECT_EQ(r.err.find("broken-at-end.log"), std::string::npos) << args[0] << " read the log first: " << r.err;
     EXPECT_TRUE(r.out.empty()) << args[0];
+  }
+  // A command that fails after creating its output folders removes them again.
+  for (const auto& args : commands(file("broken-at-end.log"), file("fresh/deeper/out"))) {
+    if (args[0] == "eval" || args[0] == "perturb") continue;  // they fail before reading the last line
+    const CliResult r = runCli(args);
+    EXPECT_EQ(r.exit_code, 1) << args[0] << ": " << r.err;
+    EXPECT_NE(r.err.find("broken-at-end.log"), std::string::npos) << args[0] << ": " << r.err;
+    EXPECT_FALSE(fs::exists(file("fresh"))) << args[0] << " left the folder it created";
   }
   const CliResult slam = runCli({"slam", file("broken-at-end.log"), "-o", out, "-q"});
   EXPECT_EQ(slam.exit_code, 1);

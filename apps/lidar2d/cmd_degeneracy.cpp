@@ -119,7 +119,7 @@ void writeSnapshot(const std::string& path, const Frame& f, const Points2& pts, 
 }
 
 void run(const DegeneracyArgs& a) {
-  prepareOutputFile(a.output);
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   const auto t_start = std::chrono::steady_clock::now();
   if (const std::string bad = a.options.check(); !bad.empty())
     throw invalidArgument(fmt::format("invalid degeneracy option: {}", bad));

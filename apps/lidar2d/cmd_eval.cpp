@@ -87,7 +87,8 @@ double maxTime(const Trajectory& t) {
 }
 
 void run(const EvalArgs& args) {
-  if (!args.output.empty()) prepareOutputFile(args.output);
+  std::optional<CreatedFolders> out_folders;
+  if (!args.output.empty()) out_folders.emplace(prepareOutputFile(args.output));
   // Open the output first so that an unwritable -o fails before the work, and never half-written.
   std::unique_ptr<io::AtomicFile> out_file;
   if (!args.output.empty()) out_file = std::make_unique<io::AtomicFile>(args.output);

@@ -123,7 +123,7 @@ localization::Database buildDatabase(const OccupancyImage& map, const localizati
 }
 
 void runIndex(DbArgs& a) {
-  prepareOutputFile(a.output);
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   const auto t0 = Clock::now();
   a.options.fov_rad = a.fov_deg * kDeg;
   const io::MapFile map = readMapChecked(a.map, a.bare);
@@ -156,8 +156,9 @@ struct LocArgs {
 };
 
 void runLocalize(const LocArgs& a) {
-  prepareOutputFile(a.output);
-  if (!a.json.empty()) prepareOutputFile(a.json);
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
+  std::optional<CreatedFolders> json_folders;
+  if (!a.json.empty()) json_folders.emplace(prepareOutputFile(a.json));
   const auto t0 = Clock::now();
   const io::MapFile map = readMapChecked(a.map, a.bare);
   std::optional<localization::Database> db;

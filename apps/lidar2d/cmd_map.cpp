@@ -66,7 +66,7 @@ OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map
 }
 
 void run(const MapArgs& a) {
-  prepareOutputFile(a.prefix + ".yaml");
+  const CreatedFolders out_folders = prepareOutputFile(a.prefix + ".yaml");
   const auto t0 = std::chrono::steady_clock::now();
   auto map = mapping::makeMap(a.model, a.options);
   // With a range table given file by file, --poses is the table's poses file (its truth), read by

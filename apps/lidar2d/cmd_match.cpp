@@ -53,7 +53,7 @@ struct MatchArgs {
 };
 
 void run(const MatchArgs& a) {
-  prepareOutputFile(a.output);
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
   registration::SequenceOptions so;

@@ -244,7 +244,7 @@ std::string describeNoise(const sim::OdometryNoise& n) {
 }
 
 void run(const PerturbArgs& a) {
-  prepareOutputFile(a.output);
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   if (a.legacy()) return runLegacy(a);
 
   sim::LogPerturbationOptions o;

@@ -26,7 +26,7 @@ struct PosesArgs {
 };
 
 void run(const PosesArgs& a) {
-  prepareOutputFile(a.output);
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   auto src = io::openLog(a.log, a.reader);
   Trajectory traj;
   const char* what = a.source == PoseKind::kTruth ? "truth" : "odometry";

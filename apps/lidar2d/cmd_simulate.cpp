@@ -78,7 +78,7 @@ struct SimulateArgs {
 };
 
 void run(const SimulateArgs& a) {
-  prepareOutputFile(a.output);
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   if (a.world.empty() == a.map.empty())
     throw CLI::ValidationError("simulate", "give exactly one of --world NAME or --map MAP.yaml");
   sim::SimulatorOptions o;

@@ -104,7 +104,7 @@ void run(const SlamArgs& a) {
   std::error_code ec;
   if (fs::exists(a.dir, ec) && !fs::is_directory(a.dir, ec))
     throw ioError("exists and is not a directory", ErrorLocation(a.dir, 0, "-o"));
-  prepareOutputDir(a.dir);
+  const CreatedFolders out_folders = prepareOutputDir(a.dir);
 
   // Frames are processed as the reader thread (prefetch) parses them, so parsing overlaps with
   // SLAM on the other core. Of each frame only its laser mounting is kept (for --pose-frame laser):

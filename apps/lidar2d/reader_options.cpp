@@ -14,27 +14,30 @@ namespace lidar2d::cli {
 namespace {
 
 // --ranges R --angles A --poses P: a range table given file by file, instead of LOG (a folder
-// holding poses.txt, angles.txt and ranges.txt is simply given as LOG). The command's LOG then
-// becomes optional; after parsing, exactly one of the two must be there. A command with a --poses
+// holding poses.txt, angles.txt and ranges.txt is simply given as LOG). With --ranges, LOG is no
+// longer required, and must not be given. A command with a --poses
 // of its own (map: a trajectory) takes it as the table's poses file when --ranges is given.
 void addRangeTableOptions(CLI::App* sub, io::ReaderOptions& options) {
   CLI::Option* log = sub->get_option_no_throw("LOG");
   if (!log) return;  // commands without a LOG (eval's EST) take logs by path only
   auto files = std::make_shared<io::RangeTableFiles>();
-  auto* ranges = sub->add_option("--ranges", files->ranges,
-                                 "range table instead of LOG: one line of ranges [m] per scan (with --angles, --poses)");
+  // Triggered as soon as it is parsed, before CLI11 checks that LOG is given (as slam's
+  // --dump-config does).
+  auto* ranges = sub->add_option_function<std::string>(
+                        "--ranges",
+                        [files, log](const std::string& v) {
+                          files->ranges = v;
+                          log->required(false);
+                        },
+                        "range table instead of LOG: one line of ranges [m] per scan (with --angles, --poses)")
+                     ->trigger_on_parse();
   auto* angles = sub->add_option("--angles", files->angles, "range table: one line of beam angles [rad]");
   CLI::Option* poses = sub->get_option_no_throw("--poses");
   if (!poses) poses = sub->add_option("--poses", files->poses, "range table: one pose x,y,theta [m, m, rad] per scan");
   ranges->needs(angles)->needs(poses);
   angles->needs(ranges);
-  const bool log_required = log->get_required();
-  log->required(false);
-  sub->parse_complete_callback([files, ranges, poses, log, log_required, &options] {
-    if (ranges->count() == 0) {
-      if (log_required && log->count() == 0) throw CLI::RequiredError("LOG");
-      return;
-    }
+  sub->parse_complete_callback([files, ranges, poses, log, &options] {
+    if (ranges->count() == 0) return;
     if (log->count() > 0)
       throw CLI::ValidationError("LOG", "give a log or the range table's --ranges, --angles and --poses, not both");
     files->poses = poses->as<std::string>();
