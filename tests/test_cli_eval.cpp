@@ -209,7 +209,8 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(CliEval, UnwritableOutputPathIsExit1) {
   TempDir tmp;
   writeFile(tmp / "t.txt", "1 0 0 0\n2 1 0 0\n");
-  const auto out = tmp / "no-such-folder" / "m.json";
+  // A folder cannot be created under a regular file (a missing folder would be created).
+  const auto out = tmp / "t.txt" / "m.json";
   const CliResult r = runCli({"eval", (tmp / "t.txt").string(), "--truth", (tmp / "t.txt").string(), "-o", out.string()});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(r.out.empty());

@@ -7,6 +7,9 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <string>
+#include <vector>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -168,6 +171,109 @@ TEST_F(CliLocalize, BadInputIsOneLineAndExitOne) {
   EXPECT_NE(r.err.find("step: the map spans"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("use a step of at least"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(path("h.db")));
+}
+
+// A bare PNG/PGM map (no YAML) with its resolution and origin on the command line reads as the
+// YAML stating them would: the same database, byte for byte. The real case: a course's hand-made
+// 300 x 300 px map at 0.05 m/px.
+TEST(CliLocalizeBareMap, PngWithResolutionAndOriginEqualsItsYaml) {
+  LIDAR2D_REQUIRE_DATA("bags/rplidar-flipped/gridmap.png");
+  test::TempDir tmp;
+  const std::string png = test::dataFile("bags/rplidar-flipped/gridmap.png").string();
+  test::writeFile(tmp / "g.yaml", "image: " + png + "\nresolution: 0.05\norigin: [-7.5, -5.5, 0.1]\n");
+  auto r = runCli({"localize-index", (tmp / "g.yaml").string(), "-o", (tmp / "yaml.db").string(), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runCli({"localize-index", png, "--resolution", "0.05", "--origin", "-7.5,-5.5,0.1", "-o", (tmp / "png.db").string(),
+              "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string a = test::readFile(tmp / "yaml.db"), b = test::readFile(tmp / "png.db");
+  ASSERT_GT(a.size(), 1000u);
+  EXPECT_TRUE(a == b) << "the bare image's database differs from its YAML's";
+  // Another origin is another map: its database differs (the checksum covers the origin).
+  r = runCli({"localize-index", png, "--resolution", "0.05", "-o", (tmp / "png0.db").string(), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(test::readFile(tmp / "png0.db") == a);
+
+  // localize on the bare image, with the top 3 candidates of every scan.
+  r = runCli({"simulate", "--map", (tmp / "g.yaml").string(), "--scans", "12", "--seed", "4", "-o",
+              (tmp / "sim.log").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runCli({"localize", png, (tmp / "sim.log").string(), "--resolution", "0.05", "--origin", "-7.5,-5.5,0.1", "--db",
+              (tmp / "png.db").string(), "--candidates", "3", "--eval", "--json", (tmp / "s.json").string(), "-o",
+              (tmp / "loc.txt").string(), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_GE(nlohmann::json::parse(test::readFile(tmp / "s.json"))["success_rate"].get<double>(), 0.9);
+  std::map<std::string, std::vector<std::pair<int, double>>> per_scan;  // t -> (rank, score)
+  std::map<std::string, std::string> best;                                // t -> "x y theta score" of rank 1
+  std::istringstream cand(test::readFile(tmp / "loc.txt.candidates"));
+  for (std::string line; std::getline(cand, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ls(line);
+    std::string t, x, y, th, sc;
+    int rank = 0;
+    ASSERT_TRUE(ls >> t >> rank >> x >> y >> th >> sc) << line;
+    per_scan[t].push_back({rank, std::stod(sc)});
+    if (rank == 1) best[t] = x + " " + y + " " + th + " " + sc;
+  }
+  EXPECT_EQ(per_scan.size(), 12u);
+  for (const auto& [t, c] : per_scan) {
+    ASSERT_LE(c.size(), 3u) << t;
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      EXPECT_EQ(c[k].first, static_cast<int>(k) + 1) << t;
+      if (k > 0) {
+        EXPECT_LE(c[k].second, c[k - 1].second) << t;
+      }
+    }
+  }
+  // Rank 1 is the pose the main output answers.
+  std::istringstream loc(test::readFile(tmp / "loc.txt"));
+  std::size_t answered = 0;
+  for (std::string line; std::getline(loc, line);) {
+    if (line.empty() || line[0] == '#' || line.find("nan") != std::string::npos) continue;
+    const std::size_t sp = line.find(' ');
+    EXPECT_EQ(best[line.substr(0, sp)], line.substr(sp + 1)) << line;
+    ++answered;
+  }
+  EXPECT_GE(answered, 11u);
+}
+
+TEST(CliLocalizeBareMap, BadUseAndBadImagesAreClearErrors) {
+  test::TempDir tmp;
+  // A tiny valid PGM: 4 x 3 px, free with a wall.
+  const std::string pgm = (tmp / "m.pgm").string();
+  test::writeFile(pgm, std::string("P5\n4 3\n255\n") + std::string(8, '\xfe') + std::string(4, '\0'));
+  test::writeFile(tmp / "m.yaml", "image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n");
+  const std::string db = (tmp / "x.db").string();
+  auto usage = [&](std::vector<std::string> args, const std::string& says) {
+    const auto r = runCli(args);
+    EXPECT_EQ(r.exit_code, 2) << says << ": " << r.err;
+    EXPECT_NE(r.err.find(says), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(db));
+  };
+  usage({"localize-index", pgm, "-o", db}, "is a bare image: give its cell size, --resolution");
+  usage({"localize-index", (tmp / "m.yaml").string(), "--resolution", "0.05", "-o", db}, "states its own");
+  usage({"localize-index", pgm, "--resolution", "0", "-o", db}, "--resolution");
+  usage({"localize-index", pgm, "--resolution", "nan", "-o", db}, "--resolution");
+  usage({"localize-index", pgm, "--resolution", "0.05", "--origin", "1,2", "-o", db}, "expected 3 comma-separated");
+  usage({"localize-index", pgm, "--resolution", "0.05", "--origin", "1,inf,0", "-o", db}, "not a finite number");
+  usage({"localize", pgm, "x.log", "-o", db}, "is a bare image");
+  auto bad = [&](std::vector<std::string> args, std::initializer_list<std::string> says) {
+    const auto r = runCli(args);
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    for (const auto& s : says) EXPECT_NE(r.err.find(s), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(db));
+  };
+  bad({"localize-index", pgm, "--resolution", "1000", "-o", db}, {"m.pgm", "resolution", "must be between"});
+  bad({"localize-index", pgm, "--resolution", "0.05", "--origin", "1e12,0,0", "-o", db}, {"m.pgm", "origin"});
+  // A truncated image: the PGM's header promises more pixels than the file holds.
+  const std::string cut = (tmp / "cut.pgm").string();
+  test::writeFile(cut, std::string("P5\n40 30\n255\n") + std::string(100, '\xfe'));
+  bad({"localize-index", cut, "--resolution", "0.05", "-o", db}, {"cut.pgm"});
+  // A PNG cut after its signature.
+  const std::string png = (tmp / "cut.png").string();
+  test::writeFile(png, std::string("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR", 16));
+  bad({"localize-index", png, "--resolution", "0.05", "-o", db}, {"cut.png"});
 }
 
 }  // namespace

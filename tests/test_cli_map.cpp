@@ -44,16 +44,20 @@ TEST_F(CliMap, WritesMapServerFilesForEveryModel) {
     EXPECT_NE(r.out.find(prefix + ".pgm"), std::string::npos);
     const io::MapFile m = io::readMap(prefix + ".yaml");
     EXPECT_DOUBLE_EQ(m.map.resolution(), 0.05);
-    // The office is 20 x 15 m: the map covers it and not much more (5 m no-return clearing).
+    // The office is 20 x 15 m and closed: the map covers its width and nothing beyond its outer
+    // walls (the simulator's lost echoes are error readings, which clear nothing; when they were
+    // written as "no return", each cleared 5 m through the wall and the map was about 28 m wide).
     EXPECT_GT(m.map.width() * 0.05, 20.0);
-    EXPECT_LT(m.map.width() * 0.05, 32.0);
+    EXPECT_LT(m.map.width() * 0.05, 21.0);
     std::size_t occ = 0, free_cells = 0;
     for (auto v : m.map.cells()) {
       occ += v == OccupancyImage::kOccupied;
       free_cells += v == OccupancyImage::kFree;
     }
     EXPECT_GT(occ, 1000u) << model;
-    EXPECT_GT(free_cells, 20 * occ) << model;
+    // Mostly free space inside the walls (15-19 free cells per occupied one; the 20 this asked for
+    // counted the free rays outside the building).
+    EXPECT_GT(free_cells, 10 * occ) << model;
     EXPECT_TRUE(fs::exists(prefix + ".png"));
     EXPECT_EQ(fs::exists(prefix + ".surface.txt"), model == "tsdf");
   }

@@ -206,10 +206,12 @@ TEST(SimulateCli, UsageErrorsExit2) {
 
 TEST(SimulateCli, BadInputExits1WithoutOutput) {
   TempDir tmp;
-  auto r = runCli({"simulate", "--world", "office", "--scans", "5", "-o", (tmp / "missing" / "x.log").string()});
+  // An output folder that cannot be created (under a regular file); a missing one would be created.
+  TempDir other;
+  test::writeFile(other / "file", "x");
+  auto r = runCli({"simulate", "--world", "office", "--scans", "5", "-o", (other / "file" / "x.log").string()});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("lidar2d: error:"), std::string::npos) << r.err;
-  EXPECT_FALSE(fs::exists(tmp / "missing"));
   const std::string out = (tmp / "x.log").string();
   r = runCli({"simulate", "--map", (tmp / "nope.yaml").string(), "-o", out});
   EXPECT_EQ(r.exit_code, 1);

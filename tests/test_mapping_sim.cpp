@@ -11,10 +11,13 @@
 #include <string>
 #include <tuple>
 
+#include "lidar2d/io/carmen_writer.hpp"
+#include "lidar2d/io/frame_source.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/sim/path.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
+#include "support/test_support.hpp"
 
 namespace lidar2d::mapping {
 
@@ -136,6 +139,52 @@ INSTANTIATE_TEST_SUITE_P(Models, SimMapping,
                          [](const auto& info) {
                            return std::string(toString(std::get<0>(info.param))) + "_" + std::get<1>(info.param).name;
                          });
+
+// The office is closed by its outer walls: a scan taken inside it sees nothing outside. A lost echo
+// (the simulator's dropout) reads as an error, not as "no return", so no beam clears through a wall.
+TEST(SimMapping, LostEchoesClearNothingOutsideTheBuilding) {
+  const sim::Scenario& s = data().scenario;
+  sim::SimulatorOptions o;
+  o.laser.dropout = 0.05;
+  sim::PathOptions p;
+  p.rate_hz = 2.0;
+  const auto frames = sim::simulate(s.world, sim::samplePath(s.waypoints, p), o);
+  std::size_t dropped = 0;
+  for (const Frame& f : frames)
+    for (std::size_t i = 0; i < f.scan.size(); ++i) dropped += f.scan.ranges()[i] == 0.0;
+  ASSERT_GT(dropped, 1000u);
+  // The same frames through a CARMEN log, as `lidar2d simulate` writes them and `map` reads them.
+  std::vector<Frame> logged;
+  {
+    test::TempDir tmp;
+    const std::string log = (tmp / "office.log").string();
+    io::CarmenWriter w(log);
+    for (const Frame& f : frames) w.write(f);
+    w.commit();
+    auto src = io::openLog(log);
+    while (auto f = src->next()) logged.push_back(std::move(*f));
+  }
+  ASSERT_EQ(logged.size(), frames.size());
+  for (const MapModel model : {MapModel::kLogOdds, MapModel::kCount, MapModel::kTsdf})
+    for (const std::vector<Frame>* input : {&frames, static_cast<const std::vector<Frame>*>(&logged)}) {
+      MapOptions mo;
+      mo.resolution_m = 0.05;
+      auto map = makeMap(model, mo);
+      for (const Frame& f : *input) map->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
+      const GridGeometry& g = map->geometry();
+      const Eigen::Vector2d lo = s.world.boundsMin(), hi = s.world.boundsMax();
+      std::size_t free_outside = 0;
+      const CellBox b = map->bounds();
+      for (int y = b.min.y; y <= b.max.y; ++y)
+        for (int x = b.min.x; x <= b.max.x; ++x) {
+          const Eigen::Vector2d c = g.centerOf({x, y});
+          const bool outside =
+              c.x() < lo.x() - 0.1 || c.y() < lo.y() - 0.1 || c.x() > hi.x() + 0.1 || c.y() > hi.y() + 0.1;
+          free_outside += outside && map->state({x, y}) == CellState::kFree;
+        }
+      EXPECT_EQ(free_outside, 0u) << toString(model) << (input == &logged ? " (through a CARMEN log)" : "");
+    }
+}
 
 TEST(SimMapping, TsdfSurfaceIsSubCellAndBeatsOccupancyCells) {
   const sim::World& world = data().scenario.world;

@@ -1,11 +1,14 @@
 #!/bin/sh
 # Installs everything lidar2d needs to build, test and benchmark on Debian 12 (bookworm).
+# Each package is used: the libraries by CMakeLists.txt's find_package calls (OpenCV's core and
+# imgproc via cmake/OpenCVMinimal.cmake), gtest/gmock by tests/, benchmark by bench/, python3-rosbag
+# by tools/make-test-bags.py (test fixtures), chromium by the SLAM report's rendering test.
 # Idempotent: does nothing (not even 'apt-get update') when every package is already installed.
 set -eu
-PKGS="build-essential make cmake pkg-config git
+PKGS="build-essential make cmake git
   libeigen3-dev libceres-dev libnanoflann-dev
   libopencv-core-dev libopencv-imgproc-dev libpng-dev
-  libcli11-dev libspdlog-dev libfmt-dev libyaml-cpp-dev nlohmann-json3-dev
+  libcli11-dev libfmt-dev libyaml-cpp-dev nlohmann-json3-dev
   zlib1g-dev libbz2-dev liblz4-dev libzstd-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-rosbag

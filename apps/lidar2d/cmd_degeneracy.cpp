@@ -22,6 +22,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "commands.hpp"
+#include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/io/atomic_file.hpp"
@@ -118,6 +119,7 @@ void writeSnapshot(const std::string& path, const Frame& f, const Points2& pts, 
 }
 
 void run(const DegeneracyArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   const auto t_start = std::chrono::steady_clock::now();
   if (const std::string bad = a.options.check(); !bad.empty())
     throw invalidArgument(fmt::format("invalid degeneracy option: {}", bad));
@@ -136,7 +138,9 @@ void run(const DegeneracyArgs& a) {
   std::size_t scans = 0, degenerate = 0, undecided = 0, snapshots = 0, repeats = 0;
   std::optional<std::size_t> last_snapshot;
   double analyze_s = 0.0, prev_t = std::nan("");
+  RateProgress progress(a.quiet, "degeneracy", "scans", source->sizeHint());
   while (auto f = source->next()) {
+    progress.update(scans);
     ++scans;
     repeats += f->time == prev_t;
     prev_t = f->time;
@@ -162,6 +166,7 @@ void run(const DegeneracyArgs& a) {
       }
     }
   }
+  progress.clear();
   if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
   out.commit();
   if (!a.quiet) {

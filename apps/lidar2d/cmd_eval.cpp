@@ -87,6 +87,8 @@ double maxTime(const Trajectory& t) {
 }
 
 void run(const EvalArgs& args) {
+  std::optional<CreatedFolders> out_folders;
+  if (!args.output.empty()) out_folders.emplace(prepareOutputFile(args.output));
   // Open the output first so that an unwritable -o fails before the work, and never half-written.
   std::unique_ptr<io::AtomicFile> out_file;
   if (!args.output.empty()) out_file = std::make_unique<io::AtomicFile>(args.output);
@@ -249,21 +251,20 @@ void addEvalCommand(CLI::App& app) {
                   "ground truth: a .relations file (Kuemmerle et al. 2009), a trajectory file, or a log with truth poses")
       ->required();
   sub->add_option("-o,--output", args->output, "also write the JSON to this file (atomically)");
-  const std::map<std::string, PoseSource> from{{"odometry", PoseSource::kOdometry}, {"truth", PoseSource::kTruth}};
-  sub->add_option("--estimate-from", args->estimate_from, "when EST is a log: use its odometry or its truth poses")
-      ->transform(CLI::CheckedTransformer(from, CLI::ignore_case))
+  addChoice<PoseSource>(sub, "--estimate-from", args->estimate_from,
+                        {{"odometry", PoseSource::kOdometry}, {"truth", PoseSource::kTruth}},
+                        "when EST is a log: use its odometry or its truth poses")
       ->default_str("odometry");
   sub->add_option("--max-dt", args->options.max_dt_s, "time tolerance of nearest-timestamp lookups [s]")
       ->check(positiveNumber())
       ->default_val(0.1);
   sub->add_option("--pairs", args->pairs,
                   "also score relative poses written by 'match' (t_prev t_cur dx dy dtheta converged iterations)");
-  const std::map<std::string, eval::AssociationMode> assoc{{"auto", eval::AssociationMode::kAuto},
-                                                           {"index", eval::AssociationMode::kIndex},
-                                                           {"time", eval::AssociationMode::kTime}};
-  sub->add_option("--association", args->options.association,
-                  "pair poses by index, by nearest time, or auto (index when the times are identical)")
-      ->transform(CLI::CheckedTransformer(assoc, CLI::ignore_case))
+  addChoice<eval::AssociationMode>(sub, "--association", args->options.association,
+                                   {{"auto", eval::AssociationMode::kAuto},
+                                    {"index", eval::AssociationMode::kIndex},
+                                    {"time", eval::AssociationMode::kTime}},
+                                   "pair poses by index, by nearest time, or auto (index when the times are identical)")
       ->default_str("auto");
   sub->add_flag("--no-align", args->no_align, "ATE in the given frames, without the least-squares SE(2) alignment");
   sub->add_option("--rpe-distance", args->options.rpe_distance_m, "segment length of the per-distance RPE [m]")

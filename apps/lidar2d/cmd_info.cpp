@@ -26,6 +26,9 @@ std::string fmtDouble(double v, int digits) { return fmt::format("{:.{}f}", v, d
 
 double deg(double rad) { return rad * 180.0 / std::numbers::pi; }
 
+/// Consecutive scans farther apart in time than this make the log's duration unknown [s].
+constexpr double kMaxScanStepS = 86400.0;
+
 nlohmann::json summarise(const InfoArgs& args) {
   // A tilted laser is reported, not refused: info reads it as --allow-tilted would and warns.
   io::ReaderOptions reader = args.reader;
@@ -38,6 +41,8 @@ nlohmann::json summarise(const InfoArgs& args) {
          t_max = -std::numeric_limits<double>::infinity();
   double fov = 0, angle_min = 0, angle_max = 0, range_max = 0, prev_t = 0;
   double odom_len = 0, truth_len = 0;
+  double widest_step = 0, step_from = 0, step_to = 0;
+  std::size_t step_at = 0;
   std::optional<SE2> prev_odom, prev_truth;
   SE2 T_robot_laser;
   bool upside_down = false;
@@ -57,6 +62,12 @@ nlohmann::json summarise(const InfoArgs& args) {
     } else {
       if (f->time == prev_t) ++time_repeats;
       if (f->time < prev_t) ++time_backwards;
+      if (std::abs(f->time - prev_t) > widest_step) {
+        widest_step = std::abs(f->time - prev_t);
+        step_from = prev_t;
+        step_to = f->time;
+        step_at = scans;
+      }
     }
     prev_t = f->time;
     t_last = f->time;
@@ -94,7 +105,20 @@ nlohmann::json summarise(const InfoArgs& args) {
   j["valid_beam_fraction"] = total_beams ? static_cast<double>(valid_beams) / static_cast<double>(total_beams) : 0.0;
   j["t_first"] = t_first;
   j["t_last"] = t_last;
-  j["duration_s"] = scans ? t_max - t_min : 0.0;
+  // A span from a broken clock would be a silent wrong answer: the duration is unknown when every
+  // scan has one time, or when consecutive scans are more than a day apart (no laser pauses that
+  // long within one log; a negative time written as an unsigned 32-bit number jumps by 2^32 s).
+  std::string unknown;
+  if (scans > 1 && t_max == t_min)
+    unknown = fmt::format("all {} scans have the timestamp {}", scans, t_min);
+  else if (widest_step > kMaxScanStepS)
+    unknown = fmt::format("the timestamp jumps from {} to {} at scan {} ({:.0f} s)", step_from, step_to, step_at,
+                          widest_step);
+  if (unknown.empty())
+    j["duration_s"] = scans ? t_max - t_min : 0.0;
+  else
+    j["duration_s"] = nullptr;
+  j["duration_unknown"] = unknown;
   j["time_repeats"] = time_repeats;
   j["time_backwards"] = time_backwards;
   j["has_odometry"] = with_odom > 0;
@@ -137,7 +161,11 @@ void printText(const nlohmann::json& j) {
     << fmtDouble(j["angle_min_deg"].get<double>(), 2) << " .. " << fmtDouble(j["angle_max_deg"].get<double>(), 2)
     << "), range max " << fmtDouble(j["range_max_m"].get<double>(), 2) << " m, "
     << fmtDouble(100.0 * j["valid_beam_fraction"].get<double>(), 1) << "% of beams valid\n";
-  o << "duration:    " << fmtDouble(j["duration_s"].get<double>(), 3) << " s (first " << fmtDouble(j["t_first"].get<double>(), 6)
+  if (j["duration_s"].is_null())
+    o << "duration:    unknown: " << j["duration_unknown"].get<std::string>() << " (first ";
+  else
+    o << "duration:    " << fmtDouble(j["duration_s"].get<double>(), 3) << " s (first ";
+  o << fmtDouble(j["t_first"].get<double>(), 6)
     << ", last " << fmtDouble(j["t_last"].get<double>(), 6) << ")\n";
   auto src = [](const nlohmann::json& s) { return s.get<std::string>().empty() ? std::string() : " from " + s.get<std::string>(); };
   o << "odometry:    " << (j["has_odometry"].get<bool>() ? "yes" : "no") << src(j["odometry_source"]);
@@ -161,7 +189,7 @@ void printText(const nlohmann::json& j) {
 void addInfoCommand(CLI::App& app) {
   auto args = std::make_shared<InfoArgs>();
   auto* sub = app.add_subcommand("info", "Summarise a log: scans, beams, field of view, duration, odometry/truth");
-  sub->add_option("LOG", args->log, "CARMEN log (.log/.clf, plain or .gz), ROS1 bag, or ROS2 bag (folder with metadata.yaml, .db3 or .mcap file)")->required();
+  sub->add_option("LOG", args->log, "CARMEN log (.log/.clf, plain or .gz), ROS1 bag, ROS2 bag (folder with metadata.yaml, .db3 or .mcap file), or range table folder")->required();
   sub->add_flag("--json", args->json, "print JSON instead of text");
   addReaderOptions(sub, args->reader);
   sub->callback([args] {

@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -20,6 +21,9 @@
 #include <numbers>
 #include <numeric>
 #include <optional>
+#include <string>
+#include <system_error>
+#include <vector>
 
 #include "commands.hpp"
 #include "progress.hpp"
@@ -39,28 +43,77 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 
 double seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
 
+// A map given as a bare image (PGM/PNG without YAML): its resolution and origin from the command line.
+struct BareMap {
+  std::optional<double> resolution;
+  std::optional<SE2> origin;
+};
+
 struct DbArgs {
   std::string map;
+  BareMap bare;
   std::string output;
   localization::DatabaseOptions options;
   double fov_deg = 360.0;
   bool quiet = false;
 };
 
-io::MapFile readMapChecked(const std::string& path) { return io::readMap(path); }
+// MAP as a map_server YAML, or as a bare image with --resolution (and --origin). The options are
+// a usage error (exit 2) where they do not apply or are missing.
+io::MapFile readMapChecked(const std::string& path, const BareMap& bare) {
+  if (!io::isMapImage(path)) {
+    if (bare.resolution || bare.origin)
+      throw CLI::ValidationError("--resolution/--origin", "apply to a bare map image; " + path + " states its own in its YAML");
+    return io::readMap(path);
+  }
+  if (!bare.resolution)
+    throw CLI::ValidationError("--resolution", path + " is a bare image: give its cell size, --resolution M (and --origin X,Y,YAW)");
+  io::MapYaml y;
+  y.resolution = *bare.resolution;
+  y.origin = bare.origin.value_or(SE2());
+  return io::readMapImage(path, y);
+}
+
+// --resolution and --origin of a bare map image.
+void addBareMapOptions(CLI::App* sub, BareMap& bare) {
+  sub->add_option_function<double>(
+         "--resolution", [&bare](double r) { bare.resolution = r; },
+         "MAP is a bare PGM/PNG image (no YAML): its cell size [m] (required then; a YAML states its own)")
+      ->check(positiveNumber());
+  sub->add_option_function<std::string>(
+         "--origin",
+         [&bare](const std::string& v) {
+           // Three comma-separated finite numbers, as the YAML's origin: x, y [m], yaw [rad].
+           std::vector<double> xs;
+           std::size_t start = 0;
+           while (start <= v.size()) {
+             const std::size_t end = std::min(v.find(',', start), v.size());
+             const std::string field = v.substr(start, end - start);
+             double x = 0.0;
+             const auto [ptr, ec] = std::from_chars(field.data(), field.data() + field.size(), x);
+             if (field.empty() || ec != std::errc() || ptr != field.data() + field.size() || !std::isfinite(x))
+               throw CLI::ValidationError("--origin", "'" + field + "' is not a finite number (expected X,Y,YAW)");
+             xs.push_back(x);
+             start = end + 1;
+           }
+           if (xs.size() != 3)
+             throw CLI::ValidationError("--origin", "expected 3 comma-separated values X,Y,YAW, got " + std::to_string(xs.size()));
+           bare.origin = SE2(xs[0], xs[1], xs[2]);
+         },
+         "bare map image: world pose of its lower-left pixel's corner, x,y [m],yaw [rad], as a map_server YAML's "
+         "origin (default 0,0,0)")
+      ->type_name("X,Y,YAW");
+}
 
 // Builds the database of `map`, with its progress on a terminal unless `quiet` (a large map's
 // positions take minutes); errors name `map_path`.
 localization::Database buildDatabase(const OccupancyImage& map, const localization::DatabaseOptions& o, bool quiet,
                                      const std::string& map_path) {
-  ProgressLine line(quiet);
+  RateProgress line(quiet, "indexing", "positions", std::nullopt);
   auto report = [](std::size_t done, std::size_t total, void* user) {
-    static_cast<ProgressLine*>(user)->update(
-        [&] {
-          return fmt::format("indexing: {} of {} positions ({:.0f}%)", done, total,
-                             100.0 * static_cast<double>(done) / static_cast<double>(std::max<std::size_t>(total, 1)));
-        },
-        done == total);
+    auto* p = static_cast<RateProgress*>(user);
+    p->setTotal(total);
+    p->update(done, done == total);
   };
   try {
     return localization::Database::build(map, o, 0, line.enabled() ? +report : nullptr, &line);
@@ -70,9 +123,10 @@ localization::Database buildDatabase(const OccupancyImage& map, const localizati
 }
 
 void runIndex(DbArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   const auto t0 = Clock::now();
   a.options.fov_rad = a.fov_deg * kDeg;
-  const io::MapFile map = readMapChecked(a.map);
+  const io::MapFile map = readMapChecked(a.map, a.bare);
   const localization::Database db = buildDatabase(map.map, a.options, a.quiet, a.map);
   io::writeLocalizationDatabase(a.output, db);
   if (!a.quiet)
@@ -85,6 +139,8 @@ enum class Scans { kAll, kEven, kOdd };
 
 struct LocArgs {
   std::string map;
+  BareMap bare;
+  std::size_t candidates = 0;
   std::string log;
   std::string db;
   std::string output;
@@ -100,8 +156,11 @@ struct LocArgs {
 };
 
 void runLocalize(const LocArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
+  std::optional<CreatedFolders> json_folders;
+  if (!a.json.empty()) json_folders.emplace(prepareOutputFile(a.json));
   const auto t0 = Clock::now();
-  const io::MapFile map = readMapChecked(a.map);
+  const io::MapFile map = readMapChecked(a.map, a.bare);
   std::optional<localization::Database> db;
   double db_s = 0;
   const auto tdb = Clock::now();
@@ -120,22 +179,32 @@ void runLocalize(const LocArgs& a) {
   auto source = io::openLog(a.log, a.reader);
   io::AtomicFile out(a.output);
   out.stream() << "# lidar2d localize: t x y theta score (nan nan nan 0 = declined)\n";
+  std::unique_ptr<io::AtomicFile> cand_out;
+  if (a.candidates > 0) {
+    cand_out = std::make_unique<io::AtomicFile>(a.output + ".candidates");
+    cand_out->stream() << fmt::format(
+        "# lidar2d localize --candidates {}: t rank x y theta score, the best distinct verified poses of each scan "
+        "(rank 1 = best), whatever their score\n",
+        a.candidates);
+  }
 
   std::vector<double> times_ms;
   std::map<std::string, std::size_t> reasons;
   eval::LocalizationTally tally;
   tally.tolerance = {a.success_m, a.success_deg * kDeg};
   // Progress on a terminal (a long log takes minutes at tens of milliseconds per scan).
-  ProgressLine line(a.quiet);
-  const std::optional<std::size_t> total = source->sizeHint();
+  RateProgress progress(a.quiet, "localizing", "scans", source->sizeHint());
   while (auto f = source->next()) {
-    line.update([&] {
-      return total ? fmt::format("localizing: scan {} of {}", f->index + 1, *total)
-                   : fmt::format("localizing: scan {}", f->index + 1);
-    });
+    progress.update(f->index);
     if ((a.scans == Scans::kEven && f->index % 2 != 0) || (a.scans == Scans::kOdd && f->index % 2 != 1)) continue;
     const localization::LocalizationResult r = loc->localize(f->scan, f->T_robot_laser);
     times_ms.push_back(r.total_ms);
+    if (cand_out)
+      for (std::size_t k = 0; k < r.candidates.size() && k < a.candidates; ++k) {
+        const SE2& T = r.candidates[k].T_world_robot;
+        cand_out->stream() << fmt::format("{:.9f} {} {:.6f} {:.6f} {:.6f} {:.4f}\n", f->time, k + 1, T.x(), T.y(),
+                                          T.theta(), r.candidates[k].score);
+      }
     if (r.declined) {
       ++reasons[r.reason];
       out.stream() << fmt::format("{:.9f} nan nan nan 0\n", f->time);
@@ -150,10 +219,11 @@ void runLocalize(const LocArgs& a) {
     tally.add(r.declined ? std::nullopt : std::optional<SE2>(r.T_world_robot),
               a.eval ? f->T_world_robot : std::nullopt, f->T_odom_robot);
   }
-  line.clear();
+  progress.clear();
   const std::size_t scans = tally.scans;
   if (scans == 0) throw badInput("the log has no scan to localize", ErrorLocation(a.log));
   out.commit();
+  if (cand_out) cand_out->commit();
   const double total_s = seconds(t0);
   nlohmann::json j;
   j["map"] = a.map;
@@ -218,7 +288,8 @@ void addLocalizeCommands(CLI::App& app) {
   auto* idx = app.add_subcommand("localize-index",
                                  "Build the global localizer's descriptor database of a map_server map (versioned "
                                  "binary file, tied to that map)");
-  idx->add_option("MAP", d->map, "map YAML (ROS map_server format)")->required();
+  idx->add_option("MAP", d->map, "map: a map_server YAML, or a bare PGM/PNG image with --resolution")->required();
+  addBareMapOptions(idx, d->bare);
   idx->add_option("-o,--output", d->output, "database file to write")->required();
   addDbOptions(idx, d->options, &d->fov_deg);
   idx->add_flag("-q,--quiet", d->quiet, "no summary on stderr");
@@ -229,22 +300,27 @@ void addLocalizeCommands(CLI::App& app) {
       "localize",
       "Global pose of every scan of LOG in a known map, each on its own (no odometry); writes 't x y theta score' per "
       "scan, 't nan nan nan 0' when it declines");
-  sub->add_option("MAP", a->map, "map YAML (ROS map_server format)")->required();
+  sub->add_option("MAP", a->map, "map: a map_server YAML, or a bare PGM/PNG image with --resolution")->required();
+  addBareMapOptions(sub, a->bare);
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->output, "output file, one line per scan")->required();
   sub->add_option("--db", a->db, "database from 'lidar2d localize-index' (default: built in memory)");
   sub->add_option("--json", a->json, "write a JSON summary (timings; success rate with --eval) to this file");
   sub->add_flag("--eval", a->eval, "compare with the log's truth: success (within 0.3 m and 5 deg), precision");
-  const std::map<std::string, Scans> scans{{"all", Scans::kAll}, {"even", Scans::kEven}, {"odd", Scans::kOdd}};
-  sub->add_option("--scans", a->scans, "which scans to localize: all, even or odd (0-based index in the log)")
-      ->transform(CLI::CheckedTransformer(scans, CLI::ignore_case))
+  addChoice<Scans>(sub, "--scans", a->scans, {{"all", Scans::kAll}, {"even", Scans::kEven}, {"odd", Scans::kOdd}},
+                   "which scans to localize: all, even or odd (0-based index in the log)")
       ->default_str("all");
   sub->add_option("--min-score", a->options.min_score, "decline below this score (fraction of points on obstacles)")
       ->capture_default_str();
   sub->add_option("--ambiguity", a->options.ambiguity_ratio,
                   "decline when a distinct alternative scores at least this fraction of the best")
       ->capture_default_str();
-  sub->add_option("--candidates", a->options.max_candidates, "candidates verified per scan")->capture_default_str();
+  sub->add_option("--candidates", a->candidates,
+                  "also write the best K distinct candidate poses of every scan, whatever their score, to OUTPUT.candidates "
+                  "('t rank x y theta score' per line; 0: none)")
+      ->capture_default_str();
+  sub->add_option("--prescored", a->options.max_candidates, "best-voted pose bins pre-scored per scan")
+      ->capture_default_str();
   sub->add_option("--profile-candidates", a->options.profile_candidates,
                   "candidates from the range profiles, for scans with few lines (0: off)")
       ->capture_default_str();

@@ -1,7 +1,6 @@
 // lidar2d map LOG --model logodds|count|tsdf -o PREFIX: an occupancy map from known poses.
 
 #include <fmt/format.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -21,6 +20,7 @@
 #include "lidar2d/mapping/map_builder.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "map_output.hpp"
+#include "progress.hpp"
 
 namespace lidar2d::cli {
 namespace {
@@ -66,18 +66,21 @@ OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map
 }
 
 void run(const MapArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.prefix + ".yaml");
   const auto t0 = std::chrono::steady_clock::now();
   auto map = mapping::makeMap(a.model, a.options);
-  mapping::FramePoses poses = a.poses_file.empty()
+  // With a range table given file by file, --poses is the table's poses file (its truth), read by
+  // the log reader, not a trajectory.
+  const std::string poses_file = a.reader.range_table ? std::string() : a.poses_file;
+  mapping::FramePoses poses = poses_file.empty()
                                   ? mapping::FramePoses::fromFrames(a.pose_source, "use --poses TRAJ or --pose-source")
-                                  : mapping::FramePoses::fromTrajectory(io::readTrajectory(a.poses_file), a.max_dt, a.poses_file);
+                                  : mapping::FramePoses::fromTrajectory(io::readTrajectory(poses_file), a.max_dt, poses_file);
   auto source = io::openLog(a.log, a.reader);
-  const bool progress = !a.quiet && ::isatty(STDERR_FILENO);
+  RateProgress progress(a.quiet, "mapping", "scans", source->sizeHint());
   mapping::MapBuilder builder(*map, std::move(poses), {.source_name = a.log});
-  const std::size_t scans = builder.insert([&] { return source->next(); }, [progress](std::size_t done) {
-    if (progress && done % 500 == 0) std::cerr << "\rmapped " << done << " scans" << std::flush;
-  });
-  if (progress) std::cerr << "\r";
+  const std::size_t scans =
+      builder.insert([&] { return source->next(); }, [&progress](std::size_t done) { progress.update(done); });
+  progress.clear();
   if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
   OccupancyImage image = mapping::toOccupancyImage(*map);
   std::size_t overridden = 0;
@@ -117,10 +120,11 @@ void addMapCommand(CLI::App& app) {
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->prefix, "output prefix: writes PREFIX.pgm, PREFIX.yaml, PREFIX.png (+ PREFIX.surface.txt for tsdf)")
       ->required();
-  const std::map<std::string, mapping::MapModel> models{
-      {"logodds", mapping::MapModel::kLogOdds}, {"count", mapping::MapModel::kCount}, {"tsdf", mapping::MapModel::kTsdf}};
-  sub->add_option("--model", a->model, "map model: logodds, count or tsdf")
-      ->transform(CLI::CheckedTransformer(models, CLI::ignore_case))
+  addChoice<mapping::MapModel>(sub, "--model", a->model,
+                               {{"logodds", mapping::MapModel::kLogOdds},
+                                {"count", mapping::MapModel::kCount},
+                                {"tsdf", mapping::MapModel::kTsdf}},
+                               "map model: logodds, count or tsdf")
       ->default_str("logodds");
   sub->add_option("--resolution", a->options.resolution_m, "cell size [m]")->default_val(0.05);
   sub->add_option("--max-range", a->options.insert.max_range_m, "returns beyond this are treated as no return [m]")
@@ -141,11 +145,11 @@ void addMapCommand(CLI::App& app) {
   sub->add_option("--truncation", a->options.tsdf.truncation_m, "tsdf: truncation distance [m]")->default_val(0.3);
   sub->add_option("--poses", a->poses_file, "trajectory file (t x y theta or TUM) giving the pose of every scan");
   sub->add_option("--max-dt", a->max_dt, "--poses: largest timestamp difference to accept [s]")->default_val(0.001);
-  const std::map<std::string, mapping::PoseSource> sources{{"auto", mapping::PoseSource::kAuto},
-                                                           {"truth", mapping::PoseSource::kTruth},
-                                                           {"odometry", mapping::PoseSource::kOdometry}};
-  sub->add_option("--pose-source", a->pose_source, "without --poses: auto (truth if present, else odometry), truth or odometry")
-      ->transform(CLI::CheckedTransformer(sources, CLI::ignore_case))
+  addChoice<mapping::PoseSource>(sub, "--pose-source", a->pose_source,
+                                 {{"auto", mapping::PoseSource::kAuto},
+                                  {"truth", mapping::PoseSource::kTruth},
+                                  {"odometry", mapping::PoseSource::kOdometry}},
+                                 "without --poses: auto (truth if present, else odometry), truth or odometry")
       ->default_str("auto");
   sub->add_option("--prior", a->prior,
                   "prior layer overriding the sensor: a map_server YAML (aligned by world coordinates) or an image of the "

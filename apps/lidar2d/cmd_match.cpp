@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/core/trajectory.hpp"
@@ -52,6 +53,7 @@ struct MatchArgs {
 };
 
 void run(const MatchArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
   registration::SequenceOptions so;
@@ -102,7 +104,12 @@ void run(const MatchArgs& a) {
                                 T.theta(), r.converged ? 1 : 0, r.iterations);
     pairs.push_back({p.t_prev, p.t_cur, T, r.converged, r.iterations});
   };
-  const registration::SequenceSummary summary = matcher.run(next_frame, write_pair);
+  std::optional<std::size_t> total_pairs;
+  if (const auto n = source->sizeHint(); n && *n > 0) total_pairs = *n - 1;
+  RateProgress progress(a.quiet, "matching", "pairs", total_pairs);
+  const registration::SequenceSummary summary =
+      matcher.run(next_frame, write_pair, [&progress](std::size_t done) { progress.update(done); });
+  progress.clear();
   if (summary.frames < 2)
     throw badInput(fmt::format("log has {} scan(s); matching needs at least 2", summary.frames), ErrorLocation(a.log));
   out.commit();
@@ -136,27 +143,24 @@ void addMatchCommand(CLI::App& app) {
       "of the current scan's robot in the previous one's frame [s, s, m, m, rad])");
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->output, "output file of relative poses")->required();
-  const std::map<std::string, registration::Method> methods{{"p2p", registration::Method::kP2P},
-                                                            {"p2l", registration::Method::kP2L},
-                                                            {"lf", registration::Method::kLikelihoodField},
-                                                            {"corr", registration::Method::kCorrelative}};
-  sub->add_option("--method", a->options.method, "p2p (point-to-point ICP), p2l (point-to-line ICP), lf, corr")
-      ->transform(CLI::CheckedTransformer(methods, CLI::ignore_case))
+  addChoice<registration::Method>(sub, "--method", a->options.method,
+                                  {{"p2p", registration::Method::kP2P},
+                                   {"p2l", registration::Method::kP2L},
+                                   {"lf", registration::Method::kLikelihoodField},
+                                   {"corr", registration::Method::kCorrelative}},
+                                  "p2p (point-to-point ICP), p2l (point-to-line ICP), lf, corr")
       ->default_str("p2l");
-  const std::map<std::string, registration::Method> icp_methods{{"p2p", registration::Method::kP2P},
-                                                                {"p2l", registration::Method::kP2L}};
-  sub->add_option("--then", a->then,
-                  "second stage from the first one's estimate: p2p or p2l ICP (e.g. --method corr --then p2l for large "
-                  "initial errors; skips the correlative search's own refinement)")
-      ->transform(CLI::CheckedTransformer(icp_methods, CLI::ignore_case));
-  const std::map<std::string, registration::Solver> solvers{{"gn", registration::Solver::kGaussNewton},
-                                                            {"ceres", registration::Solver::kCeres}};
-  sub->add_option("--solver", a->options.solver, "gn (Gauss-Newton) or ceres (robust loss)")
-      ->transform(CLI::CheckedTransformer(solvers, CLI::ignore_case))
+  addChoice<registration::Method>(
+      sub, "--then", a->then, {{"p2p", registration::Method::kP2P}, {"p2l", registration::Method::kP2L}},
+      "second stage from the first one's estimate: p2p or p2l ICP (e.g. --method corr --then p2l for large "
+      "initial errors; skips the correlative search's own refinement)")
+      ->default_str("none");
+  addChoice<registration::Solver>(sub, "--solver", a->options.solver,
+                                  {{"gn", registration::Solver::kGaussNewton}, {"ceres", registration::Solver::kCeres}},
+                                  "gn (Gauss-Newton) or ceres (robust loss)")
       ->default_str("gn");
-  const std::map<std::string, Init> inits{{"odom", Init::kOdom}, {"identity", Init::kIdentity}};
-  sub->add_option("--init", a->init, "initial guess: odom (odometry's relative motion) or identity")
-      ->transform(CLI::CheckedTransformer(inits, CLI::ignore_case))
+  addChoice<Init>(sub, "--init", a->init, {{"odom", Init::kOdom}, {"identity", Init::kIdentity}},
+                  "initial guess: odom (odometry's relative motion) or identity")
       ->default_str("odom");
   sub->add_option("--max-dist", a->options.icp.max_correspondence_dist_m, "ICP: max correspondence distance [m]")
       ->capture_default_str();

@@ -244,6 +244,7 @@ std::string describeNoise(const sim::OdometryNoise& n) {
 }
 
 void run(const PerturbArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   if (a.legacy()) return runLegacy(a);
 
   sim::LogPerturbationOptions o;
@@ -361,7 +362,8 @@ void addPerturbCommand(CLI::App& app) {
                                       "defaults of the odometry terms: 'constant' (--odom-noise only, the default) or "
                                       "'realistic' (issue 29: 3 % of distance + 5 mm per step translation noise, 1 "
                                       "degree per metre + 3 % of the turn heading noise, 2 % scale error)")
-                          ->check(CLI::IsMember({"constant", "realistic"}))
+                          ->check(CLI::IsMember({"constant", "realistic"}).description(""))
+                          ->type_name("constant|realistic")
                           ->capture_default_str());
   odom_opts.push_back(sub->add_option("--odom-trans-noise-per-m", a->trans_noise_per_m,
                                       "T: extra std of the x and y error per metre of the step [m/m] (realistic: 0.03)")

@@ -26,6 +26,7 @@ struct PosesArgs {
 };
 
 void run(const PosesArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   auto src = io::openLog(a.log, a.reader);
   Trajectory traj;
   const char* what = a.source == PoseKind::kTruth ? "truth" : "odometry";
@@ -47,14 +48,12 @@ void addPosesCommand(CLI::App& app) {
   auto* sub = app.add_subcommand("poses", "Write the truth or odometry poses of a log's scans as a trajectory file");
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->output, "trajectory file to write")->required();
-  const std::map<std::string, PoseKind> sources{{"truth", PoseKind::kTruth}, {"odometry", PoseKind::kOdometry}};
-  sub->add_option("--source", a->source, "which poses: truth or odometry")
-      ->transform(CLI::CheckedTransformer(sources, CLI::ignore_case))
+  addChoice<PoseKind>(sub, "--source", a->source, {{"truth", PoseKind::kTruth}, {"odometry", PoseKind::kOdometry}},
+                      "which poses: truth or odometry")
       ->default_str("truth");
-  const std::map<std::string, io::TrajectoryFormat> formats{{"plain", io::TrajectoryFormat::kPlain},
-                                                           {"tum", io::TrajectoryFormat::kTum}};
-  sub->add_option("--format", a->format, "plain (t x y theta) or tum (t tx ty tz qx qy qz qw)")
-      ->transform(CLI::CheckedTransformer(formats, CLI::ignore_case))
+  addChoice<io::TrajectoryFormat>(sub, "--format", a->format,
+                                  {{"plain", io::TrajectoryFormat::kPlain}, {"tum", io::TrajectoryFormat::kTum}},
+                                  "plain (t x y theta) or tum (t tx ty tz qx qy qz qw)")
       ->default_str("plain");
   addReaderOptions(sub, a->reader);
   sub->callback([a] { run(*a); });

@@ -78,6 +78,7 @@ struct SimulateArgs {
 };
 
 void run(const SimulateArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
   if (a.world.empty() == a.map.empty())
     throw CLI::ValidationError("simulate", "give exactly one of --world NAME or --map MAP.yaml");
   sim::SimulatorOptions o;
@@ -167,7 +168,10 @@ void addSimulateCommand(CLI::App& app) {
   for (const auto& w : sim::listWorlds()) worlds.append(worlds.empty() ? "" : ", ").append(w);
   auto* world = sub->add_option("--world", a->world,
                                 fmt::format("built-in world: {} (an unknown name is a usage error, exit 2)", worlds))
-                    ->check(CLI::IsMember(sim::listWorlds()));
+                    ->check(CLI::IsMember(sim::listWorlds()).description(""));
+  std::string world_words;
+  for (const auto& w : sim::listWorlds()) world_words.append(world_words.empty() ? "" : "|").append(w);
+  world->type_name(world_words);
   auto* map = sub->add_option("--map", a->map,
                               "map_server YAML: occupied cells become walls; the route is a random walk through free "
                               "space (default 500 scans)");

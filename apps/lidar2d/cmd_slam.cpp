@@ -104,6 +104,7 @@ void run(const SlamArgs& a) {
   std::error_code ec;
   if (fs::exists(a.dir, ec) && !fs::is_directory(a.dir, ec))
     throw ioError("exists and is not a directory", ErrorLocation(a.dir, 0, "-o"));
+  const CreatedFolders out_folders = prepareOutputDir(a.dir);
 
   // Frames are processed as the reader thread (prefetch) parses them, so parsing overlaps with
   // SLAM on the other core. Of each frame only its laser mounting is kept (for --pose-frame laser):
@@ -248,16 +249,15 @@ void addSlamCommand(CLI::App& app) {
   sub->add_flag("--markdown", a->markdown, "with --dump-config: print the options as the Markdown table of docs/slam.md")
       ->needs(dump);
   sub->add_flag("--no-odometry", a->no_odometry, "ignore the log's odometry (scan matching only)");
-  const std::map<std::string, bool> frames{{"robot", false}, {"laser", true}};
-  sub->add_option("--pose-frame", a->laser_frame,
+  addChoice<bool>(sub, "--pose-frame", a->laser_frame, {{"robot", false}, {"laser", true}},
                   "frame of the poses in trajectory.txt: robot (base_link) or laser (the robot pose times the laser "
                   "mounting; what the Radish relation files measure)")
-      ->transform(CLI::CheckedTransformer(frames, CLI::ignore_case))
       ->default_str("robot");
-  const std::map<std::string, mapping::MapModel> models{
-      {"logodds", mapping::MapModel::kLogOdds}, {"count", mapping::MapModel::kCount}, {"tsdf", mapping::MapModel::kTsdf}};
-  sub->add_option("--map-model", a->model, "model of the output map: logodds, count or tsdf")
-      ->transform(CLI::CheckedTransformer(models, CLI::ignore_case))
+  addChoice<mapping::MapModel>(sub, "--map-model", a->model,
+                               {{"logodds", mapping::MapModel::kLogOdds},
+                                {"count", mapping::MapModel::kCount},
+                                {"tsdf", mapping::MapModel::kTsdf}},
+                               "model of the output map: logodds, count or tsdf")
       ->default_str("logodds");
   sub->add_option("--resolution", a->resolution, "cell size of the output map [m]")->default_val(0.05);
   sub->add_flag("-q,--quiet", a->quiet, "no progress bar and no summary");

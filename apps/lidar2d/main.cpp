@@ -2,13 +2,55 @@
 // 1 bad input or I/O failure (one line on stderr), 2 usage error.
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <exception>
 #include <opencv2/core/utils/logger.hpp>
 #include <iostream>
 #include <new>
+#include <string>
+#include <vector>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
+
+namespace {
+
+// Edit distance (insertions, deletions, substitutions, and swaps of neighbours: "slma" is one
+// step from "slam"), for suggesting the nearest command name.
+std::size_t editDistance(const std::string& a, const std::string& b) {
+  std::vector<std::vector<std::size_t>> d(a.size() + 1, std::vector<std::size_t>(b.size() + 1));
+  for (std::size_t i = 0; i <= a.size(); ++i) d[i][0] = i;
+  for (std::size_t j = 0; j <= b.size(); ++j) d[0][j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i)
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1]) d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+    }
+  return d[a.size()][b.size()];
+}
+
+// CLI11 reports an unknown first word as "A subcommand is required". When the first argument is no
+// option and no command, this names it and the nearest command instead; returns false then.
+bool knownCommandOrOption(const CLI::App& app, const std::string& word) {
+  if (word.empty() || word[0] == '-') return true;
+  std::string nearest;
+  std::size_t best = std::string::npos;
+  for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; })) {
+    if (sub->get_name() == word) return true;
+    const std::size_t d = editDistance(word, sub->get_name());
+    if (d < best) {
+      best = d;
+      nearest = sub->get_name();
+    }
+  }
+  std::cerr << "lidar2d: error: unknown command '" << word << "'";
+  // More than half the word changed is no longer a typo.
+  if (best <= std::max<std::size_t>(1, word.size() / 2)) std::cerr << "; did you mean '" << nearest << "'?";
+  std::cerr << " ('lidar2d --help' lists the commands)\n";
+  return false;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   // OpenCV would print its own warnings (e.g. on an unreadable image) on stderr; errors reach the
@@ -29,6 +71,7 @@ int main(int argc, char** argv) {
   lidar2d::cli::addDegeneracyCommand(app);
   lidar2d::cli::addLocalizeCommands(app);
   lidar2d::cli::requireFiniteNumbers(app);
+  if (argc > 1 && !knownCommandOrOption(app, argv[1])) return 2;
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstddef>
 #include <iostream>
+#include <optional>
 #include <string>
 
 namespace lidar2d::cli {
@@ -45,5 +46,37 @@ class ProgressLine {
 /// `done` of `total` (> 0) as a bar of `width` characters and a percentage, capped at 100%:
 /// "[#########.....................]  30%".
 std::string progressBar(std::size_t done, std::size_t total, int width = 30);
+
+/// "what [bar] done/total unit, R unit/s, M:SS left" after `seconds` of work; without a known
+/// `total` (CARMEN text logs, whose length is unknown until read) "what done unit, R unit/s".
+std::string progressText(const std::string& what, std::size_t done, std::optional<std::size_t> total, double seconds,
+                         const std::string& unit);
+
+/// The progress of a command's main loop on a terminal: counts, rate and time left (ProgressLine's
+/// rules: nothing when `quiet` or stderr is not a terminal, erased when it goes out of scope).
+class RateProgress {
+ public:
+  RateProgress(bool quiet, std::string what, std::string unit, std::optional<std::size_t> total)
+      : line_(quiet), what_(std::move(what)), unit_(std::move(unit)), total_(total) {}
+  void update(std::size_t done, bool force = false) {
+    line_.update(
+        [&] {
+          return progressText(what_, done, total_,
+                              std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(), unit_);
+        },
+        force);
+  }
+  bool enabled() const { return line_.enabled(); }
+  /// Sets the total once it is known (a database's positions, once they are laid out).
+  void setTotal(std::size_t total) { total_ = total; }
+  /// Erases the line (before a summary is printed).
+  void clear() { line_.clear(); }
+
+ private:
+  ProgressLine line_;
+  std::string what_, unit_;
+  std::optional<std::size_t> total_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
 
 }  // namespace lidar2d::cli

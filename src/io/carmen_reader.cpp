@@ -242,6 +242,10 @@ class CarmenSource final : public FrameSource {
     n.truth_source = decision_.truth_source;
     if (repeats_ || backwards_)
       n.warnings.push_back(fmt::format("timestamps repeat {} times; go backwards {} times", repeats_, backwards_));
+    if (wrapped_)
+      n.warnings.push_back(fmt::format("{} scans have timestamps near 2^32 s (e.g. 4294967296): negative times written "
+                                       "as unsigned 32-bit numbers; time spans and gaps between them are meaningless",
+                                       wrapped_));
     if (unbracketed_)
       n.warnings.push_back(fmt::format("odometry of {} scans taken from the nearer ODOM line, whose times do not "
                                        "bracket the scan time",
@@ -326,6 +330,10 @@ class CarmenSource final : public FrameSource {
       if (m.time == prev_time_) ++repeats_;
       if (m.time < prev_time_) ++backwards_;
     }
+    // Some converters wrote negative times through an unsigned 32-bit number: -2 s becomes
+    // 2^32 - 2 s (infinite-corridor: 1937 scans at 4.29497e+09). No robot logged in 2106, and the
+    // true value is lost to the 6 significant digits such logs print, so it is reported, not undone.
+    if (std::abs(m.time - kTwoTo32) < kWrapWindow) ++wrapped_;
     prev_time_ = m.time;
     p.frame.index = count_++;
     p.frame.time = m.time;
@@ -385,6 +393,9 @@ class CarmenSource final : public FrameSource {
   bool eof_ = false;
   std::size_t count_ = 0, emitted_ = 0;
   double prev_time_ = 0.0;
+  static constexpr double kTwoTo32 = 4294967296.0;  ///< 2^32 [s]
+  static constexpr double kWrapWindow = 1048576.0;  ///< 2^20 s (12 days) either side of 2^32
+  std::size_t wrapped_ = 0;
   std::size_t repeats_ = 0, backwards_ = 0, unbracketed_ = 0, unmatched_truth_ = 0, forced_ = 0;
 };
 

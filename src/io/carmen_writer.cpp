@@ -99,7 +99,10 @@ void CarmenWriter::write(const Frame& frame) {
   for (std::size_t i = 0; i < n; ++i) {
     const double r = scan.ranges()[i];
     const bool valid = scan.isValid(i);
-    appendRange(l, valid ? r : rmax, valid, rmax);
+    // CARMEN has one "no return" value, range_max; an error reading (a lost echo: 0, below
+    // range_min, NaN) is written as 0, which reads back invalid too but is not "nothing there":
+    // mapping clears along no-return beams only (docs/mapping.md).
+    appendRange(l, valid ? r : (r >= rmax ? rmax : 0.0), valid, rmax);
   }
   fmt::format_to(out, " {}", scan.intensities().size());
   for (double e : scan.intensities()) fmt::format_to(out, " {}", std::isfinite(e) ? e : 0.0);

@@ -6,7 +6,9 @@
 #include <cassert>
 #include <cctype>
 #include <cmath>
+#include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 
 #include "lidar2d/core/error.hpp"
@@ -109,14 +111,9 @@ std::int8_t classify(int grey, int alpha, const MapYaml& y) {
   return static_cast<std::int8_t>(1 + 98 * ratio);
 }
 
-}  // namespace
-
-MapFile readMap(const std::string& yaml_path) {
-  MapFile out;
-  out.yaml = parseYaml(yaml_path);
-  const fs::path img(out.yaml.image);
-  out.image_path = img.is_absolute() ? img.string() : (fs::path(yaml_path).parent_path() / img).string();
-  const GreyImage g = readGreyImage(out.image_path, "image");
+// The map of `out.image_path` under `out.yaml`'s interpretation.
+void readImageInto(MapFile& out, const std::string& field) {
+  const GreyImage g = readGreyImage(out.image_path, field);
   std::vector<std::int8_t> cells(g.value.size());
   for (int r = 0; r < g.height; ++r) {
     const int row = g.height - 1 - r;  // image top row = map's top (largest y)
@@ -127,6 +124,47 @@ MapFile readMap(const std::string& yaml_path) {
     }
   }
   out.map = OccupancyImage::create(g.width, g.height, out.yaml.resolution, out.yaml.origin, std::move(cells));
+}
+
+}  // namespace
+
+MapFile readMap(const std::string& yaml_path) {
+  MapFile out;
+  out.yaml = parseYaml(yaml_path);
+  const fs::path img(out.yaml.image);
+  out.image_path = img.is_absolute() ? img.string() : (fs::path(yaml_path).parent_path() / img).string();
+  readImageInto(out, "image");
+  return out;
+}
+
+bool isMapImage(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  char head[8] = {};
+  in.read(head, sizeof head);
+  const std::size_t n = static_cast<std::size_t>(in.gcount());
+  static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (n == 8 && std::equal(head, head + 8, kPng, [](char a, unsigned char b) { return static_cast<unsigned char>(a) == b; }))
+    return true;
+  return n >= 3 && head[0] == 'P' && (head[1] == '5' || head[1] == '2') && std::isspace(static_cast<unsigned char>(head[2]));
+}
+
+MapFile readMapImage(const std::string& image_path, const MapYaml& yaml) {
+  const MapYaml& y = yaml;
+  if (!(y.resolution >= OccupancyImage::kMinResolution && y.resolution <= OccupancyImage::kMaxResolution))
+    throw badInput(fmt::format("must be between {} and {} m, got {}", OccupancyImage::kMinResolution,
+                               OccupancyImage::kMaxResolution, y.resolution),
+                   {image_path, 0, "resolution"});
+  if (!y.origin.isFinite() || std::abs(y.origin.x()) > OccupancyImage::kMaxOriginAbs ||
+      std::abs(y.origin.y()) > OccupancyImage::kMaxOriginAbs)
+    throw badInput(fmt::format("x and y must be finite and within +-{:g} m", OccupancyImage::kMaxOriginAbs),
+                   {image_path, 0, "origin"});
+  if (!(y.free_thresh >= 0 && y.free_thresh < y.occupied_thresh && y.occupied_thresh <= 1))
+    throw badInput("thresholds must satisfy 0 <= free_thresh < occupied_thresh <= 1", {image_path, 0, "free_thresh"});
+  MapFile out;
+  out.yaml = y;
+  out.yaml.image = image_path;
+  out.image_path = image_path;
+  readImageInto(out, "map image");
   return out;
 }
 

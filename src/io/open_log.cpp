@@ -21,6 +21,8 @@ const char* toString(LogFormat f) {
       return "rosbag1";
     case LogFormat::kRosbag2:
       return "rosbag2";
+    case LogFormat::kRangeTable:
+      return "range-table";
   }
   return "unknown";
 }
@@ -31,7 +33,17 @@ LogFormat detectFormat(const std::string& path) {
   if (!fs::exists(path, ec)) throw ioError("no such file", {path});
   if (fs::is_directory(path, ec)) {
     if (fs::exists(fs::path(path) / "metadata.yaml", ec)) return LogFormat::kRosbag2;
-    throw badInput("is a directory, not a log file (a ROS2 bag folder would hold metadata.yaml)", {path});
+    const RangeTableFiles t = internal::rangeTableFolder(path);
+    const bool has[3] = {fs::exists(t.poses, ec), fs::exists(t.angles, ec), fs::exists(t.ranges, ec)};
+    if (has[0] && has[1] && has[2]) return LogFormat::kRangeTable;
+    if (has[0] || has[1] || has[2])
+      throw badInput(fmt::format("a range table folder needs poses.txt, angles.txt and ranges.txt; {} is missing",
+                                 !has[0] ? "poses.txt" : (!has[1] ? "angles.txt" : "ranges.txt")),
+                     {path});
+    throw badInput(
+        "is a directory, not a log file (a ROS2 bag folder would hold metadata.yaml, a range table folder "
+        "poses.txt, angles.txt and ranges.txt)",
+        {path});
   }
   std::ifstream in(path, std::ios::binary);
   if (!in) throw ioError(std::string("cannot open: ") + std::strerror(errno), {path});
@@ -92,6 +104,8 @@ std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOpt
       return internal::openRosbag1(path, options);
     case LogFormat::kRosbag2:
       return internal::openRosbag2(path, options);
+    case LogFormat::kRangeTable:
+      return internal::openRangeTable(internal::rangeTableFolder(path));
   }
   throw badInput("unknown log format", {path});
 }
@@ -145,7 +159,8 @@ std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOption
     mount = internal::applyTiltRule(*options.laser_mount, options, {"ReaderOptions", 0, "laser_mount"},
                                     "given by the options", mount_warnings);
   }
-  std::unique_ptr<FrameSource> source = openFormat(path, options);
+  std::unique_ptr<FrameSource> source =
+      options.range_table ? internal::openRangeTable(*options.range_table) : openFormat(path, options);
   if (mount) return std::make_unique<MountOverride>(std::move(source), *mount, std::move(mount_warnings));
   return source;
 }

@@ -261,6 +261,11 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     return (a.translation() - b.translation()).norm() > o.distinct_distance_m ||
            std::abs(angleDiff(a.theta(), b.theta())) > o.distinct_angle_rad;
   };
+  for (const Candidate& c : cands) {
+    bool seen = false;
+    for (const auto& k : res.candidates) seen = seen || !distinct(c.T_world_robot, k.T_world_robot);
+    if (!seen) res.candidates.push_back(c);
+  }
   for (std::size_t c = 1; c < cands.size(); ++c) {
     if (cands[c].score < o.min_score) break;
     if (!distinct(cands[c].T_world_robot, best.T_world_robot)) continue;

@@ -107,7 +107,9 @@ std::optional<Frame> Simulator::next() {
     const double noise = laser_rng_.gaussian(l.range_noise_m);
     const bool drop = laser_rng_.uniform() < l.dropout;
     if (r >= l.range_max_m) continue;
-    r = drop ? l.range_max_m : std::max(0.0, r + noise);
+    // A lost echo reads 0 (an error reading, invalid), never range_max ("no return", which
+    // mapping clears along): see LaserModel.
+    r = drop ? 0.0 : std::max(0.0, r + noise);
   }
   if (k_ == 0) {
     odom_ = options_.odom_starts_at_truth ? tp.T_world_robot : SE2();

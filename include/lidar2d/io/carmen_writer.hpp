@@ -23,8 +23,9 @@ class CarmenWriter {
 
   /// Adds a `# comment` line (e.g. how the log was made).
   void comment(const std::string& text);
-  /// Appends one frame. Ranges are written with millimetre precision or better; invalid beams as
-  /// the scan's range_max (CARMEN's "no return"), NaN as range_max too.
+  /// Appends one frame. Ranges are written with millimetre precision or better; invalid beams at or
+  /// beyond range_max (and +inf) as the scan's range_max (CARMEN's "no return"), the other invalid
+  /// beams (error readings: 0, at or below range_min, -inf, NaN) as 0.
   void write(const Frame& frame);
   /// Finishes the file and renames it into place. Throws `lidar2d::Error` (kIo) on failure.
   void commit();

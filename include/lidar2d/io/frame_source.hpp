@@ -18,9 +18,12 @@ enum class LogFormat {
   kRosbag1,  ///< ROS1 bag, format 2.0 or 1.2
   kRosbag2,  ///< ROS2 bag: a folder with metadata.yaml (sqlite3 or MCAP storage, split or compressed
              ///< by rosbag2), or a single .db3 or .mcap file
+  /// Plain range tables (a folder with poses.txt, angles.txt and ranges.txt, or the three files
+  /// named in ReaderOptions::range_table): the layout robotics courses and MATLAB users keep.
+  kRangeTable,
 };
 
-/// Printable name of a format ("carmen", "rosbag1", "rosbag2").
+/// Printable name of a format ("carmen", "rosbag1", "rosbag2", "range-table").
 const char* toString(LogFormat f);
 
 /// How the pose triples of CARMEN laser messages are interpreted.
@@ -32,6 +35,22 @@ enum class CarmenPoses {
   kAuto,
   kTruth,     ///< the laser messages' robot pose is ground truth; odometry from ODOM lines if any
   kOdometry,  ///< the laser messages' odometry triple is odometry; no truth unless TRUEPOS lines
+};
+
+/// The three files of a range table, each plain text (comma or blank separated numbers, '#'
+/// comment lines and blank lines skipped, plain or gzip):
+/// - `poses`: one robot pose `x y theta` [m, m, rad] per scan, in the world frame: the truth;
+/// - `angles`: one line of beam angles [rad] in the laser frame, evenly spaced, increasing;
+/// - `ranges`: one line of ranges [m] per scan, as many as there are angles; readings at or beyond
+///   `range_max_m` mean no return, 0 is an error reading (both invalid). NaN, infinite or negative
+///   values are errors.
+/// The tables hold no times: scan k gets the time k / rate_hz. The laser sits at the robot's origin.
+struct RangeTableFiles {
+  std::string poses;
+  std::string angles;
+  std::string ranges;
+  double rate_hz = 10.0;      ///< scan rate of the synthesized times [Hz], > 0
+  double range_max_m = 30.0;  ///< readings >= this are "no return" [m] (a Hokuyo UTM-30LX's 30 m)
 };
 
 /// Options of every reader; each reader ignores what does not apply to its format.
@@ -56,6 +75,8 @@ struct ReaderOptions {
   /// mounting), true projects its beams onto the robot's plane (`LaserMount::project`, each range
   /// shortened by the tilt) and says so in the notes' warnings.
   bool allow_tilted_laser = false;
+  /// A range table given file by file; when set, `openLog` reads it whatever its path argument.
+  std::optional<RangeTableFiles> range_table;
 };
 
 /// The farthest a laser may be mounted from the robot's frame origin: `ReaderOptions::laser_mount`
@@ -98,7 +119,8 @@ class FrameSource {
 };
 
 /// Detects the format from the file's first bytes (gzip magic -> CARMEN, "#ROSBAG V" -> ROS1,
-/// SQLite header or a folder with metadata.yaml -> ROS2). Throws `lidar2d::Error` for a missing,
+/// SQLite header or a folder with metadata.yaml -> ROS2, a folder with poses.txt, angles.txt and
+/// ranges.txt -> range table). Throws `lidar2d::Error` for a missing,
 /// unreadable or empty file, a directory that is not a ROS2 bag, or unknown content.
 LogFormat detectFormat(const std::string& path);
 

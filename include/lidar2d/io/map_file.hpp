@@ -52,6 +52,16 @@ struct MapFile {
 /// missing image, wrong magic, truncated data, more than 10^9 pixels, more than 8 bits per pixel.
 MapFile readMap(const std::string& yaml_path);
 
+/// Whether the file at `path` starts like an image (PNG signature, or a PGM's "P5"/"P2") rather
+/// than a YAML. False for a file that cannot be read (readMap then reports it).
+bool isMapImage(const std::string& path);
+
+/// Reads a bare map image (PGM or PNG, no YAML: a map drawn or exported by hand) as readMap reads
+/// the image of a YAML holding `yaml`'s fields (its `image` is ignored). The resolution and origin
+/// are checked as readMap checks them, with the error naming `image_path` and the field
+/// ("resolution", "origin"). Throws `lidar2d::Error` as readMap does.
+MapFile readMapImage(const std::string& image_path, const MapYaml& yaml);
+
 /// Writes `map` as a trinary map_server map: the PGM at `image_path` (default: the YAML path with
 /// its extension replaced by ".pgm") and the YAML at `yaml_path`, whose `image` is the PGM's path
 /// relative to the YAML's folder. Cells 0..`free_max` become 254 (free), `occupied_min`..100 become

@@ -205,6 +205,9 @@ struct LocalizationResult {
   SE2 T_world_robot;     ///< best pose
   double score = 0.0;    ///< its score, in [0, 1]
   std::vector<Candidate> alternatives;  ///< distinct poses other than the best, best first (score >= min_score)
+  /// Every verified candidate, best first, each distinct (LocalizerOptions::distinct_*) from those
+  /// before it, whatever its score: the hypotheses a caller may track itself (the best is first).
+  std::vector<Candidate> candidates;
   std::size_t num_points = 0;           ///< valid scan points used
   std::size_t num_lines = 0;            ///< scan lines used
   std::size_t num_hits = 0;             ///< database pairs matched

@@ -27,16 +27,18 @@ namespace lidar2d::sim {
 /// beam 0 is at -fov/2 and the last beam at +fov/2 (increment fov / (beams - 1)); with 360 degrees,
 /// beam 0 is at -pi and the increment 2*pi / beams (no duplicated beam).
 /// A beam that hits nothing within `range_max_m` reads `range_max_m` ("no return", invalid); a hit
-/// reads the true distance plus N(0, range_noise_m^2), and is replaced by `range_max_m` with
-/// probability `dropout`. Noisy ranges below 0 are clamped to 0 (and are then invalid, since they
-/// are <= range_min).
+/// reads the true distance plus N(0, range_noise_m^2), and with probability `dropout` is lost and
+/// reads 0 instead: an error reading, as real lasers report a lost echo (a Hokuyo URG's error codes
+/// below 20 mm, an RPLidar's 0), not "nothing there" - a wall that swallowed the echo is still there,
+/// so mapping must not clear through it. Noisy ranges below 0 are clamped to 0. Readings
+/// <= range_min are invalid and every algorithm ignores them.
 struct LaserModel {
   int beams = 541;                        ///< number of beams, >= 1
   double fov_rad = 4.71238898038469;      ///< field of view [rad] (270 deg), in (0, 2*pi]
   double range_min_m = 0.05;              ///< shorter readings are invalid [m], >= 0
   double range_max_m = 30.0;              ///< maximum range; also the "no return" value [m], > range_min
   double range_noise_m = 0.01;            ///< standard deviation of the range noise [m], >= 0
-  double dropout = 0.01;                  ///< probability that a hit is lost (reads range_max) [0, 1]
+  double dropout = 0.01;                  ///< probability that a hit is lost (reads 0, invalid) [0, 1]
   SE2 T_robot_laser = SE2(0.1, 0.0, 0.0); ///< mounting pose of the laser on the robot [m, m, rad]
 
   double angleMin() const;

@@ -13,6 +13,10 @@
 #include "lidar2d/core/laser_scan.hpp"
 #include "lidar2d/core/se2.hpp"
 
+namespace lidar2d::io::internal {
+class TextLineReader;
+}  // namespace lidar2d::io::internal
+
 namespace lidar2d::io::internal::carmen {
 
 enum class LaserKind { kFront, kRear, kRobot, kRaw };
@@ -60,7 +64,6 @@ struct Event {
   std::size_t line = 0;
 };
 
-class LineReader;
 
 // Reads a log line by line and turns the lines into events. `selected` is the laser message type
 // to parse (others are skipped unparsed); when null, the first laser message type found is taken.
@@ -84,7 +87,7 @@ class EventReader {
   bool classify(std::string_view line, Event& ev);
 
   std::string path_;
-  std::unique_ptr<LineReader> in_;
+  std::unique_ptr<TextLineReader> in_;
   const LaserType* selected_;
   Params params_;
   std::vector<std::string_view> fields_;

@@ -14,6 +14,10 @@ namespace lidar2d::io::internal {
 std::unique_ptr<FrameSource> openCarmen(const std::string& path, const ReaderOptions& options);
 std::unique_ptr<FrameSource> openRosbag1(const std::string& path, const ReaderOptions& options);
 std::unique_ptr<FrameSource> openRosbag2(const std::string& path, const ReaderOptions& options);
+/// A range table: `files` (ReaderOptions::range_table, or the three files of a folder).
+std::unique_ptr<FrameSource> openRangeTable(const RangeTableFiles& files);
+/// The three files of a range table folder (poses.txt, angles.txt, ranges.txt).
+RangeTableFiles rangeTableFolder(const std::string& dir);
 
 /// The mounting frames get from `mount` (described as `what`, e.g. "base_link -> laser from
 /// /tf_static") under ReaderOptions' tilt rule: level within `options.max_laser_tilt_deg` (tilt
