@@ -169,9 +169,6 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // log-posterior beats the best match near the prediction.
   const double nats = opt.prior_nats_per_point * static_cast<double>(pts.size());
   auto logPosterior = [&](const Candidate& c) { return nats * c.explained - 0.5 * c.sigmas * c.sigmas; };
-  auto outweighsPrior = [&](const Candidate& far, double near_log_posterior) {
-    return logPosterior(far) > near_log_posterior;
-  };
   auto consider = [&](Candidate c) {
     if (c.sigmas <= opt.prior_gate_sigmas) {
       if (!in_gate || better(c, *in_gate)) in_gate = std::move(c);
@@ -230,7 +227,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // A match beyond the gate wins when the evidence outweighs the prior: a higher log-posterior
   // than the best match within the gate (or than the prediction itself, explaining nothing).
   if (beyond_gate && beyond_gate->explained >= opt.min_explained_fraction &&
-      outweighsPrior(*beyond_gate, in_gate ? logPosterior(*in_gate) : 0.0)) {
+      logPosterior(*beyond_gate) > (in_gate ? logPosterior(*in_gate) : 0.0)) {
     win = &*beyond_gate;
     out.overrode_prior = true;
   } else if (beyond_gate && beyond_gate->explained >= opt.min_explained_fraction && !win) {

@@ -48,14 +48,7 @@ Points2 voxelFilter(const Points2& pts, double cell_m) {
 }
 
 double explainedFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T, double inlier_m) {
-  if (pts.empty()) return 0.0;
-  const double d2max = inlier_m * inlier_m;
-  std::size_t n = 0;
-  for (const auto& p : pts) {
-    double d2 = 0.0;
-    if (target.nearest(T * p, &d2) < target.size() && d2 <= d2max) ++n;
-  }
-  return static_cast<double>(n) / static_cast<double>(pts.size());
+  return overlapWith(target, pts, T, inlier_m, inlier_m).explained;
 }
 
 }  // namespace lidar2d::slam::internal
