@@ -178,6 +178,7 @@ void run(const SlamArgs& a) {
   j["prior_overridden"] = s.prior_overridden;
   j["prior_kept"] = s.prior_kept;
   j["fragments"] = s.fragments;
+  j["relocalizations"] = s.relocalizations;
   j["odometry_wins"] = s.odometry_wins;
   j["degenerate_scans"] = s.degenerate;
   j["loop_searches"] = s.loop_searches;

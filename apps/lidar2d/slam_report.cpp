@@ -170,8 +170,9 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
                                    j.value("ms_per_scan_p95", 0.0), j.value("ms_per_scan_p99", 0.0),
                                    j.value("ms_per_scan_max", 0.0)));
   row("fragments", fmt::format("{} (stretches between lost tracks not tied together by a loop closure; 1: one map); "
+                               "{} lost tracks relocalized in the earlier map; "
                                "odometry overruled {} estimates made without scan evidence",
-                               j.value("fragments", 0), j.value("odometry_wins", 0)));
+                               j.value("fragments", 0), j.value("relocalizations", 0), j.value("odometry_wins", 0)));
   row("motion prior", fmt::format("{} matches taken against it on strong scan evidence, {} contradicting it rejected",
                                   j.value("prior_overridden", 0), j.value("prior_kept", 0)));
   row("map", fmt::format("{} x {} cells of {} m", W, H, res));

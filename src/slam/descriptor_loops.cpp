@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <utility>
 
 #include "src/slam/internal/points.hpp"
@@ -72,12 +73,19 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
   }
   const bool quiet =
       !s_.last_loop_node || n - *s_.last_loop_node > static_cast<std::size_t>(opt.descriptor_quiet_nodes);
-  if (!confirming && !(quiet && n % static_cast<std::size_t>(opt.descriptor_every_nodes) == 0)) return;
+  // A fragment after a lost track, not yet tied to the map before it: every one of its first
+  // kRelocalizeEveryNode nodes is looked up in the submaps before it (no age limit: they lie in
+  // another frame), then one in descriptor_every_nodes as usual.
+  const std::optional<std::size_t> untied = s_.untied_since;
+  const bool relocalizing = untied && n >= *untied;
+  const bool due = n % static_cast<std::size_t>(opt.descriptor_every_nodes) == 0;
+  if (!confirming && !(relocalizing && (n - *untied < kRelocalizeEveryNode || due)) && !(quiet && due)) return;
   std::vector<std::size_t> targets;
   for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
     const Submap& sm = s_.submaps[s];
     if (!sm.db || sm.db->empty()) continue;
-    if (sm.nodes.back() + static_cast<std::size_t>(opt.descriptor_min_age_nodes) > n) continue;
+    const bool before_fragment = relocalizing && sm.nodes.back() < *untied;
+    if (!before_fragment && sm.nodes.back() + static_cast<std::size_t>(opt.descriptor_min_age_nodes) > n) continue;
     targets.push_back(s);
   }
   if (targets.empty()) return;
@@ -141,7 +149,9 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
       const double turn = std::abs(angleDiff(implied.theta(), node.T_world_robot.theta()));
       const double path = s_.node_path_m[n] - s_.node_path_m[sm.nodes.back()];
       const double allowed = opt.descriptor_max_correction_m + opt.descriptor_drift_fraction * path;
-      if (correction > allowed || turn > opt.descriptor_max_rotation_rad) {
+      // Across a lost track the estimate is only the prediction: any correction is plausible.
+      const bool across_lost_track = relocalizing && sm.nodes.back() < *untied;
+      if (!across_lost_track && (correction > allowed || turn > opt.descriptor_max_rotation_rad)) {
         c.accepted = false;
         c.reason = fmt::format("implausible correction of {:.1f} m / {:.0f} deg after {:.0f} m of path", correction,
                                turn / kDeg, path);

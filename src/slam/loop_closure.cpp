@@ -51,6 +51,10 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   }
   std::sort(candidates.begin(), candidates.end());
   int searches_left = opt.loop_searches_per_node;
+  // A fragment after a lost track, not yet tied to the map before it, searches at every node: each
+  // node of a revisit is a chance to tie it (and to confirm a pending closure).
+  const bool every_node = n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 ||
+                          (s_.untied_since && n >= *s_.untied_since);
   for (const auto& [dist, s] : candidates) {
     Submap& sm = s_.submaps[s];
     const SE2& T_world_anchor = s_.nodes[sm.anchor].T_world_robot;
@@ -63,7 +67,7 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     if (sm.last_link_node && n - *sm.last_link_node <= static_cast<std::size_t>(opt.loop_link_memory_nodes)) {
       const std::size_t m = *sm.last_link_node;
       init = sm.last_link_T_anchor_node * (s_.nodes[m].T_local_robot.inverse() * node.T_local_robot);
-    } else if (n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 && searches_left > 0) {
+    } else if (every_node && searches_left > 0) {
       --searches_left;
       const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
       const auto cr =
@@ -160,6 +164,15 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
         {r.frame_index, r.time,
          fmt::format("loop closure found by descriptors: node {} to submap {}, correcting {:.2f} m of drift", c.to,
                      s_.nodes[c.from].submap, correction)});
+  }
+  if (s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since) {
+    ++s_.stats.relocalizations;
+    const ScanRecord& r = s_.scans[s_.nodes[c.to].scan];
+    s_.events.push_back({r.frame_index, r.time,
+                         fmt::format("relocalized: the fragment from node {} (after lost tracking) is tied to submap {} "
+                                     "by node {}",
+                                     *s_.untied_since, s_.nodes[c.from].submap, c.to)});
+    s_.untied_since.reset();
   }
   if (!sm.last_link_node || c.to > *sm.last_link_node) {
     sm.last_link_node = c.to;

@@ -160,6 +160,11 @@ struct Slam::Impl {
       const Eigen::Vector2d d = T_local.rotation().transpose() * dir_local;
       node.degenerate_dir_rad = std::atan2(d.y(), d.x());
     }
+    if (restart && !state.submaps.empty() && !state.submaps.back().finished) {
+      // The nodes before a lost track and after it do not share a frame: one submap cannot hold both.
+      loops.finishSubmap(state.submaps.back());
+      if (opt.descriptor_loops) descriptors.indexSubmap(state.submaps.back());
+    }
     if (state.submaps.empty() || state.submaps.back().finished) {
       state.submaps.emplace_back();
       state.submaps.back().anchor = n;
@@ -175,7 +180,10 @@ struct Slam::Impl {
                : state.node_path_m[n - 1] +
                      (state.nodes[n - 1].T_local_robot.translation() - T_local.translation()).norm());
     descriptors.describeNode(raw);
-    if (restart) state.restarts.push_back(n);
+    if (restart) {
+      state.restarts.push_back(n);
+      state.untied_since = n;
+    }
     if (n > 0) internal::addSequentialConstraints(state, n, restart, degenerate, dir_local);
 
     front_end.addNode(n, restart);

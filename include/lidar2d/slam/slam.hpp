@@ -80,6 +80,7 @@ struct SlamStats {
   std::size_t prior_overridden = 0;  ///< matches taken against the motion prior, on strong scan evidence
   std::size_t prior_kept = 0;        ///< matches contradicting the prior without that evidence (prior kept)
   std::size_t fragments = 0;         ///< stretches between lost tracks not tied together by a loop closure (1: all one)
+  std::size_t relocalizations = 0;   ///< lost tracks tied back to the earlier map by a verified closure
   std::size_t odometry_wins = 0;     ///< node links where odometry overruled an estimate without scan evidence
   std::size_t loop_searches = 0, loop_accepted = 0, loop_rejected = 0;
   std::size_t descriptor_queries = 0;      ///< descriptor look-ups

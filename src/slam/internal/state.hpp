@@ -91,6 +91,10 @@ struct SlamState {
   // Back end.
   SE2 T_world_local;
   std::optional<std::size_t> last_loop_node;  // latest node with an accepted closure
+  // The first node of the current fragment (the front end lost track there) while no accepted
+  // closure ties the fragment to the nodes before it: the descriptor search relocalizes its nodes
+  // against every earlier submap, without the drift limits (its link is only the prediction).
+  std::optional<std::size_t> untied_since;
   std::size_t nodes_since_optimization = 0;
   std::size_t loops_since_optimization = 0;
   bool searched_loop_pending = false;     // a searched closure was accepted since the last optimisation
