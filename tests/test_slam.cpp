@@ -277,6 +277,47 @@ TEST(Slam, KidnappedRobotIsReportedAndTheRunContinues) {
   EXPECT_EQ(reported + 1, slam->stats().fragments) << all;
 }
 
+TEST(Slam, KidnappedIntoTheMappedAreaIsRelocalizedIntoOneMap) {
+  // The office route up to frame 600, then the robot is carried back to where it was at frame 250
+  // (3 m away, turned by 90 degrees; its odometry does not know) and drives that stretch again: the
+  // fragment after the lost track must be found in the map built before it, and the run ends as
+  // one map in the truth's frame.
+  const auto a = simulateWorld("office", 5);
+  ASSERT_GT(a.size(), 600u);
+  std::vector<Frame> frames(a.begin(), a.begin() + 600);
+  const SE2 T_odom_carried = *frames.back().T_odom_robot * (*a[250].T_odom_robot).inverse();
+  const double dt = frames.back().time + 0.1 - a[250].time;
+  for (std::size_t i = 250; i < 550; ++i) {
+    Frame f = a[i];
+    f.index = frames.size();
+    f.time += dt;
+    f.T_odom_robot = T_odom_carried * *a[i].T_odom_robot;
+    frames.push_back(f);
+  }
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  std::string all;
+  for (const auto& ev : slam->events()) all += ev.what + "\n";
+  EXPECT_NE(all.find("lost track"), std::string::npos) << all;
+  EXPECT_NE(all.find("relocalized"), std::string::npos) << all;
+  EXPECT_GE(slam->stats().relocalizations, 1u);
+  EXPECT_EQ(slam->stats().fragments, 1u) << all;
+  // Every pose is where it was, but for the scans between the kidnapping and the lost track (the
+  // front end predicted them from odometry that did not know): the fragment after it is placed by
+  // the map, and the odometry across the kidnapping, wrong, does not bend the map before it.
+  std::vector<SE2> kept;
+  std::vector<Frame> kept_frames;
+  for (std::size_t i = 0; i < est.size(); ++i)
+    if (i < 600 || i >= 610) {
+      kept.push_back(est[i]);
+      kept_frames.push_back(frames[i]);
+    }
+  const Errors e = poseErrors(kept, kept_frames);
+  EXPECT_LT(e.rms, 0.05);
+  EXPECT_LT(e.max, 0.15);
+}
+
 TEST(Slam, FramesWithFewPointsArePredicted) {
   auto frames = simulateWorld("office", 6, 100);
   // Scans 40..44 see nothing valid.

@@ -33,7 +33,10 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool de
     sqrt_info(2, 2) = 1.0 / s.opt.sequential_sigma_rad;
   }
   s.addEdge(std::move(c), sqrt_info, 0.0);
-  if (s.node_odometry[n - 1] && s.node_odometry[n]) {
+  // Across a lost track odometry is no evidence either (a kidnapped robot's odometry is wrong):
+  // closures that tie the new fragment to the map place it; where none does, checkAtEnd lets
+  // odometry win.
+  if (!restart && s.node_odometry[n - 1] && s.node_odometry[n]) {
     Constraint o;
     o.kind = Constraint::Kind::kOdometry;
     o.from = n - 1;
@@ -71,9 +74,28 @@ void checkAtEnd(SlamState& s) {
   }
   std::vector<char> restart(N, 0);
   for (std::size_t r : s.restarts) restart[r] = 1;
+
+  // Fragments: the stretches between restarts, united through accepted loop closures.
+  std::vector<std::size_t> fragment_of(N, 0), first_node{0};
+  for (std::size_t n = 1; n < N; ++n) {
+    fragment_of[n] = fragment_of[n - 1] + (restart[n] ? 1 : 0);
+    if (restart[n]) first_node.push_back(n);
+  }
+  std::vector<std::size_t> parent(first_node.size());
+  for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = i;
+  auto find = [&](std::size_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  for (const Constraint& c : s.constraints)
+    if (c.kind == Constraint::Kind::kLoop && c.accepted) parent[find(fragment_of[c.from])] = find(fragment_of[c.to]);
+
+  // Never worse than odometry: across a lost track that no verified closure explains.
   bool added = false;
   for (std::size_t n = 1; n < N; ++n) {
     if (!restart[n] || !s.node_odometry[n - 1] || !s.node_odometry[n]) continue;
+    // Closures tie both sides to one map: the scans placed them (a kidnapped robot's odometry is wrong).
+    if (find(fragment_of[n - 1]) == find(fragment_of[n])) continue;
     const SE2 odo = s.node_odometry[n - 1]->inverse() * *s.node_odometry[n];
     const SE2 est = s.nodes[n - 1].T_world_robot.inverse() * s.nodes[n].T_world_robot;
     const MotionPrediction p = odometryPrediction(s.opt, odo, s.nodes[n].time - s.nodes[n - 1].time);
@@ -94,20 +116,6 @@ void checkAtEnd(SlamState& s) {
   }
   if (added) optimize(s, s.opt.graph.max_iterations);
 
-  // Fragments: union of the stretches between restarts through accepted loop closures.
-  std::vector<std::size_t> fragment_of(N, 0), first_node{0};
-  for (std::size_t n = 1; n < N; ++n) {
-    fragment_of[n] = fragment_of[n - 1] + (restart[n] ? 1 : 0);
-    if (restart[n]) first_node.push_back(n);
-  }
-  std::vector<std::size_t> parent(first_node.size());
-  for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = i;
-  auto find = [&](std::size_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
-  for (const Constraint& c : s.constraints)
-    if (c.kind == Constraint::Kind::kLoop && c.accepted) parent[find(fragment_of[c.from])] = find(fragment_of[c.to]);
   std::size_t fragments = 0;
   for (std::size_t i = 0; i < parent.size(); ++i) {
     if (find(i) != i) continue;

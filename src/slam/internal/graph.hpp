@@ -11,7 +11,8 @@ namespace lidar2d::slam::internal {
 
 /// The constraints from node n-1 to node `n` (n > 0): the front end's relative pose (weak along
 /// `dir_local`, the local-frame direction a degenerate match could not pin; only as strong as the
-/// prediction after a `restart`), and the odometry between them when both have trusted odometry.
+/// prediction after a `restart`), and the odometry between them when both have trusted odometry
+/// and the track was not lost between them.
 void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool degenerate,
                               const Eigen::Vector2d& dir_local);
 
@@ -21,9 +22,10 @@ void optimize(SlamState& s, int iterations);
 
 /// The end-of-run checks, after the final optimisation:
 /// - never worse than odometry: where the link between two consecutive nodes is only the prediction
-///   (the front end had lost track) and the optimised estimate contradicts their odometry beyond the
-///   motion prior's gate, odometry wins (a constraint as strong as the prior), with an event, and the
-///   graph is optimised again;
+///   (the front end had lost track), no accepted loop closure ties the two sides into one map (then
+///   the scans placed them: a kidnapped robot's odometry is wrong), and the optimised estimate
+///   contradicts their odometry beyond the motion prior's gate, odometry wins (a constraint as
+///   strong as the prior), with an event, and the graph is optimised again;
 /// - fragments: the stretches between restarts that no accepted loop closure ties together; each
 ///   fragment beyond the first is reported as an event. Sets stats.fragments and
 ///   stats.odometry_wins.
