@@ -318,6 +318,47 @@ TEST(Slam, KidnappedIntoTheMappedAreaIsRelocalizedIntoOneMap) {
   EXPECT_LT(e.max, 0.15);
 }
 
+TEST(Slam, TheBackEndThreadChangesNothingButWhereTheWorkRuns) {
+  // Loop closures by search and by link, optimisations and a lost track: the same run with the
+  // back end on its own thread and inline gives the same poses, constraints and events, and the
+  // counters can be read while it runs.
+  auto frames = simulateWorld("office", 8, 700);
+  for (std::size_t i = 400; i < frames.size(); ++i) frames[i].T_odom_robot = SE2(0.0, 0.0, 1.0) * *frames[i].T_odom_robot;
+  SlamOptions inline_options;
+  inline_options.back_end_thread = false;
+  Slam threaded{SlamOptions{}}, inline_run{inline_options};
+  std::size_t nodes_seen = 0;
+  for (const auto& f : frames) {
+    threaded.add(f);
+    inline_run.add(f);
+    if (f.index % 50 == 0) {
+      EXPECT_GE(threaded.stats().nodes, nodes_seen);
+      nodes_seen = threaded.stats().nodes;
+      EXPECT_EQ(threaded.constraints().size(), inline_run.constraints().size());
+    }
+  }
+  threaded.finish();
+  inline_run.finish();
+  ASSERT_GT(threaded.stats().loop_accepted, 0u);
+  ASSERT_GT(threaded.stats().optimizations, 1u);
+  const auto a = threaded.trajectory(), b = inline_run.trajectory();
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].T_world_robot.x(), b[i].T_world_robot.x()) << i;
+    EXPECT_EQ(a[i].T_world_robot.y(), b[i].T_world_robot.y()) << i;
+    EXPECT_EQ(a[i].T_world_robot.theta(), b[i].T_world_robot.theta()) << i;
+  }
+  ASSERT_EQ(threaded.constraints().size(), inline_run.constraints().size());
+  for (std::size_t i = 0; i < threaded.constraints().size(); ++i) {
+    EXPECT_EQ(threaded.constraints()[i].from, inline_run.constraints()[i].from);
+    EXPECT_EQ(threaded.constraints()[i].to, inline_run.constraints()[i].to);
+    EXPECT_EQ(threaded.constraints()[i].accepted, inline_run.constraints()[i].accepted);
+  }
+  ASSERT_EQ(threaded.events().size(), inline_run.events().size());
+  for (std::size_t i = 0; i < threaded.events().size(); ++i)
+    EXPECT_EQ(threaded.events()[i].what, inline_run.events()[i].what);
+}
+
 TEST(Slam, FramesWithFewPointsArePredicted) {
   auto frames = simulateWorld("office", 6, 100);
   // Scans 40..44 see nothing valid.

@@ -53,9 +53,11 @@ double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>
 class SlamProgress {
  public:
   SlamProgress(bool quiet, std::optional<std::size_t> total) : line_(quiet), total_(total) {}
-  void update(std::size_t done, const slam::SlamStats& s, bool force = false) {
+  /// `slam`'s counters are read only when the line is redrawn: reading them waits for its back end.
+  void update(std::size_t done, const slam::Slam& slam, bool force = false) {
     line_.update(
         [&] {
+          const slam::SlamStats& s = slam.stats();
           return fmt::format("slam {}{} scans, {} nodes, {} loop closures, {:.1f} s ",
                              total_ && *total_ > 0 ? progressBar(done, *total_) + " " : "", done, s.nodes,
                              s.loop_accepted, secondsSince(start_));
@@ -117,13 +119,13 @@ void run(const SlamArgs& a) {
   while (auto f = source->next()) {
     T_robot_laser.push_back(f->T_robot_laser);
     slam.add(*f);
-    bar.update(T_robot_laser.size(), slam.stats());
+    bar.update(T_robot_laser.size(), slam);
   }
   source.reset();
   const std::size_t num_scans = T_robot_laser.size();
   if (num_scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
   slam.finish();
-  bar.update(num_scans, slam.stats(), true);
+  bar.update(num_scans, slam, true);
   bar.done();
   const double slam_seconds = secondsSince(t_slam);
   const auto trajectory = slam.trajectory();

@@ -156,19 +156,17 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   if (descriptor) {
     ++s_.stats.descriptor_accepted;
     s_.descriptor_loop_accepted = true;
-    const ScanRecord& r = s_.scans[s_.nodes[c.to].scan];
     const double correction =
         ((s_.nodes[c.from].T_world_robot * c.T_from_to).translation() - s_.nodes[c.to].T_world_robot.translation())
             .norm();
-    s_.events.push_back(
-        {r.frame_index, r.time,
+    s_.back_end_events.push_back(
+        {s_.node_frame_index[c.to], s_.nodes[c.to].time,
          fmt::format("loop closure found by descriptors: node {} to submap {}, correcting {:.2f} m of drift", c.to,
                      s_.nodes[c.from].submap, correction)});
   }
   if (s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since) {
     ++s_.stats.relocalizations;
-    const ScanRecord& r = s_.scans[s_.nodes[c.to].scan];
-    s_.events.push_back({r.frame_index, r.time,
+    s_.back_end_events.push_back({s_.node_frame_index[c.to], s_.nodes[c.to].time,
                          fmt::format("relocalized: the fragment from node {} (after lost tracking) is tied to submap {} "
                                      "by node {}",
                                      *s_.untied_since, s_.nodes[c.from].submap, c.to)});

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <future>
 #include <utility>
 
 #include "lidar2d/core/error.hpp"
@@ -93,6 +94,33 @@ struct Slam::Impl {
   internal::LoopClosure loops;
   internal::DescriptorLoops descriptors;
   bool finished = false;
+  // The back-end work of the newest node (backEnd) when it runs on its own thread
+  // (back_end_thread). Declared last: destroyed (joined) before the state it works on.
+  std::future<void> back_end;
+
+  /// Waits for the newest node's back-end work and merges its events. Everything the back end
+  /// touches (nodes' world poses, submaps, constraints, its counters) is the caller's afterwards.
+  void sync() {
+    if (back_end.valid()) back_end.get();
+    for (Event& e : state.back_end_events) state.events.push_back(std::move(e));
+    state.back_end_events.clear();
+  }
+
+  /// The back end's work for the new node `n`: finishes and indexes the submap when `finish`,
+  /// searches loop closures (by proximity, then by descriptors) and optimises when due. Reads
+  /// only what the front end no longer changes (nodes, their points and lines, submaps), and
+  /// records events in back_end_events, so it may run while the next scans are tracked; the next
+  /// node waits for it, so the run is the same as with no thread.
+  void backEnd(std::size_t n, bool finish) {
+    if (finish) {
+      internal::Submap& sm = state.submaps[state.nodes[n].submap];
+      loops.finishSubmap(sm);
+      if (state.opt.descriptor_loops) descriptors.indexSubmap(sm);
+    }
+    ++state.nodes_since_optimization;
+    if (const auto covered = loops.searchNear(n)) descriptors.search(n, *covered);
+    internal::optimizeIfDue(state);
+  }
 
   void add(const Frame& f) {
     const auto t0 = Clock::now();
@@ -148,6 +176,7 @@ struct Slam::Impl {
   /// Scan `scan_index` (frame `f`, at `T_local`, with its points `pts` and `raw`) becomes a node.
   void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
+    sync();  // the world frame, the submaps and the graph as the previous node's back end left them
     const SlamOptions& opt = state.opt;
     const std::size_t n = state.nodes.size();
     Node node;
@@ -175,6 +204,7 @@ struct Slam::Impl {
     state.node_points.push_back(std::move(pts));
     state.node_scans.emplace_back(f.scan, f.T_robot_laser);
     state.node_odometry.push_back(f.T_odom_robot && odom_trusted ? f.T_odom_robot : std::nullopt);
+    state.node_frame_index.push_back(f.index);
     state.node_path_m.push_back(
         n == 0 ? 0.0
                : state.node_path_m[n - 1] +
@@ -187,15 +217,11 @@ struct Slam::Impl {
     if (n > 0) internal::addSequentialConstraints(state, n, restart, degenerate, dir_local);
 
     front_end.addNode(n, restart);
-    internal::Submap& sm = state.submaps.back();
-    if (static_cast<int>(sm.nodes.size()) >= opt.submap_nodes) {
-      loops.finishSubmap(sm);
-      if (opt.descriptor_loops) descriptors.indexSubmap(sm);
-    }
-
-    ++state.nodes_since_optimization;
-    if (const auto covered = loops.searchNear(n)) descriptors.search(n, *covered);
-    internal::optimizeIfDue(state);
+    const bool finish = static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes;
+    if (opt.back_end_thread)
+      back_end = std::async(std::launch::async, [this, n, finish] { backEnd(n, finish); });
+    else
+      backEnd(n, finish);
   }
 };
 
@@ -207,7 +233,11 @@ void Slam::add(const Frame& frame) { impl_->add(frame); }
 void Slam::finish() {
   if (impl_->finished) return;
   const auto t0 = Clock::now();
+  impl_->sync();
   internal::SlamState& s = impl_->state;
+  // The back end's events were merged a node late: in frame order again.
+  std::stable_sort(s.events.begin(), s.events.end(),
+                   [](const Event& a, const Event& b) { return a.frame_index < b.frame_index; });
   impl_->loops.expirePending();
   internal::optimize(s, s.opt.graph.max_iterations);
   internal::checkAtEnd(s);
@@ -218,6 +248,7 @@ void Slam::finish() {
 }
 
 std::vector<ScanEstimate> Slam::trajectory() const {
+  impl_->sync();
   const internal::SlamState& s = impl_->state;
   std::vector<ScanEstimate> out;
   out.reserve(s.scans.size());
@@ -236,10 +267,20 @@ std::vector<ScanEstimate> Slam::trajectory() const {
   return out;
 }
 
-const std::vector<Node>& Slam::nodes() const { return impl_->state.nodes; }
-const std::vector<Constraint>& Slam::constraints() const { return impl_->state.constraints; }
-const std::vector<Event>& Slam::events() const { return impl_->state.events; }
+const std::vector<Node>& Slam::nodes() const {
+  impl_->sync();
+  return impl_->state.nodes;
+}
+const std::vector<Constraint>& Slam::constraints() const {
+  impl_->sync();
+  return impl_->state.constraints;
+}
+const std::vector<Event>& Slam::events() const {
+  impl_->sync();
+  return impl_->state.events;
+}
 const SlamStats& Slam::stats() const {
+  impl_->sync();
   internal::SlamState& s = impl_->state;
   s.stats.nodes = s.nodes.size();
   s.stats.submaps = s.submaps.size();

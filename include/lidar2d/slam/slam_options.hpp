@@ -111,6 +111,7 @@ struct SlamOptions {
   double odometry_sigma_rad = 2.0 * kDeg;
   int optimize_every_nodes = 30;
   int intermediate_iterations = 10;
+  bool back_end_thread = true;
   /// Solver of the final optimisation (`max_iterations`) and of every one (`threads`); its
   /// `function_tolerance` is not a SLAM option.
   PoseGraphOptions graph;
@@ -343,6 +344,9 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "solver iterations of the final optimisation (and after a descriptor closure)"},
     {LIDAR2D_SLAM_FIELD(graph.threads), "pose graph", "threads", OptionRange::atLeast(1),
      "Ceres threads of every optimisation"},
+    {LIDAR2D_SLAM_FIELD(back_end_thread), "pose graph", "flag", OptionRange::any(),
+     "a new node's loop search and the optimisations run on a second thread while the next scans are "
+     "tracked (the results are the same as without it: the next node waits for them)"},
 };
 
 #undef LIDAR2D_SLAM_FIELD

@@ -81,11 +81,15 @@ struct SlamState {
   std::vector<std::optional<SE2>> node_odometry;            // trusted odometry poses (odometry constraints)
   std::vector<std::vector<localization::Line>> node_lines;  // robot frame, longest first (descriptor loops)
   std::vector<double> node_path_m;                          // front-end path length from the first node [m]
+  std::vector<std::size_t> node_frame_index;                // Frame::index of each node's scan
   std::vector<std::size_t> restarts;                        // nodes where the front end restarted (lost track)
   std::vector<Submap> submaps;
   std::vector<Constraint> constraints;
   std::vector<PoseGraphEdge> edges;  // of the accepted constraints
   std::vector<Event> events;
+  // Events of the back end (loop closure, optimisation), which may run on its own thread while the
+  // front end records its own events: merged into `events` when the two meet (Slam::Impl::sync).
+  std::vector<Event> back_end_events;
   SlamStats stats;
 
   // Back end.
