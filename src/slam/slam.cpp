@@ -2,7 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
-#include <future>
+#include <condition_variable>
+#include <exception>
+#include <functional>
+#include <mutex>
+#include <stop_token>
+#include <thread>
 #include <utility>
 
 #include "lidar2d/core/error.hpp"
@@ -83,6 +88,70 @@ const char* toString(Constraint::Kind k) {
   return "unknown";
 }
 
+namespace {
+
+/// One long-lived worker thread running one task at a time: the SLAM back end's. A thread per
+/// task (std::async) gave each node a new thread, and glibc a new malloc arena per thread: 50%
+/// more peak memory on the Intel bag. (The standard library has no thread pool, and one thread
+/// is all this needs.)
+class Worker {
+ public:
+  Worker() : thread_([this](std::stop_token stop) { run(stop); }) {}
+  ~Worker() {
+    thread_.request_stop();
+    cv_.notify_all();
+  }
+  Worker(const Worker&) = delete;
+  Worker& operator=(const Worker&) = delete;
+
+  /// Starts `task`; the previous one must have been waited for.
+  void start(std::function<void()> task) {
+    {
+      std::lock_guard lock(mutex_);
+      task_ = std::move(task);
+      busy_ = true;
+    }
+    cv_.notify_all();
+  }
+  /// Waits for the current task (if any); rethrows what it threw.
+  void wait() {
+    std::unique_lock lock(mutex_);
+    cv_.wait(lock, [&] { return !busy_; });
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+  }
+
+ private:
+  void run(std::stop_token stop) {
+    std::unique_lock lock(mutex_);
+    while (true) {
+      cv_.wait(lock, [&] { return stop.stop_requested() || task_; });
+      if (!task_) return;  // stopped, nothing left to do
+      std::function<void()> task = std::move(task_);
+      task_ = nullptr;
+      lock.unlock();
+      std::exception_ptr error;
+      try {
+        task();
+      } catch (...) {
+        error = std::current_exception();
+      }
+      lock.lock();
+      error_ = error;
+      busy_ = false;
+      cv_.notify_all();
+    }
+  }
+
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::function<void()> task_;
+  bool busy_ = false;
+  std::exception_ptr error_;
+  std::jthread thread_;  // last: started once the members it uses exist, joined first
+};
+
+}  // namespace
+
 /// The pipeline: each scan goes through the front end; the motion filter makes some of them nodes;
 /// a node joins the local map and a submap, gets its sequential constraints, is searched for loop
 /// closures (by proximity, then by descriptors), and the graph is optimised when due.
@@ -94,14 +163,14 @@ struct Slam::Impl {
   internal::LoopClosure loops;
   internal::DescriptorLoops descriptors;
   bool finished = false;
-  // The back-end work of the newest node (backEnd) when it runs on its own thread
-  // (back_end_thread). Declared last: destroyed (joined) before the state it works on.
-  std::future<void> back_end;
+  // Runs the newest node's back-end work (backEnd) with back_end_thread. Declared last: destroyed
+  // (joined) before the state it works on.
+  std::unique_ptr<Worker> back_end = state.opt.back_end_thread ? std::make_unique<Worker>() : nullptr;
 
   /// Waits for the newest node's back-end work and merges its events. Everything the back end
   /// touches (nodes' world poses, submaps, constraints, its counters) is the caller's afterwards.
   void sync() {
-    if (back_end.valid()) back_end.get();
+    if (back_end) back_end->wait();
     for (Event& e : state.back_end_events) state.events.push_back(std::move(e));
     state.back_end_events.clear();
   }
@@ -218,8 +287,8 @@ struct Slam::Impl {
 
     front_end.addNode(n, restart);
     const bool finish = static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes;
-    if (opt.back_end_thread)
-      back_end = std::async(std::launch::async, [this, n, finish] { backEnd(n, finish); });
+    if (back_end)
+      back_end->start([this, n, finish] { backEnd(n, finish); });
     else
       backEnd(n, finish);
   }
