@@ -28,7 +28,9 @@ LaserScan mergeScans(const std::vector<PlacedScan>& inputs, double time) {
     range_max = std::max(range_max, in.scan->rangeMax() + in.T_robot_laser.translation().norm());
     intensities = intensities && in.scan->hasIntensities();
   }
-  const double n_real = std::ceil(kTwoPi / step - 1e-6);
+  // The tolerance absorbs a step stored as a float (pi/180 in a LaserScan message: 2 pi / step is
+  // 360.000004).
+  const double n_real = std::ceil(kTwoPi / step - 1e-3);
   if (!(n_real <= static_cast<double>(LaserScan::kMaxBeams)))
     throw invalidArgument(fmt::format("merged scan would have {:.0f} beams (angle step {} rad)", n_real, step),
                           {"mergeScans", 0, "angle_increment"});

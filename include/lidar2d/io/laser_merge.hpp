@@ -29,7 +29,7 @@ struct PlacedScan {
 };
 
 /// The merged scan of `inputs` (at least one) at `time` [s], as described in the file comment:
-/// angle_min -pi, n = ceil(2 pi / s - 1e-6) beams for s the smallest |angle_increment| of the inputs,
+/// angle_min -pi, n = ceil(2 pi / s - 0.001) beams for s the smallest |angle_increment| of the inputs,
 /// increment 2 pi / n; range_min 0; range_max the largest input range_max plus that laser's distance
 /// from the robot's origin. Intensities are kept when every input has them (the chosen return's).
 /// Throws `lidar2d::Error` (kInvalidArgument) when `inputs` is empty or holds a null scan, or when
