@@ -201,6 +201,9 @@ std::unique_ptr<FrameSource> openMergedLasers(const std::string& path, const Rea
                                       "from the log",
                                       options.laser_mounts.size(), options.lasers.size()),
                           {"ReaderOptions", 0, "laser_mounts"});
+  if (options.laser_mount)
+    throw invalidArgument("one laser_mount for several lasers: give laser_mounts, one per laser",
+                          {"ReaderOptions", 0, "laser_mount"});
   if (options.range_table) throw badInput("a range table holds one laser; there is nothing to merge", where);
   std::vector<std::unique_ptr<FrameSource>> sources;
   for (std::size_t j = 0; j < options.lasers.size(); ++j) {

@@ -23,8 +23,8 @@ RangeTableFiles rangeTableFolder(const std::string& dir);
 /// Two or more lasers (options.lasers) merged into one scan per frame (io/laser_merge.hpp): each laser
 /// read by `open` with the options of that laser alone (scan_topic and carmen_laser its name, its
 /// laser_mounts entry as laser_mount, require_laser_mount set). Throws lidar2d::Error naming `path`
-/// for a laser listed twice or a range table, kInvalidArgument for a tolerance that is not > 0 or a
-/// count of mountings other than the lasers'; `open`'s errors (an unknown topic) pass through.
+/// for a laser listed twice or a range table, kInvalidArgument for a tolerance that is not > 0, a
+/// count of mountings other than the lasers', or a single laser_mount; `open`'s errors (an unknown topic) pass through.
 std::unique_ptr<FrameSource> openMergedLasers(const std::string& path, const ReaderOptions& options,
                                               const std::function<std::unique_ptr<FrameSource>(const ReaderOptions&)>& open);
 
