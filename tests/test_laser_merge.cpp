@@ -175,6 +175,30 @@ TEST(LaserMergeBag, WithoutOdometryTheMergeIsNotCompensatedAndSaysSo) {
   EXPECT_TRUE(said);
 }
 
+TEST(LaserMergeBag, MountingsAreOnePerLaserOrNone) {
+  io::ReaderOptions o = twoLasers();
+  o.laser_mount = LaserMount::planar(SE2(0.2, 0, 0));
+  EXPECT_TRUE(test::throwsError([&] { (void)io::openLog(fixture("two_lasers.bag"), o); }, ErrorKind::kInvalidArgument,
+                                {"laser_mounts, one per laser"}));
+  o.laser_mount.reset();
+  o.laser_mounts = {LaserMount::planar(SE2(0.2, 0, 0))};
+  EXPECT_TRUE(test::throwsError([&] { (void)io::openLog(fixture("two_lasers.bag"), o); }, ErrorKind::kInvalidArgument,
+                                {"1 laser mountings for 2 lasers"}));
+  // The bag's own mountings, given explicitly, read the same scans.
+  o.laser_mounts = {LaserMount::planar(SE2(0.2, 0, 0)), LaserMount::planar(SE2(-0.2, 0.05, kPi))};
+  auto given = io::openLog(fixture("two_lasers.bag"), o);
+  auto from_tf = io::openLog(fixture("two_lasers.bag"), twoLasers());
+  while (auto a = from_tf->next()) {
+    const auto b = given->next();
+    ASSERT_TRUE(b);
+    for (std::size_t k = 0; k < a->scan.size(); ++k) {
+      if (a->scan.isValid(k)) {
+        EXPECT_NEAR(a->scan.ranges()[k], b->scan.ranges()[k], 1e-6) << k;
+      }
+    }
+  }
+}
+
 TEST(LaserMergeBag, PairsOnlyWithinTheTolerance) {
   io::ReaderOptions o = twoLasers();
   o.laser_sync_tolerance_s = 0.02;  // the rear scans are 30 ms later
