@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cctype>
 #include <filesystem>
 #include <cstdlib>
 #include <nlohmann/json.hpp>
@@ -49,7 +50,24 @@ TEST(FirstHour, HelpShowsChoicesInWordsWithTheirDefault) {
     ASSERT_EQ(r.exit_code, 0) << cmd;
     for (const std::string internal : {"ENUM", "BOOLEAN", "->", "value in {"})
       EXPECT_EQ(r.out.find(internal), std::string::npos) << cmd << " --help shows '" << internal << "':\n" << r.out;
+    // CLI11's parser type and check names, as whole words.
+    std::string word;
+    for (const char c : r.out + " ") {
+      if (std::isalnum(static_cast<unsigned char>(c)) || c == '_') {
+        word += c;
+        continue;
+      }
+      for (const char* type : {"TEXT", "FLOAT", "DOUBLE", "INT", "UINT", "POSITIVE", "NONNEGATIVE"})
+        EXPECT_NE(word, type) << cmd << " --help shows the parser's type name " << type << ":\n" << r.out;
+      word.clear();
+    }
   }
+  // Values in words, with their bounds and defaults.
+  const std::string perturb = runCli({"perturb", "--help"}).out;
+  EXPECT_NE(perturb.find("--time-jitter NUMBER >= 0=0"), std::string::npos) << perturb;
+  EXPECT_NE(perturb.find("--time-bursts INTEGER in 1..1099511627776=1"), std::string::npos) << perturb;
+  EXPECT_NE(perturb.find("-o,--output PATH REQUIRED"), std::string::npos) << perturb;
+  EXPECT_NE(perturb.find("--odom-noise SX,SY,STH"), std::string::npos) << perturb;
   EXPECT_NE(runCli({"map", "--help"}).out.find("--model logodds|count|tsdf=logodds"), std::string::npos);
   EXPECT_NE(runCli({"slam", "--help"}).out.find("--pose-frame robot|laser=robot"), std::string::npos);
   EXPECT_NE(runCli({"match", "--help"}).out.find("--method p2p|p2l|lf|corr=p2l"), std::string::npos);

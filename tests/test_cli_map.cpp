@@ -1,5 +1,6 @@
 // lidar2d map end to end: outputs per model, --poses, --prior, and bad input (exit 1, no files).
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -101,6 +102,25 @@ TEST_F(CliMap, PriorOverridesTheSensor) {
   const auto r2 = runCli({"map", log(), "--prior", path("prior.pgm"), "-o", path("with-prior-pgm")});
   ASSERT_EQ(r2.exit_code, 0) << r2.err;
   EXPECT_EQ(io::readMap(path("with-prior-pgm.yaml")).map.cells(), out.map.cells());
+  // A bare image with --prior-resolution and --prior-origin is aligned by world coordinates, as its
+  // YAML is: here a prior image cropped to its block's 10 x 10 cells.
+  OccupancyImage block = OccupancyImage::filled(10, 10, base.map.resolution(),
+                                                SE2(base.map.origin().x() + c0 * base.map.resolution(),
+                                                    base.map.origin().y() + r0 * base.map.resolution(), 0.0),
+                                                OccupancyImage::kOccupied);
+  io::writeMap(path("block.yaml"), block);
+  const auto r3 = runCli({"map", log(), "--prior", path("block.pgm"), "--prior-resolution",
+                          fmt::format("{}", base.map.resolution()), "--prior-origin",
+                          fmt::format("{},{},0", block.origin().x(), block.origin().y()), "-o", path("with-bare")});
+  ASSERT_EQ(r3.exit_code, 0) << r3.err;
+  EXPECT_EQ(io::readMap(path("with-bare.yaml")).map.cells(), out.map.cells());
+  // The options without --prior, or on a YAML prior, are usage errors, before any work.
+  EXPECT_EQ(runCli({"map", log(), "--prior-resolution", "0.05", "-o", path("no-prior")}).exit_code, 2);
+  EXPECT_EQ(runCli({"map", log(), "--prior", path("prior.yaml"), "--prior-resolution", "0.05", "-o", path("yaml-prior")})
+                .exit_code,
+            2);
+  EXPECT_FALSE(fs::exists(path("no-prior.yaml")));
+  EXPECT_FALSE(fs::exists(path("yaml-prior.yaml")));
 }
 
 struct BadMapCase {

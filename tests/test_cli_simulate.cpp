@@ -116,6 +116,21 @@ TEST(Simulate, MapWorldAndPathFile) {
   EXPECT_EQ(j["scans"], 80);
   EXPECT_EQ(j["has_truth"], true);
   EXPECT_GT(j["valid_beam_fraction"].get<double>(), 0.5);  // a closed room: most beams hit
+  // The same map as a bare image with its resolution and origin on the command line: the same log.
+  const std::string bare_log = (tmp / "bare.log").string();
+  r = runCli({"simulate", "--map", (tmp / "room.pgm").string(), "--resolution", "0.05", "--origin", "-2,-1,0", "-o",
+              bare_log, "--scans", "80", "--seed", "2"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::string yaml_text = test::readFile(log), bare_text = test::readFile(bare_log);
+  // The header comment names the map file; everything after it is the same.
+  yaml_text = yaml_text.substr(yaml_text.find("\nROBOTLASER1"));
+  bare_text = bare_text.substr(bare_text.find("\nROBOTLASER1"));
+  EXPECT_TRUE(yaml_text == bare_text) << "the bare image simulates another log than its YAML";
+  // A bare image without its resolution, or the options with --world, are usage errors.
+  EXPECT_EQ(runCli({"simulate", "--map", (tmp / "room.pgm").string(), "-o", bare_log + "2"}).exit_code, 2);
+  EXPECT_EQ(runCli({"simulate", "--world", "office", "--resolution", "0.05", "-o", bare_log + "3"}).exit_code, 2);
+  EXPECT_FALSE(fs::exists(bare_log + "2"));
+  EXPECT_FALSE(fs::exists(bare_log + "3"));
   // --path: one scan per trajectory pose, truth = those poses.
   writeFile(tmp / "traj.txt", "# t x y theta\n0.0 1.0 1.0 0.0\n0.1 1.1 1.0 0.1\n0.25 1.2 1.1 0.2\n");
   const std::string log2 = (tmp / "p.log").string();

@@ -478,6 +478,70 @@ TEST(Rosbag2Reader, UpsideDownLaserGivesTheUprightRobotFramePoints) {
   }
 }
 
+// Two lasers in a ROS2 bag, the rear one upside down (roll pi) and turned back (yaw pi), in a round
+// room of radius 2 m centred on the robot: merged (io/laser_merge.hpp), each through its own tf
+// mounting and mirror, every point lies on the circle, and both halves are there.
+TEST(Rosbag2Reader, TwoLasersOneUpsideDownMergeOntoTheRoom) {
+  constexpr double kR = 2.0;
+  // Range from (lx, ly) along the robot-frame bearing b to the circle.
+  auto circle = [](double lx, double ly, double b) {
+    const double cd = lx * std::cos(b) + ly * std::sin(b);
+    return -cd + std::sqrt(cd * cd - (lx * lx + ly * ly) + kR * kR);
+  };
+  auto scan = [](double t, const std::string& frame, const std::vector<float>& ranges) {
+    CdrWriter w;
+    w.header(t, frame);
+    const float inc = static_cast<float>(kPi / 180);
+    for (float v : {static_cast<float>(-kPi / 2), static_cast<float>(kPi / 2), inc, 0.0f, 0.1f, 0.05f, 20.0f})
+      w.put<float>(v);
+    w.put<std::uint32_t>(static_cast<std::uint32_t>(ranges.size()));
+    for (float r : ranges) w.put<float>(r);
+    w.put<std::uint32_t>(0);
+    return w.bytes();
+  };
+  test::TempDir tmp;
+  const fs::path db_path = tmp / "two.db3";
+  {
+    TestDb db(db_path);
+    db.topic(1, "/scan_front", "sensor_msgs/msg/LaserScan");
+    db.topic(2, "/scan_rear", "sensor_msgs/msg/LaserScan");
+    db.topic(3, "/tf_static", "tf2_msgs/msg/TFMessage");
+    CdrWriter tf;
+    tf.put<std::uint32_t>(2);
+    tf.header(1.0, "base_link").str("front").pose(0.1, 0.0, 0.2, 0.0, 0.0, 0.0);
+    tf.header(1.0, "base_link").str("rear").pose(-0.1, 0.05, 0.2, kPi, 0.0, kPi);
+    db.message(3, 1.0, tf.bytes());
+    std::vector<float> front, rear;
+    for (int j = 0; j < 181; ++j) {
+      const double a = -kPi / 2 + j * kPi / 180;
+      front.push_back(static_cast<float>(circle(0.1, 0.0, a)));
+      rear.push_back(static_cast<float>(circle(-0.1, 0.05, kPi - a)));  // Rz(pi) Rx(pi): beam a points at pi - a
+    }
+    for (int k = 0; k < 3; ++k) {
+      db.message(1, 2.0 + 0.1 * k, scan(2.0 + 0.1 * k, "front", front));
+      db.message(2, 2.01 + 0.1 * k, scan(2.01 + 0.1 * k, "rear", rear));
+    }
+  }
+  ReaderOptions o;
+  o.lasers = {"/scan_front", "/scan_rear"};
+  auto src = openLog(db_path.string(), o);
+  std::size_t frames = 0;
+  while (auto f = src->next()) {
+    ASSERT_EQ(f->scan.size(), 360u);
+    std::size_t valid = 0;
+    for (std::size_t k = 0; k < f->scan.size(); ++k) {
+      if (!f->scan.isValid(k)) continue;
+      ++valid;
+      EXPECT_NEAR(f->scan.ranges()[k], kR, 1e-5) << "beam " << k;
+    }
+    EXPECT_GT(valid, 340u);  // one laser alone fills at most 181 beams
+    ++frames;
+  }
+  EXPECT_EQ(frames, 3u);
+  EXPECT_THAT(src->notes().scan_source, HasSubstr("upside down"));
+  EXPECT_EQ(src->notes().lasers.size(), 2u);
+}
+
 // ---- CDR decoder ----
 
 TEST(RosMessages, EveryTruncationOfACdrMessageIsAnError) {

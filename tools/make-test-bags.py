@@ -30,6 +30,13 @@ Fixtures:
   stamps 50.02 + 0.1 k with ranges 1 + 0.01 k + 0.1 j (j = 0..7). Written in a shuffled order
   (fixed seed), so time order must come from the index across chunks. (python3-rosbag makes one
   connection per topic; several on one topic are tested in test_rosbag1_container.cpp.)
+- two_lasers.bag: a front and a rear laser (180 degrees each, 181 beams from -pi/2 in steps of
+  pi/180, range_min 0.05, range_max 20) in a round room of radius 3 m centred on the world origin,
+  the robot driving along +x at 1 m/s (x = t - 10, y = 0, heading 0). /tf_static: base_link ->
+  laser_front (x 0.2) and base_link -> laser_rear (x -0.2, y 0.05, yaw pi). /scan_front at stamps
+  10.0 + 0.1 k, /scan_rear at 10.03 + 0.1 k (k = 0..4), each with the exact ranges to the circle from
+  the laser's pose at its stamp; /odom every 0.05 s from 9.9 to 10.6 s.
+- two_lasers_no_tf.bag: the same without /tf_static.
 """
 
 import math
@@ -186,6 +193,36 @@ def many_chunks(path):
             write(bag, topic, typ, data, t)
 
 
+def circle_ranges(lx, ly, heading):
+    """Ranges of a 181-beam half-circle laser at (lx, ly) facing `heading` to the circle of radius 3."""
+    out = []
+    for j in range(181):
+        a = heading - math.pi / 2 + j * math.pi / 180
+        dx, dy = math.cos(a), math.sin(a)
+        cd = lx * dx + ly * dy
+        out.append(-cd + math.sqrt(cd * cd - (lx * lx + ly * ly) + 9.0))
+    return out
+
+
+def two_lasers(path, with_tf):
+    with rosbag.Bag(path, "w") as bag:
+        if with_tf:
+            write(bag, "/tf_static", "tf2_msgs/TFMessage",
+                  tf_message([(stamp_of(9.0), "base_link", "laser_front", 0.2, 0.0, 0.0, 0.0),
+                              (stamp_of(9.0), "base_link", "laser_rear", -0.2, 0.05, 0.0, math.pi)]), 9.0)
+        for i in range(15):
+            t = 9.9 + 0.05 * i
+            write(bag, "/odom", "nav_msgs/Odometry", odometry(i, stamp_of(t), t - 10.0, 0.0, 0.0), t)
+        for k in range(5):
+            for topic, frame, t, mx, my, yaw in (("/scan_front", "laser_front", 10.0 + 0.1 * k, 0.2, 0.0, 0.0),
+                                                 ("/scan_rear", "laser_rear", 10.03 + 0.1 * k, -0.2, 0.05, math.pi)):
+                m = header(k, stamp_of(t), frame)
+                m += struct.pack("<7f", -math.pi / 2, math.pi / 2, math.pi / 180, 0.0, 0.1, 0.05, 20.0)
+                rs = circle_ranges(t - 10.0 + mx, my, yaw)
+                m += struct.pack("<I", len(rs)) + struct.pack(f"<{len(rs)}f", *rs) + struct.pack("<I", 0)
+                write(bag, topic, "sensor_msgs/LaserScan", m, t)
+
+
 if __name__ == "__main__":
     import sys
     out = sys.argv[1] if len(sys.argv) > 1 else "tests/data"
@@ -195,3 +232,5 @@ if __name__ == "__main__":
     corrupt_scan(os.path.join(out, "corrupt_scan.bag"))
     many_chunks(os.path.join(out, "many_chunks.bag"))
     flipped(os.path.join(out, "flipped.bag"))
+    two_lasers(os.path.join(out, "two_lasers.bag"), True)
+    two_lasers(os.path.join(out, "two_lasers_no_tf.bag"), False)

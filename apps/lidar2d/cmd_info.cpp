@@ -131,6 +131,7 @@ nlohmann::json summarise(const InfoArgs& args) {
   j["laser_upside_down"] = upside_down;
   j["laser_tilt_deg"] = deg(tilt);
   j["scan_source"] = notes.scan_source;
+  j["lasers"] = notes.lasers;
   j["odometry_source"] = notes.odom_source;
   j["truth_source"] = notes.truth_source;
   nlohmann::json warnings = notes.warnings;
@@ -155,6 +156,11 @@ void printText(const nlohmann::json& j) {
   if (!j["container"].get<std::string>().empty()) o << ": " << j["container"].get<std::string>();
   o << ")\n";
   o << "scans:       " << j["scans"] << " from " << j["scan_source"].get<std::string>() << "\n";
+  if (!j["lasers"].empty()) {
+    std::string lasers;
+    for (const auto& l : j["lasers"]) lasers += (lasers.empty() ? "" : ", ") + l.get<std::string>();
+    o << "lasers:      " << lasers << "\n";
+  }
   o << "beams:       " << j["beams"];
   if (j["beams_min"] != j["beams_max"]) o << " (varies " << j["beams_min"] << ".." << j["beams_max"] << ")";
   o << ", field of view " << fmtDouble(j["fov_deg"].get<double>(), 2) << " deg ("

@@ -11,7 +11,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -22,10 +21,10 @@
 #include <numeric>
 #include <optional>
 #include <string>
-#include <system_error>
 #include <vector>
 
 #include "commands.hpp"
+#include "map_input.hpp"
 #include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/localization_score.hpp"
@@ -43,67 +42,14 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 
 double seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
 
-// A map given as a bare image (PGM/PNG without YAML): its resolution and origin from the command line.
-struct BareMap {
-  std::optional<double> resolution;
-  std::optional<SE2> origin;
-};
-
 struct DbArgs {
   std::string map;
-  BareMap bare;
+  BareMapOptions bare;
   std::string output;
   localization::DatabaseOptions options;
   double fov_deg = 360.0;
   bool quiet = false;
 };
-
-// MAP as a map_server YAML, or as a bare image with --resolution (and --origin). The options are
-// a usage error (exit 2) where they do not apply or are missing.
-io::MapFile readMapChecked(const std::string& path, const BareMap& bare) {
-  if (!io::isMapImage(path)) {
-    if (bare.resolution || bare.origin)
-      throw CLI::ValidationError("--resolution/--origin", "apply to a bare map image; " + path + " states its own in its YAML");
-    return io::readMap(path);
-  }
-  if (!bare.resolution)
-    throw CLI::ValidationError("--resolution", path + " is a bare image: give its cell size, --resolution M (and --origin X,Y,YAW)");
-  io::MapYaml y;
-  y.resolution = *bare.resolution;
-  y.origin = bare.origin.value_or(SE2());
-  return io::readMapImage(path, y);
-}
-
-// --resolution and --origin of a bare map image.
-void addBareMapOptions(CLI::App* sub, BareMap& bare) {
-  sub->add_option_function<double>(
-         "--resolution", [&bare](double r) { bare.resolution = r; },
-         "MAP is a bare PGM/PNG image (no YAML): its cell size [m] (required then; a YAML states its own)")
-      ->check(positiveNumber());
-  sub->add_option_function<std::string>(
-         "--origin",
-         [&bare](const std::string& v) {
-           // Three comma-separated finite numbers, as the YAML's origin: x, y [m], yaw [rad].
-           std::vector<double> xs;
-           std::size_t start = 0;
-           while (start <= v.size()) {
-             const std::size_t end = std::min(v.find(',', start), v.size());
-             const std::string field = v.substr(start, end - start);
-             double x = 0.0;
-             const auto [ptr, ec] = std::from_chars(field.data(), field.data() + field.size(), x);
-             if (field.empty() || ec != std::errc() || ptr != field.data() + field.size() || !std::isfinite(x))
-               throw CLI::ValidationError("--origin", "'" + field + "' is not a finite number (expected X,Y,YAW)");
-             xs.push_back(x);
-             start = end + 1;
-           }
-           if (xs.size() != 3)
-             throw CLI::ValidationError("--origin", "expected 3 comma-separated values X,Y,YAW, got " + std::to_string(xs.size()));
-           bare.origin = SE2(xs[0], xs[1], xs[2]);
-         },
-         "bare map image: world pose of its lower-left pixel's corner, x,y [m],yaw [rad], as a map_server YAML's "
-         "origin (default 0,0,0)")
-      ->type_name("X,Y,YAW");
-}
 
 // Builds the database of `map`, with its progress on a terminal unless `quiet` (a large map's
 // positions take minutes); errors name `map_path`.
@@ -139,7 +85,7 @@ enum class Scans { kAll, kEven, kOdd };
 
 struct LocArgs {
   std::string map;
-  BareMap bare;
+  BareMapOptions bare;
   std::size_t candidates = 0;
   std::string log;
   std::string db;
@@ -289,7 +235,7 @@ void addLocalizeCommands(CLI::App& app) {
                                  "Build the global localizer's descriptor database of a map_server map (versioned "
                                  "binary file, tied to that map)");
   idx->add_option("MAP", d->map, "map: a map_server YAML, or a bare PGM/PNG image with --resolution")->required();
-  addBareMapOptions(idx, d->bare);
+  addBareMapOptions(idx, d->bare, "MAP");
   idx->add_option("-o,--output", d->output, "database file to write")->required();
   addDbOptions(idx, d->options, &d->fov_deg);
   idx->add_flag("-q,--quiet", d->quiet, "no summary on stderr");
@@ -301,7 +247,7 @@ void addLocalizeCommands(CLI::App& app) {
       "Global pose of every scan of LOG in a known map, each on its own (no odometry); writes 't x y theta score' per "
       "scan, 't nan nan nan 0' when it declines");
   sub->add_option("MAP", a->map, "map: a map_server YAML, or a bare PGM/PNG image with --resolution")->required();
-  addBareMapOptions(sub, a->bare);
+  addBareMapOptions(sub, a->bare, "MAP");
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->output, "output file, one line per scan")->required();
   sub->add_option("--db", a->db, "database from 'lidar2d localize-index' (default: built in memory)");

@@ -19,6 +19,7 @@
 #include "lidar2d/mapping/export.hpp"
 #include "lidar2d/mapping/map_builder.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
+#include "map_input.hpp"
 #include "map_output.hpp"
 #include "progress.hpp"
 
@@ -30,6 +31,8 @@ struct MapArgs {
   std::string prefix;
   std::string poses_file;
   std::string prior;
+  BareMapOptions prior_bare{
+      .resolution_flag = "--prior-resolution", .origin_flag = "--prior-origin", .resolution = {}, .origin = {}};
   mapping::MapModel model = mapping::MapModel::kLogOdds;
   mapping::PoseSource pose_source = mapping::PoseSource::kAuto;
   mapping::MapOptions options;
@@ -38,26 +41,47 @@ struct MapArgs {
   io::ReaderOptions reader;
 };
 
-OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map, std::size_t& overridden) {
-  OccupancyImage out = map;
-  const std::string ext = std::filesystem::path(path).extension().string();
+// The prior layer, read before any mapping so that a bad mask fails before the work: a map aligned
+// by world coordinates (a map_server YAML, or a bare image with --prior-resolution), or the cells of
+// a bare image of exactly the output map's size (black = occupied, white = free, any other grey = no
+// override: the PNG/PGM that `lidar2d map` wrote, painted over, works directly).
+struct Prior {
+  std::optional<OccupancyImage> aligned;
+  std::vector<std::int8_t> cells;
+  int width = 0, height = 0;
+};
+
+Prior readPrior(const std::string& path, const BareMapOptions& bare) {
+  Prior p;
   try {
-    if (ext == ".yaml" || ext == ".yml") {
-      overridden = mapping::applyPrior(out, io::readMap(path).map);
-      return out;
+    if (!io::isMapImage(path) || bare.given()) {
+      p.aligned = readMapChecked(path, bare).map;
+      return p;
     }
-    // A bare image of exactly the exported map's size: black = occupied, white = free, any other
-    // grey = no override (the PNG/PGM that `lidar2d map` wrote, painted over, works directly).
     const io::GreyImage img = io::readGreyImage(path, "prior");
-    std::vector<std::int8_t> cells(img.value.size());
+    p.cells.resize(img.value.size());
+    p.width = img.width;
+    p.height = img.height;
     const auto w = static_cast<std::size_t>(img.width);
     for (int r = 0; r < img.height; ++r)
       for (int c = 0; c < img.width; ++c) {
         const std::uint8_t v = img.value[static_cast<std::size_t>(img.height - 1 - r) * w + static_cast<std::size_t>(c)];
-        cells[static_cast<std::size_t>(r) * w + static_cast<std::size_t>(c)] =
+        p.cells[static_cast<std::size_t>(r) * w + static_cast<std::size_t>(c)] =
             v < 50 ? OccupancyImage::kOccupied : (v > 250 ? OccupancyImage::kFree : OccupancyImage::kUnknown);
       }
-    overridden = mapping::applyPriorSameSize(out, cells, img.width, img.height);
+    return p;
+  } catch (const Error& e) {
+    if (!e.where().file.empty()) throw;
+    throw Error(e.kind(), e.message(), ErrorLocation(path, 0, e.where().field));
+  }
+}
+
+OccupancyImage overrideWithPrior(const Prior& prior, const std::string& path, const OccupancyImage& map,
+                          std::size_t& overridden) {
+  OccupancyImage out = map;
+  try {
+    overridden = prior.aligned ? mapping::applyPrior(out, *prior.aligned)
+                               : mapping::applyPriorSameSize(out, prior.cells, prior.width, prior.height);
     return out;
   } catch (const Error& e) {
     if (!e.where().file.empty()) throw;
@@ -68,6 +92,12 @@ OccupancyImage readPriorImage(const std::string& path, const OccupancyImage& map
 void run(const MapArgs& a) {
   const CreatedFolders out_folders = prepareOutputFile(a.prefix + ".yaml");
   const auto t0 = std::chrono::steady_clock::now();
+  std::optional<Prior> prior;
+  if (!a.prior.empty()) {
+    prior = readPrior(a.prior, a.prior_bare);
+  } else if (a.prior_bare.given()) {
+    throw CLI::ValidationError("--prior-resolution/--prior-origin", "apply to a bare --prior image; no --prior given");
+  }
   auto map = mapping::makeMap(a.model, a.options);
   // With a range table given file by file, --poses is the table's poses file (its truth), read by
   // the log reader, not a trajectory.
@@ -84,7 +114,7 @@ void run(const MapArgs& a) {
   if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
   OccupancyImage image = mapping::toOccupancyImage(*map);
   std::size_t overridden = 0;
-  if (!a.prior.empty()) image = readPriorImage(a.prior, image, overridden);
+  if (prior) image = overrideWithPrior(*prior, a.prior, image, overridden);
   std::string comment = fmt::format("lidar2d map: {} model, {} scans of {}", mapping::toString(a.model), scans,
                                     std::filesystem::path(a.log).filename().string());
   if (!a.prior.empty())
@@ -152,8 +182,10 @@ void addMapCommand(CLI::App& app) {
                                  "without --poses: auto (truth if present, else odometry), truth or odometry")
       ->default_str("auto");
   sub->add_option("--prior", a->prior,
-                  "prior layer overriding the sensor: a map_server YAML (aligned by world coordinates) or an image of the "
-                  "output's size; black = occupied, white = free, grey = no override");
+                  "prior layer overriding the sensor: a map_server YAML or a bare PGM/PNG image with --prior-resolution "
+                  "(aligned by world coordinates), or an image of the output's size; black = occupied, white = free, "
+                  "grey = no override");
+  addBareMapOptions(sub, a->prior_bare, "--prior");
   sub->add_flag("-q,--quiet", a->quiet, "print nothing on success");
   addReaderOptions(sub, a->reader);
   sub->callback([a] { run(*a); });

@@ -366,24 +366,24 @@ void addPerturbCommand(CLI::App& app) {
                           ->type_name("constant|realistic")
                           ->capture_default_str());
   odom_opts.push_back(sub->add_option("--odom-trans-noise-per-m", a->trans_noise_per_m,
-                                      "T: extra std of the x and y error per metre of the step [m/m] (realistic: 0.03)")
+                                      "T: extra std of the x and y error per metre of the step [m/m] (default: constant 0, realistic 0.03)")
                           ->check(nonNegativeNumber()));
   odom_opts.push_back(sub->add_option("--odom-rot-noise-per-rad", a->rot_noise_per_rad,
-                                      "R: extra heading std per radian the step turns [rad/rad] (realistic: 0.03)")
+                                      "R: extra heading std per radian the step turns [rad/rad] (default: constant 0, realistic 0.03)")
                           ->check(nonNegativeNumber()));
   odom_opts.push_back(sub->add_option("--odom-rot-noise-deg-per-m", a->rot_noise_deg_per_m,
-                                      "M: extra heading std per metre of the step [deg/m] (realistic: 1)")
+                                      "M: extra heading std per metre of the step [deg/m] (default: constant 0, realistic 1)")
                           ->check(nonNegativeNumber()));
   odom_opts.push_back(sub->add_option("--odom-scale-error", a->scale_error,
-                                      "s: systematic relative distance error, > -1 (0.02: distances read 2 % long; "
-                                      "realistic: 0.02)")
+                                      "s: systematic relative distance error, > -1 (0.02: distances read 2 % long; default: constant 0, "
+                                      "realistic 0.02)")
                           ->check(check("SCALE", [](const std::string& v) -> std::string {
                             const auto x = parseNumber(v);
                             return !x || *x > -1 ? std::string()
                                                  : fmt::format("must be a finite number > -1, got {}", v);
                           })));
   odom_opts.push_back(sub->add_option("--odom-drift-deg-per-m", a->drift_deg_per_m,
-                                      "h: systematic heading drift per metre of the step [deg/m], either sign"));
+                                      "h: systematic heading drift per metre of the step [deg/m], either sign (default 0)"));
   auto* keep = sub->add_flag("--keep-odometry", a->keep_odometry,
                              "keep the log's own odometry (no noise; the log needs no truth): only drop and retime "
                              "scans");
@@ -404,12 +404,15 @@ void addPerturbCommand(CLI::App& app) {
       }));
   sub->add_option("--time-jitter", a->time_jitter_s,
                   "SIGMA_S: add Gaussian noise of this std to every kept scan's stamp [s] (seeded)")
-      ->check(nonNegativeNumber());
+      ->check(nonNegativeNumber())
+      ->capture_default_str();
   sub->add_option("--time-bursts", a->time_bursts,
                   "N: each group of N consecutive kept scans carries the stamp of the group's last scan")
-      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 40));
+      ->check(CLI::Range(std::size_t{1}, std::size_t{1} << 40))
+      ->capture_default_str();
   sub->add_option("--synthesize-times", a->synthesize_hz,
-                  "HZ: replace the stamp of input scan i by t0 + i / HZ (logs whose stamps repeat or are missing)")
+                  "HZ: replace the stamp of input scan i by t0 + i / HZ (logs whose stamps repeat or are missing; default: "
+                  "the log's stamps)")
       ->check(positiveNumber());
   sub->add_option("--seed", a->seed, "random seed of the odometry noise and the time jitter (std::mt19937_64)")
       ->capture_default_str();

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "map_input.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/carmen_writer.hpp"
 #include "lidar2d/io/map_file.hpp"
@@ -57,6 +58,7 @@ CLI::Validator numbers(const std::string& name, int count, bool allow_negative) 
 struct SimulateArgs {
   std::string world;
   std::string map;
+  BareMapOptions bare;
   std::string path;
   std::string output;
   std::uint64_t seed = 1;
@@ -81,6 +83,8 @@ void run(const SimulateArgs& a) {
   const CreatedFolders out_folders = prepareOutputFile(a.output);
   if (a.world.empty() == a.map.empty())
     throw CLI::ValidationError("simulate", "give exactly one of --world NAME or --map MAP.yaml");
+  if (a.map.empty() && a.bare.given())
+    throw CLI::ValidationError("--resolution/--origin", "apply to a bare --map image, not to --world");
   sim::SimulatorOptions o;
   o.seed = a.seed;
   o.laser.beams = a.beams;
@@ -114,7 +118,7 @@ void run(const SimulateArgs& a) {
     world_desc = fmt::format("world={}", a.world);
     if (a.path.empty()) truth = sim::samplePath(s.waypoints, po, a.scans);
   } else {
-    const io::MapFile mf = io::readMap(a.map);
+    const io::MapFile mf = readMapChecked(a.map, a.bare);
     world = sim::worldFromMap(mf.map, 65, a.map);
     world_desc = fmt::format("map={}", a.map);
     if (a.path.empty()) {
@@ -173,8 +177,9 @@ void addSimulateCommand(CLI::App& app) {
   for (const auto& w : sim::listWorlds()) world_words.append(world_words.empty() ? "" : "|").append(w);
   world->type_name(world_words);
   auto* map = sub->add_option("--map", a->map,
-                              "map_server YAML: occupied cells become walls; the route is a random walk through free "
-                              "space (default 500 scans)");
+                              "map_server YAML, or a bare PGM/PNG image with --resolution (and --origin): occupied cells "
+                              "become walls; the route is a random walk through free space (default 500 scans)");
+  addBareMapOptions(sub, a->bare, "--map");
   world->excludes(map);
   sub->add_option("-o,--output", a->output, "output CARMEN log")->required();
   sub->add_option("--seed", a->seed, "random seed (noise and random walks)")->capture_default_str();

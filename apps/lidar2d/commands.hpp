@@ -75,5 +75,10 @@ CLI::Option* addChoice(CLI::App* sub, const std::string& flags, V& value,
 /// Adds a finiteness check to every floating-point option of `app` and its subcommands, recursively
 /// (CLI11 reads "nan" and "inf" as numbers). Call after adding the subcommands.
 void requireFiniteNumbers(CLI::App& app);
+/// Rewrites the value names --help shows for every option of `app` and its subcommands, recursively,
+/// in words instead of CLI11's parser types and check names: NUMBER, INTEGER, PATH or NAME (TEXT,
+/// by the help text), with their bounds ("NUMBER > 0", "NUMBER in 0..45"); names already set
+/// ("X,Y,YAW", "p2p|p2l") stay. Call after requireFiniteNumbers.
+void showValuesInWords(CLI::App& app);
 
 }  // namespace lidar2d::cli

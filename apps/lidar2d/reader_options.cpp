@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <memory>
 #include <numbers>
@@ -18,9 +19,10 @@ namespace {
 // holding poses.txt, angles.txt and ranges.txt is simply given as LOG). With --ranges, LOG is no
 // longer required, and must not be given. A command with a --poses
 // of its own (map: a trajectory) takes it as the table's poses file when --ranges is given.
-void addRangeTableOptions(CLI::App* sub, io::ReaderOptions& options) {
+// Returns what to run once the command line is parsed (nothing for commands without a LOG).
+std::function<void()> addRangeTableOptions(CLI::App* sub, io::ReaderOptions& options) {
   CLI::Option* log = sub->get_option_no_throw("LOG");
-  if (!log) return;  // commands without a LOG (eval's EST) take logs by path only
+  if (!log) return {};  // commands without a LOG (eval's EST) take logs by path only
   auto files = std::make_shared<io::RangeTableFiles>();
   // Triggered as soon as it is parsed, before CLI11 checks that LOG is given (as slam's
   // --dump-config does).
@@ -37,7 +39,7 @@ void addRangeTableOptions(CLI::App* sub, io::ReaderOptions& options) {
   if (!poses) poses = sub->add_option("--poses", files->poses, "range table: one pose x,y,theta [m, m, rad] per scan");
   ranges->needs(angles)->needs(poses);
   angles->needs(ranges);
-  sub->parse_complete_callback([files, ranges, poses, log, &options] {
+  return [files, ranges, poses, log, &options] {
     if (ranges->count() == 0) return;
     if (log->count() > 0)
       throw CLI::ValidationError("LOG", "give a log or the range table's --ranges, --angles and --poses, not both");
@@ -47,7 +49,7 @@ void addRangeTableOptions(CLI::App* sub, io::ReaderOptions& options) {
     // an option's variable from its results; run_callback does so now, after parsing.)
     log->add_result(files->ranges);
     log->run_callback();
-  });
+  };
 }
 
 }  // namespace
@@ -90,23 +92,81 @@ LaserMount parseLaserMount(const std::string& v) {
 
 }  // namespace
 
+namespace {
+
+// The lasers named on the command line (--scan-topic, --carmen-laser: repeated or comma lists) and
+// the mountings (--laser-mount, repeated), resolved into ReaderOptions once parsing is complete:
+// one laser -> scan_topic / carmen_laser and laser_mount; two or more -> lasers and laser_mounts.
+struct LaserChoice {
+  std::vector<std::string> topics, carmen;
+  std::vector<LaserMount> mounts;
+
+  void resolve(io::ReaderOptions& options) const {
+    if (topics.size() >= 2 && carmen.size() >= 2)
+      throw CLI::ValidationError("--scan-topic/--carmen-laser",
+                                 "several lasers are listed for both ROS bags and CARMEN logs; list them for one");
+    const std::vector<std::string>& lasers = topics.size() >= 2 ? topics : carmen;
+    if (lasers.size() >= 2) {
+      if (!mounts.empty() && mounts.size() != lasers.size())
+        throw CLI::ValidationError("--laser-mount", fmt::format("{} given for {} lasers: give one per laser, in the "
+                                                                "lasers' order, or none to take them from the log",
+                                                                mounts.size(), lasers.size()));
+      options.lasers = lasers;
+      options.laser_mounts = mounts;
+      return;
+    }
+    if (!topics.empty()) options.scan_topic = topics.front();
+    if (!carmen.empty()) options.carmen_laser = carmen.front();
+    if (mounts.size() > 1)
+      throw CLI::ValidationError("--laser-mount",
+                                 fmt::format("{} given for one laser (several lasers: list them with --scan-topic "
+                                             "or --carmen-laser)",
+                                             mounts.size()));
+    if (!mounts.empty()) options.laser_mount = mounts.front();
+  }
+};
+
+}  // namespace
+
 void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
-  sub->add_option("--scan-topic", options.scan_topic, "ROS bags: LaserScan topic (default: auto-detect)");
+  auto lasers = std::make_shared<LaserChoice>();
+  sub->add_option("--scan-topic", lasers->topics,
+                  "ROS bags: LaserScan topic (default: the one with the most messages); two or more (a comma list, "
+                  "or the option repeated) are merged into one scan per frame, the first one's scans setting the "
+                  "times (docs/file-formats.md, two or more lasers)")
+      ->delimiter(',')
+      ->allow_extra_args(false)
+      ->type_name("TOPIC[,TOPIC...]");
   sub->add_option("--odom-topic", options.odom_topic,
-                  "ROS bags: Odometry topic (default: auto-detect; 'none' ignores odometry)");
-  sub->add_option("--carmen-laser", options.carmen_laser,
-                  "CARMEN logs: laser message to read, e.g. FLASER, RLASER, ROBOTLASER1 (default: first found)");
+                  "ROS bags: Odometry topic (default: auto-detect; 'none' ignores odometry)")
+      ->type_name("TOPIC|none");
+  sub->add_option("--carmen-laser", lasers->carmen,
+                  "CARMEN logs: laser message to read (default: the first found); FLASER,RLASER merges the front and "
+                  "rear lasers")
+      ->delimiter(',')
+      ->allow_extra_args(false)
+      ->type_name("FLASER|RLASER|ROBOTLASER1|ROBOTLASER2|RAWLASER1..4[,...]");
+  sub->add_option("--laser-sync-tolerance", options.laser_sync_tolerance_s,
+                  "two or more lasers: largest time difference between the first laser's scan and another's merged "
+                  "into it [s]; scans without such a partner are left out")
+      ->check(positiveNumber())
+      ->default_str("0.05");
   addChoice<io::CarmenPoses>(
       sub, "--carmen-poses", options.carmen_poses,
       {{"auto", io::CarmenPoses::kAuto}, {"truth", io::CarmenPoses::kTruth}, {"odometry", io::CarmenPoses::kOdometry}},
       "CARMEN logs: meaning of the laser messages' poses: auto, truth or odometry")
       ->default_str("auto");
-  sub->add_option_function<std::string>(
+  sub->add_option_function<std::vector<std::string>>(
          "--laser-mount",
-         [&options](const std::string& v) { options.laser_mount = parseLaserMount(v); },
+         [lasers](const std::vector<std::string>& v) {
+           lasers->mounts.clear();
+           for (const std::string& m : v) lasers->mounts.push_back(parseLaserMount(m));
+         },
          "the laser's mounting on the robot, replacing the log's (tf, CARMEN offset): X,Y [m],THETA [deg], "
          "optionally followed by ',flipped' for a laser mounted upside down (its scans mirrored), or "
-         "X,Y,Z [m],ROLL,PITCH,YAW [deg] (docs/file-formats.md, laser mounting)")
+         "X,Y,Z [m],ROLL,PITCH,YAW [deg] (docs/file-formats.md, laser mounting); with several lasers, repeated once "
+         "per laser in their order (default: from the log)")
+      ->allow_extra_args(false)
       ->type_name("X,Y,THETA_DEG[,flipped]|X,Y,Z,R,P,Y");
   sub->add_option("--max-tilt", options.max_laser_tilt_deg,
                   "a scan plane tilted from the robot's plane by at most this is taken as level [deg]")
@@ -115,7 +175,11 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
   sub->add_flag("--allow-tilted", options.allow_tilted_laser,
                 "read a laser tilted by more than --max-tilt: its beams are projected onto the floor plane, each "
                 "range shortened by the tilt (default: such a log is refused)");
-  addRangeTableOptions(sub, options);
+  const std::function<void()> range_table = addRangeTableOptions(sub, options);
+  sub->parse_complete_callback([range_table, lasers, &options] {
+    lasers->resolve(options);
+    if (range_table) range_table();
+  });
 }
 
 }  // namespace lidar2d::cli

@@ -237,7 +237,11 @@ class CarmenSource final : public FrameSource {
   const std::string& path() const override { return path_; }
   SourceNotes notes() const override {
     SourceNotes n;
-    if (decision_.type) n.scan_source = std::string(decision_.type->name);
+    if (decision_.type) {
+      n.scan_source = std::string(decision_.type->name);
+      n.lasers.push_back(fmt::format("{} ({} messages)", decision_.type->name, emitted_));
+    }
+    for (const auto& [name, count] : other_lasers_) n.lasers.push_back(fmt::format("{} ({} messages)", name, count));
     n.odom_source = decision_.odom_source;
     n.truth_source = decision_.truth_source;
     if (repeats_ || backwards_)

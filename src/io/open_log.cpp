@@ -146,6 +146,16 @@ void mountFrame(Frame& frame, const LaserMount& mount) {
 }  // namespace internal
 
 std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOptions& options) {
+  if (options.lasers.size() >= 2)
+    return internal::openMergedLasers(path, options, [&path](const ReaderOptions& o) { return openLog(path, o); });
+  if (options.lasers.size() == 1) {
+    ReaderOptions o = options;
+    o.scan_topic = o.carmen_laser = o.lasers.front();
+    o.lasers.clear();
+    if (o.laser_mounts.size() == 1) o.laser_mount = o.laser_mounts.front();
+    o.laser_mounts.clear();
+    return openLog(path, o);
+  }
   if (!(options.max_laser_tilt_deg >= 0.0 && options.max_laser_tilt_deg <= 45.0))
     throw invalidArgument("the tilt tolerance must be within [0, 45] deg", {"ReaderOptions", 0, "max_laser_tilt_deg"});
   std::vector<std::string> mount_warnings;

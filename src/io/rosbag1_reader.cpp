@@ -98,7 +98,7 @@ class Ros1Source final : public RosMessageSource {
 
   void setUp(const ReaderOptions& options) {
     const std::vector<Topic> topics = listTopics();
-    const auto pick = pickScanAndOdometry(topics, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
+    const auto pick = pickScanAndOdometry(topics, kLaserScanType, kOdometryType, options, path_, notes_.warnings, notes_.lasers);
     const Topic& scan = *pick.scan;
     checkMd5(scan, kLaserScanMd5);
     scan_topic_ = scan.info.name;

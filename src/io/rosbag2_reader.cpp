@@ -267,7 +267,7 @@ class Ros2Source final : public RosMessageSource {
   std::size_t indexOf(const Topic& t) const { return static_cast<std::size_t>(&t - topics_.data()); }
 
   void setUp(const ReaderOptions& options) {
-    const auto pick = pickScanAndOdometry(topics_, kLaserScanType, kOdometryType, options, path_, notes_.warnings);
+    const auto pick = pickScanAndOdometry(topics_, kLaserScanType, kOdometryType, options, path_, notes_.warnings, notes_.lasers);
     checkCdr(*pick.scan);
     scan_topic_ = indexOf(*pick.scan);
     size_hint_ = static_cast<std::size_t>(pick.scan->info.count);

@@ -77,6 +77,24 @@ struct ReaderOptions {
   bool allow_tilted_laser = false;
   /// A range table given file by file; when set, `openLog` reads it whatever its path argument.
   std::optional<RangeTableFiles> range_table;
+
+  /// Two or more lasers on one robot, merged into one scan per frame in the robot frame
+  /// (io/laser_merge.hpp; docs/file-formats.md, "Two or more lasers"): their LaserScan topics (ROS
+  /// bags) or CARMEN laser messages ("FLASER", "RLASER"), replacing scan_topic / carmen_laser. The
+  /// first laser's scans give the frames (time, odometry, truth); each other laser contributes its
+  /// scan nearest in time, within laser_sync_tolerance_s. Empty or one name: a single laser.
+  std::vector<std::string> lasers;
+  /// Empty, or one mounting per entry of `lasers` replacing the log's (as laser_mount does for one
+  /// laser). Without them each laser's mounting must come from the log (tf; CARMEN's conventions).
+  std::vector<LaserMount> laser_mounts;
+  /// Largest time difference between the first laser's scan and another laser's scan merged into
+  /// it [s], > 0; a scan of the first laser with no partner that close is left out (counted in the
+  /// notes' warnings).
+  double laser_sync_tolerance_s = 0.05;
+  /// A ROS bag whose tf does not connect the robot to the laser is an error (kBadInput) instead of
+  /// a warning with the identity mounting (set for each laser of a merge; a wrong mounting would
+  /// misplace one laser's points against the other's).
+  bool require_laser_mount = false;
 };
 
 /// The farthest a laser may be mounted from the robot's frame origin: `ReaderOptions::laser_mount`
@@ -94,6 +112,9 @@ struct SourceNotes {
   std::string truth_source;  ///< e.g. "FLASER pose (corrected log)", "TRUEPOS", or empty if none
   std::string container;     ///< how the log is stored when there is a choice, e.g. "mcap storage, 2 files"
   std::vector<std::string> warnings;  ///< e.g. "timestamps repeat (12 times)"
+  /// Every laser the log holds, with its message count, e.g. "/scan_front (120 messages)" (ROS bags:
+  /// the LaserScan topics; CARMEN logs: the laser message types, complete once the log is read).
+  std::vector<std::string> lasers;
 };
 
 /// A stream of frames in file order. Memory use does not grow with the log's length.

@@ -1,6 +1,7 @@
 #pragma once
 // Factories of the concrete readers; only open_log.cpp and the tests call them directly.
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -18,6 +19,14 @@ std::unique_ptr<FrameSource> openRosbag2(const std::string& path, const ReaderOp
 std::unique_ptr<FrameSource> openRangeTable(const RangeTableFiles& files);
 /// The three files of a range table folder (poses.txt, angles.txt, ranges.txt).
 RangeTableFiles rangeTableFolder(const std::string& dir);
+
+/// Two or more lasers (options.lasers) merged into one scan per frame (io/laser_merge.hpp): each laser
+/// read by `open` with the options of that laser alone (scan_topic and carmen_laser its name, its
+/// laser_mounts entry as laser_mount, require_laser_mount set). Throws lidar2d::Error naming `path`
+/// for a laser listed twice or a range table, kInvalidArgument for a tolerance that is not > 0, a
+/// count of mountings other than the lasers', or a single laser_mount; `open`'s errors (an unknown topic) pass through.
+std::unique_ptr<FrameSource> openMergedLasers(const std::string& path, const ReaderOptions& options,
+                                              const std::function<std::unique_ptr<FrameSource>(const ReaderOptions&)>& open);
 
 /// The mounting frames get from `mount` (described as `what`, e.g. "base_link -> laser from
 /// /tf_static") under ReaderOptions' tilt rule: level within `options.max_laser_tilt_deg` (tilt

@@ -156,6 +156,13 @@ RosMount findRosMount(const RosTfTree& tree, const std::vector<std::string>& rob
 
 LaserMount rosFrameMount(const RosMount& mount, const ReaderOptions& options, const std::string& path,
                          std::vector<std::string>& warnings) {
+  if (!options.laser_mount && !mount.found && options.require_laser_mount)
+  {
+    std::string why = warnings.empty() ? std::string("no laser mounting in tf") : warnings.back();
+    if (const auto k = why.find(": laser mounting unknown"); k != std::string::npos) why.resize(k);
+    throw badInput(fmt::format("{}; merging lasers needs each one's mounting: give --laser-mount once per laser", why),
+                   {path, 0, "tf"});
+  }
   if (options.laser_mount || !mount.found) return LaserMount();
   return applyTiltRule(mount.mount, options, {path, 0, "tf " + mount.description}, mount.description, warnings);
 }

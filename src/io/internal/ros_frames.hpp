@@ -62,7 +62,8 @@ RosTopicChoice chooseScanAndOdometry(const std::vector<RosTopicInfo>& topics, co
 
 /// `chooseScanAndOdometry` over a reader's own topic records (each with an `info` member): the
 /// chosen scan topic's record and the odometry topic's, or nullptr when there is none. The records
-/// must outlive the returned pointers.
+/// must outlive the returned pointers. `lasers` (SourceNotes::lasers) receives every topic of
+/// `scan_type` with its message count.
 template <class Topic>
 struct RosTopicPick {
   const Topic* scan = nullptr;
@@ -71,10 +72,14 @@ struct RosTopicPick {
 template <class Topic>
 RosTopicPick<Topic> pickScanAndOdometry(const std::vector<Topic>& topics, const std::string& scan_type,
                                         const std::string& odom_type, const ReaderOptions& options,
-                                        const std::string& path, std::vector<std::string>& warnings) {
+                                        const std::string& path, std::vector<std::string>& warnings,
+                                        std::vector<std::string>& lasers) {
   std::vector<RosTopicInfo> infos;
   infos.reserve(topics.size());
-  for (const auto& t : topics) infos.push_back(t.info);
+  for (const auto& t : topics) {
+    infos.push_back(t.info);
+    if (t.info.type == scan_type) lasers.push_back(t.info.name + " (" + std::to_string(t.info.count) + " messages)");
+  }
   const RosTopicChoice choice = chooseScanAndOdometry(infos, scan_type, odom_type, options, path, warnings);
   auto find = [&](const std::string& name) {
     for (const auto& t : topics)

@@ -1,0 +1,61 @@
+#include "map_input.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <system_error>
+#include <vector>
+
+#include "commands.hpp"
+
+namespace lidar2d::cli {
+
+io::MapFile readMapChecked(const std::string& path, const BareMapOptions& bare) {
+  if (!io::isMapImage(path)) {
+    if (bare.given())
+      throw CLI::ValidationError(bare.resolution_flag + "/" + bare.origin_flag,
+                                 "apply to a bare map image; " + path + " states its own in its YAML");
+    return io::readMap(path);
+  }
+  if (!bare.resolution)
+    throw CLI::ValidationError(bare.resolution_flag, path + " is a bare image: give its cell size, " +
+                                                         bare.resolution_flag + " M (and " + bare.origin_flag +
+                                                         " X,Y,YAW)");
+  io::MapYaml y;
+  y.resolution = *bare.resolution;
+  y.origin = bare.origin.value_or(SE2());
+  return io::readMapImage(path, y);
+}
+
+void addBareMapOptions(CLI::App* sub, BareMapOptions& bare, const std::string& what) {
+  sub->add_option_function<double>(
+         bare.resolution_flag, [&bare](double r) { bare.resolution = r; },
+         what + " as a bare PGM/PNG image (no YAML): its cell size [m] (required then; a YAML states its own)")
+      ->check(positiveNumber());
+  const std::string flag = bare.origin_flag;
+  sub->add_option_function<std::string>(
+         flag,
+         [&bare, flag](const std::string& v) {
+           // Three comma-separated finite numbers, as the YAML's origin: x, y [m], yaw [rad].
+           std::vector<double> xs;
+           std::size_t start = 0;
+           while (start <= v.size()) {
+             const std::size_t end = std::min(v.find(',', start), v.size());
+             const std::string field = v.substr(start, end - start);
+             double x = 0.0;
+             const auto [ptr, ec] = std::from_chars(field.data(), field.data() + field.size(), x);
+             if (field.empty() || ec != std::errc() || ptr != field.data() + field.size() || !std::isfinite(x))
+               throw CLI::ValidationError(flag, "'" + field + "' is not a finite number (expected X,Y,YAW)");
+             xs.push_back(x);
+             start = end + 1;
+           }
+           if (xs.size() != 3)
+             throw CLI::ValidationError(flag, "expected 3 comma-separated values X,Y,YAW, got " + std::to_string(xs.size()));
+           bare.origin = SE2(xs[0], xs[1], xs[2]);
+         },
+         what + " as a bare image: world pose of its lower-left pixel's corner, x,y [m],yaw [rad], as a map_server "
+                "YAML's origin (default 0,0,0)")
+      ->type_name("X,Y,YAW");
+}
+
+}  // namespace lidar2d::cli

@@ -1,0 +1,35 @@
+#pragma once
+// A map given on the command line: a map_server YAML, or a bare PGM/PNG image (a map drawn or
+// exported by hand) whose resolution and origin the command line states. Shared by every command
+// that reads a map (localize-index, localize, simulate --map, map --prior).
+
+#include <CLI/CLI.hpp>
+#include <optional>
+#include <string>
+
+#include "lidar2d/core/se2.hpp"
+#include "lidar2d/io/map_file.hpp"
+
+namespace lidar2d::cli {
+
+/// The command-line stand-ins for a bare image's YAML, and the names of their options.
+struct BareMapOptions {
+  std::string resolution_flag = "--resolution";
+  std::string origin_flag = "--origin";
+  std::optional<double> resolution;  ///< [m/cell]
+  std::optional<SE2> origin;         ///< lower-left pixel's corner in the world [m, m, rad]
+  /// Whether either option was given.
+  bool given() const { return resolution || origin; }
+};
+
+/// Adds `bare.resolution_flag` and `bare.origin_flag` to `sub`; `what` names the map in their help
+/// ("MAP", "--prior"). `bare` must outlive parsing.
+void addBareMapOptions(CLI::App* sub, BareMapOptions& bare, const std::string& what);
+
+/// The map at `path`: a map_server YAML, or, when the file starts like an image, a bare image read
+/// with `bare`'s resolution and origin (default 0,0,0) as a YAML with map_server's defaults would
+/// read it. A bare image without the resolution, or the options with a YAML, is a usage error
+/// (CLI::ValidationError, exit 2); bad content is lidar2d::Error naming the file and field.
+io::MapFile readMapChecked(const std::string& path, const BareMapOptions& bare);
+
+}  // namespace lidar2d::cli
