@@ -87,6 +87,7 @@ struct LocalizeBenchOptions {
   std::size_t baseline_stride = 20;  ///< branch-and-bound baseline on every n-th odd scan (0: skip)
   std::string save_maps;             ///< folder to write the even-scan maps to (empty: none)
   bool verbose = false;              ///< print every failure on stderr
+  bool extras = true;                ///< also the symmetric world and the ROS2 bag
   localization::DatabaseOptions db;
   localization::LocalizerOptions loc;
 };
