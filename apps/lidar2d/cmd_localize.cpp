@@ -243,6 +243,7 @@ void runLocalize(const LocArgs& a) {
   j["log"] = a.log;
   j["database"] = a.db.empty() ? nlohmann::json("built in memory") : nlohmann::json(a.db);
   j["database_s"] = db_s;
+  if (!std::isnan(loc->database().coverage())) j["database_coverage"] = loc->database().coverage();
   j["database_positions"] = loc->database().positions().size();
   j["database_pairs"] = loc->database().numPairs();
   j["database_mb"] = loc->database().memoryBytes() / 1e6;
@@ -337,8 +338,17 @@ void addLocalizeCommands(CLI::App& app) {
   sub->add_option("--profile-candidates", a->options.profile_candidates,
                   "candidates from the range profiles, for scans with few lines (0: off)")
       ->capture_default_str();
+  sub->add_option("--budget-ms", a->options.budget_ms,
+                  "when no candidate scores, search the whole map by branch and bound until the scan has taken this "
+                  "long [ms] (0: never)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sub->add_option("--regions", a->options.max_regions,
+                  "candidate regions searched by branch and bound over every heading when the descriptors are not "
+                  "confident (0: none)")
+      ->capture_default_str();
   sub->add_flag("--fallback", a->options.fallback_branch_and_bound,
-                "when no candidate scores, search the whole map by branch and bound (slow)");
+                "the whole-map search without the budget (exhaustive; seconds per scan)");
   addDbOptions(sub, a->db_options, nullptr);
   sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
   addReaderOptions(sub, a->reader);

@@ -1,5 +1,5 @@
-// Global localization (issue 6) on the protocol of ../shared/DESIGN.md:
-// - corrected intel and freiburg-079: a log-odds map (5 cm) from the even-numbered scans with truth
+// Global localization (issues 6, 34) on the protocol of ../shared/DESIGN.md:
+// - the seven corrected logs: a log-odds map (5 cm) from the even-numbered scans with truth
 //   poses; every odd-numbered scan localized on its own. Success = within 0.3 m and 5 deg of the
 //   truth; precision = successes among answered scans; decline rate; median/p95 ms per query;
 //   database build time and size. Baseline: exhaustive branch-and-bound correlative search over the
@@ -75,8 +75,8 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     const auto tb = Clock::now();
     localization::Database db = localization::Database::build(map, bo.db);
     const double build_s = sec(tb);
-    const std::string db_desc = fmt::format("{:.2f} s, {:.1f} MB, {} positions, {} pairs", build_s,
-                                            db.memoryBytes() / 1e6, db.positions().size(), db.numPairs());
+    const std::string db_desc = fmt::format("{:.2f} s, {:.1f} MB, {} positions, {:.0f}% coverage", build_s,
+                                            db.memoryBytes() / 1e6, db.positions().size(), 100.0 * db.coverage());
     localization::Localizer loc(map, std::move(db), bo.loc);
     std::size_t n = 0, ok = 0, answered = 0, declined = 0;
     // Failure modes: no verified candidate near the truth; one near it but not ranked first;
@@ -128,7 +128,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
             r.T_world_robot.theta() / kDeg, f.T_world_robot->x(), f.T_world_robot->y(),
             f.T_world_robot->theta() / kDeg, r.num_regions, r.used_fallback ? " whole-map" : "");
     }
-    row(name, "descriptor", n, ok, answered, declined, ms, db_desc);
+    row(name, "cascade", n, ok, answered, declined, ms, db_desc);
     {
       std::string dec;
       for (const auto& [reason, c] : f_declined) dec += fmt::format(" {}: {}", reason, c);

@@ -258,10 +258,10 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     stage_b.push_back({guess, score(sub, guess, sensor_robot) + 1e-3 * pre[c].pre, pre[c].votes});
   }
   std::sort(stage_b.begin(), stage_b.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
-  // Stage C: refine the best against the likelihood field and score them on every point.
+  // Stage C: refine the best against the likelihood field and score them on every point. (The
+  // branch-and-bound stages below add their poses the same way.)
   std::vector<Candidate> cands;
-  for (std::size_t c = 0; c < stage_b.size() && c < o.max_refined; ++c) {
-    const SE2& guess = stage_b[c].guess;
+  auto addRefined = [&](const SE2& guess, double votes) {
     const registration::Result r = registration::matchLikelihoodField(s_->field, pts, guess, s_->lf_options);
     SE2 T = r.T_target_source;
     if (!T.isFinite() || (T.translation() - guess.translation()).norm() > 0.5) T = guess;
@@ -271,8 +271,9 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
       T = guess;
       sc = sc_guess;
     }
-    cands.push_back({T, sc.score(), stage_b[c].votes, sc.fit()});
-  }
+    cands.push_back({T, sc.score(), votes, sc.fit()});
+  };
+  for (std::size_t c = 0; c < stage_b.size() && c < o.max_refined; ++c) addRefined(stage_b[c].guess, stage_b[c].votes);
   res.num_candidates = cands.size();
 
   auto bestOf = [&] {
@@ -281,19 +282,6 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   auto distinct = [&](const SE2& a, const SE2& b) {
     return (a.translation() - b.translation()).norm() > o.distinct_distance_m ||
            std::abs(angleDiff(a.theta(), b.theta())) > o.distinct_angle_rad;
-  };
-  // Refines a pose from a branch-and-bound stage and adds it to the candidates (as stage C does).
-  auto addRefined = [&](const SE2& guess) {
-    const registration::Result r = registration::matchLikelihoodField(s_->field, pts, guess, s_->lf_options);
-    SE2 T = r.T_target_source;
-    if (!T.isFinite() || (T.translation() - guess.translation()).norm() > 0.5) T = guess;
-    ScoreParts sc = scoreParts(*s_, pts, T, sensor_robot);
-    const ScoreParts sc_guess = scoreParts(*s_, pts, guess, sensor_robot);
-    if (sc_guess.score() > sc.score()) {
-      T = guess;
-      sc = sc_guess;
-    }
-    cands.push_back({T, sc.score(), 0.0, sc.fit()});
   };
   // An answer that needs no further search: it scores well and no distinct candidate comes close
   // (a runner-up near the ambiguity ratio may hide a better pose the descriptors missed).
@@ -334,7 +322,7 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     disc = std::make_unique<internal::DiscretisedScan>(*s_->grid, sub);
     for (const Eigen::Vector2d& c : regions) {
       const internal::GridPose g = disc->searchWindow(c, o.region_half_window_m, Clock::time_point::max());
-      if (g.score > 0) addRefined(g.T_world_robot);
+      if (g.score > 0) addRefined(g.T_world_robot, 0.0);
     }
     res.num_regions = regions.size();
     bestOf();
@@ -350,7 +338,7 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
       const internal::GridPose g = disc->searchAll(deadline);
       res.used_fallback = true;
       res.fallback_complete = g.complete;
-      if (g.score > 0) addRefined(g.T_world_robot);
+      if (g.score > 0) addRefined(g.T_world_robot, 0.0);
       bestOf();
     }
   }
