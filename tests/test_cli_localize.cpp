@@ -203,16 +203,16 @@ TEST(CliLocalizeBareMap, PngWithResolutionAndOriginEqualsItsYaml) {
               (tmp / "loc.txt").string(), "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_GE(nlohmann::json::parse(test::readFile(tmp / "s.json"))["success_rate"].get<double>(), 0.9);
-  std::map<std::string, std::vector<std::pair<int, double>>> per_scan;  // t -> (rank, score)
+  std::map<std::string, std::vector<std::pair<int, double>>> per_scan;  // t -> (rank, fit)
   std::map<std::string, std::string> best;                                // t -> "x y theta score" of rank 1
   std::istringstream cand(test::readFile(tmp / "loc.txt.candidates"));
   for (std::string line; std::getline(cand, line);) {
     if (line.empty() || line[0] == '#') continue;
     std::istringstream ls(line);
-    std::string t, x, y, th, sc;
+    std::string t, x, y, th, sc, fit;
     int rank = 0;
-    ASSERT_TRUE(ls >> t >> rank >> x >> y >> th >> sc) << line;
-    per_scan[t].push_back({rank, std::stod(sc)});
+    ASSERT_TRUE(ls >> t >> rank >> x >> y >> th >> sc >> fit) << line;
+    per_scan[t].push_back({rank, std::stod(fit)});  // ranked by fit
     if (rank == 1) best[t] = x + " " + y + " " + th + " " + sc;
   }
   EXPECT_EQ(per_scan.size(), 12u);

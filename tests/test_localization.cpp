@@ -160,6 +160,8 @@ TEST(Localization, RangeProfilesLocalizeScansWithoutLines) {
   const SimMap& s = office();
   LocalizerOptions profile_only;
   profile_only.lines.min_length_m = 1000.0;  // no line is that long
+  profile_only.max_regions = 0;  // the descriptor stages only: no branch and bound
+  profile_only.budget_ms = 0;
   LocalizerOptions neither = profile_only;
   neither.profile_candidates = 0;
   const Localizer loc(s.map, profile_only, fastDb());
@@ -183,6 +185,108 @@ TEST(Localization, RangeProfilesLocalizeScansWithoutLines) {
     EXPECT_EQ(r0.reason, "no lines");
   }
   EXPECT_GE(correct, n * 8 / 10) << "correct " << correct << " of " << n;
+}
+
+TEST(Localization, WholeMapSearchFindsWhatTheDescriptorsMiss) {
+  // The cascade's last resort: with neither lines nor range profiles the descriptors propose
+  // nothing, and the branch and bound over the whole map (run to its end here, so no timing is
+  // involved) finds the pose; without it every scan is declined.
+  const SimMap& s = office();
+  LocalizerOptions blind;
+  blind.lines.min_length_m = 1000.0;
+  blind.profile_candidates = 0;
+  blind.max_regions = 0;
+  blind.budget_ms = 0;
+  LocalizerOptions searching = blind;
+  searching.fallback_branch_and_bound = true;
+  const Localizer none(s.map, blind, fastDb());
+  const Localizer loc(s.map, searching, fastDb());
+  std::size_t n = 0, correct = 0;
+  for (std::size_t i = 3; i < s.frames.size(); i += 20) {
+    const Frame& f = s.frames[i];
+    const auto r = loc.localize(f.scan, f.T_robot_laser);
+    ++n;
+    EXPECT_TRUE(r.used_fallback);
+    EXPECT_TRUE(r.fallback_complete);
+    if (!r.declined) {
+      correct += near(*f.T_world_robot, r.T_world_robot);
+      EXPECT_TRUE(near(*f.T_world_robot, r.T_world_robot)) << "scan " << i << " score " << r.score;
+    }
+    const auto r0 = none.localize(f.scan, f.T_robot_laser);
+    EXPECT_TRUE(r0.declined);
+    EXPECT_FALSE(r0.used_fallback);
+  }
+  EXPECT_GE(correct, n * 8 / 10) << "correct " << correct << " of " << n;
+}
+
+TEST(Localization, RegionSearchRecoversScansTheVerifiedCandidatesMiss) {
+  // Stage D: the candidates' regions searched over every heading. With only the range profiles'
+  // few best positions (their whole-sector turn and grid position off the truth) and no
+  // whole-map search, the regions must at least keep what the descriptors alone answer.
+  const SimMap& s = office();
+  LocalizerOptions base;
+  base.lines.min_length_m = 1000.0;
+  base.profile_candidates = 4;
+  base.budget_ms = 0;
+  base.confident_score = 1.0;  // always search the regions
+  LocalizerOptions no_regions = base;
+  no_regions.max_regions = 0;
+  const Localizer with(s.map, base, fastDb());
+  const Localizer without(s.map, no_regions, fastDb());
+  std::size_t n = 0, correct_with = 0, correct_without = 0;
+  for (std::size_t i = 3; i < s.frames.size(); i += 10) {
+    const Frame& f = s.frames[i];
+    const auto a = with.localize(f.scan, f.T_robot_laser);
+    const auto b = without.localize(f.scan, f.T_robot_laser);
+    ++n;
+    EXPECT_GT(a.num_regions, 0u);
+    EXPECT_EQ(b.num_regions, 0u);
+    correct_with += !a.declined && near(*f.T_world_robot, a.T_world_robot);
+    correct_without += !b.declined && near(*f.T_world_robot, b.T_world_robot);
+    if (!a.declined) {
+      EXPECT_TRUE(near(*f.T_world_robot, a.T_world_robot)) << "scan " << i << " score " << a.score;
+    }
+  }
+  EXPECT_GE(correct_with, correct_without);
+  EXPECT_GE(correct_with, n * 8 / 10) << "correct " << correct_with << " of " << n;
+}
+
+TEST(Localization, ScanWithFewerThanTenBeamsIsUnknown) {
+  const SimMap& s = office();
+  const Localizer loc(s.map, {}, fastDb());
+  const Frame& f = s.frames[3];
+  Points2 pts = f.scan.toPoints(f.T_robot_laser);
+  pts.resize(9);
+  const auto r = loc.localize(pts);
+  EXPECT_TRUE(r.declined);
+  EXPECT_EQ(r.reason, "no points");
+}
+
+TEST(LocalizationDatabase, CoverageIsTheShareOfFreeSpaceIndexed) {
+  // A 3 m square room: positions everywhere but near its walls. The same room with a 0.3 m wide
+  // free strip 10 m long (narrower than twice the clearance, so never indexed) covers less.
+  auto room = OccupancyImage::filled(80, 80, 0.05, SE2(), OccupancyImage::kOccupied);
+  for (int y = 10; y < 70; ++y)
+    for (int x = 10; x < 70; ++x) room.set(x, y, OccupancyImage::kFree);
+  auto with_strip = OccupancyImage::filled(80, 260, 0.05, SE2(), OccupancyImage::kOccupied);
+  for (int y = 10; y < 70; ++y)
+    for (int x = 10; x < 70; ++x) with_strip.set(x, y, OccupancyImage::kFree);
+  for (int y = 70; y < 250; ++y)
+    for (int x = 37; x < 43; ++x) with_strip.set(x, y, OccupancyImage::kFree);
+  const Database a = Database::build(room, fastDb());
+  const Database b = Database::build(with_strip, fastDb());
+  EXPECT_GT(a.coverage(), 0.5);
+  EXPECT_LE(a.coverage(), 1.0);
+  EXPECT_LT(b.coverage(), a.coverage() * 0.8);
+  EXPECT_TRUE(std::isnan(Database::fromParts(fastDb(), 0, {}, {}).coverage()));
+}
+
+TEST(LocalizationDatabase, MapCoarserThanTwentyCentimetresIsRefused) {
+  const auto coarse = OccupancyImage::filled(40, 40, 0.25, SE2(), OccupancyImage::kFree);
+  EXPECT_TRUE(test::throwsError([&] { (void)Database::build(coarse, fastDb()); }, ErrorKind::kBadInput,
+                                {"0.25 m", "coarser than 0.2 m"}));
+  const auto fine_enough = OccupancyImage::filled(40, 40, 0.2, SE2(), OccupancyImage::kFree);
+  EXPECT_NO_THROW((void)Database::build(fine_enough, fastDb()));
 }
 
 TEST(LocalizationDatabase, ProfilesOfTheWrongSizeAreRefused) {

@@ -61,11 +61,22 @@ localization::Database buildDatabase(const OccupancyImage& map, const localizati
     p->setTotal(total);
     p->update(done, done == total);
   };
+  std::optional<localization::Database> db;
   try {
-    return localization::Database::build(map, o, 0, line.enabled() ? +report : nullptr, &line);
+    db = localization::Database::build(map, o, 0, line.enabled() ? +report : nullptr, &line);
   } catch (const Error& e) {
     throw Error(e.kind(), e.message(), ErrorLocation(map_path, 0, e.where().field));
   }
+  line.clear();
+  // Below half of the free space indexed, a good share of the scans taken in the map has no
+  // virtual scan near it (thin passages, free space next to unknown areas of a map from other tools).
+  constexpr double kLowCoverage = 0.5;
+  if (db->coverage() < kLowCoverage)
+    std::cerr << fmt::format(
+        "lidar2d: warning: {}: the localization database indexes only {:.0f}% of the map's free space ({} positions "
+        "keep {} m from obstacles and unknown cells); scans elsewhere may be declined (try a smaller --clearance)\n",
+        map_path, 100.0 * db->coverage(), db->positions().size(), o.clearance_m);
+  return std::move(*db);
 }
 
 void runIndex(DbArgs& a) {
@@ -76,9 +87,11 @@ void runIndex(DbArgs& a) {
   const localization::Database db = buildDatabase(map.map, a.options, a.quiet, a.map);
   io::writeLocalizationDatabase(a.output, db);
   if (!a.quiet)
-    std::cerr << fmt::format("indexed {} positions, {} lines, {} line pairs ({:.1f} MB in memory) in {:.2f} s -> {}\n",
-                             db.positions().size(), db.lines().size(), db.numPairs(), db.memoryBytes() / 1e6,
-                             seconds(t0), a.output);
+    std::cerr << fmt::format(
+        "indexed {} positions ({:.0f}% of the free space), {} lines, {} line pairs ({:.1f} MB in memory) in {:.2f} s "
+        "-> {}\n",
+        db.positions().size(), 100.0 * db.coverage(), db.lines().size(), db.numPairs(), db.memoryBytes() / 1e6,
+        seconds(t0), a.output);
 }
 
 enum class Scans { kAll, kEven, kOdd };
@@ -129,8 +142,8 @@ void runLocalize(const LocArgs& a) {
   if (a.candidates > 0) {
     cand_out = std::make_unique<io::AtomicFile>(a.output + ".candidates");
     cand_out->stream() << fmt::format(
-        "# lidar2d localize --candidates {}: t rank x y theta score, the best distinct verified poses of each scan "
-        "(rank 1 = best), whatever their score\n",
+        "# lidar2d localize --candidates {}: t rank x y theta score fit, the best distinct verified poses of each "
+        "scan (rank 1 = best, ranked by fit), whatever their score\n",
         a.candidates);
   }
 
@@ -148,8 +161,8 @@ void runLocalize(const LocArgs& a) {
     if (cand_out)
       for (std::size_t k = 0; k < r.candidates.size() && k < a.candidates; ++k) {
         const SE2& T = r.candidates[k].T_world_robot;
-        cand_out->stream() << fmt::format("{:.9f} {} {:.6f} {:.6f} {:.6f} {:.4f}\n", f->time, k + 1, T.x(), T.y(),
-                                          T.theta(), r.candidates[k].score);
+        cand_out->stream() << fmt::format("{:.9f} {} {:.6f} {:.6f} {:.6f} {:.4f} {:.4f}\n", f->time, k + 1, T.x(),
+                                          T.y(), T.theta(), r.candidates[k].score, r.candidates[k].fit);
       }
     if (r.declined) {
       ++reasons[r.reason];
@@ -176,6 +189,7 @@ void runLocalize(const LocArgs& a) {
   j["log"] = a.log;
   j["database"] = a.db.empty() ? nlohmann::json("built in memory") : nlohmann::json(a.db);
   j["database_s"] = db_s;
+  if (!std::isnan(loc->database().coverage())) j["database_coverage"] = loc->database().coverage();
   j["database_positions"] = loc->database().positions().size();
   j["database_pairs"] = loc->database().numPairs();
   j["database_mb"] = loc->database().memoryBytes() / 1e6;
@@ -263,15 +277,24 @@ void addLocalizeCommands(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--candidates", a->candidates,
                   "also write the best K distinct candidate poses of every scan, whatever their score, to OUTPUT.candidates "
-                  "('t rank x y theta score' per line; 0: none)")
+                  "('t rank x y theta score fit' per line, ranked by fit; 0: none)")
       ->capture_default_str();
   sub->add_option("--prescored", a->options.max_candidates, "best-voted pose bins pre-scored per scan")
       ->capture_default_str();
   sub->add_option("--profile-candidates", a->options.profile_candidates,
                   "candidates from the range profiles, for scans with few lines (0: off)")
       ->capture_default_str();
+  sub->add_option("--budget-ms", a->options.budget_ms,
+                  "when no candidate scores, search the whole map by branch and bound until the scan has taken this "
+                  "long [ms] (0: never)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  sub->add_option("--regions", a->options.max_regions,
+                  "candidate regions searched by branch and bound over every heading when the descriptors are not "
+                  "confident (0: none)")
+      ->capture_default_str();
   sub->add_flag("--fallback", a->options.fallback_branch_and_bound,
-                "when no candidate scores, search the whole map by branch and bound (slow)");
+                "the whole-map search without the budget (exhaustive; seconds per scan)");
   addDbOptions(sub, a->db_options, nullptr);
   sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
   addReaderOptions(sub, a->reader);

@@ -82,11 +82,16 @@ struct DegeneracyBenchOptions {
 void runDegeneracyBenchmark(const std::string& data_dir, const DegeneracyBenchOptions& options);
 /// Options of the `localize` subcommand.
 struct LocalizeBenchOptions {
-  std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
+  /// Under data_dir: the seven corrected logs.
+  std::vector<std::string> logs{"corrected/intel.log.gz",        "corrected/freiburg-079.log.gz",
+                                "corrected/orebro.log.gz",       "corrected/belgioioso.log.gz",
+                                "corrected/edmonton.log.gz",     "corrected/freiburg-101.log.gz",
+                                "corrected/infinite-corridor.log.gz"};
   std::size_t stride = 1;            ///< localize every stride-th odd scan
   std::size_t baseline_stride = 20;  ///< branch-and-bound baseline on every n-th odd scan (0: skip)
   std::string save_maps;             ///< folder to write the even-scan maps to (empty: none)
   bool verbose = false;              ///< print every failure on stderr
+  bool extras = true;                ///< also the symmetric world and the ROS2 bag
   localization::DatabaseOptions db;
   localization::LocalizerOptions loc;
 };

@@ -28,6 +28,10 @@ namespace {
 constexpr double kMaxGridPositions = 1e7;
 // The clearance in cells a database build tests around each position, at most.
 constexpr double kMaxClearanceCells = 500;
+// Coarsest map resolution a database is built for: beyond it a wall is one blurred cell, the
+// query's 0.1 m hit distance and 0.3 m success tolerance are below a cell, and corridors are one
+// or two cells wide (no position keeps its clearance).
+constexpr double kMaxResolution = 0.2;
 
 }  // namespace
 
@@ -108,6 +112,7 @@ const std::vector<Database::Position>& Database::positions() const { return impl
 const std::vector<Database::LineFeature>& Database::lines() const { return impl_->lines; }
 const std::vector<float>& Database::profiles() const { return impl_->profiles; }
 std::size_t Database::numPairs() const { return impl_->pairs.size(); }
+double Database::coverage() const { return impl_->coverage; }
 bool Database::empty() const { return impl_->pairs.empty(); }
 std::size_t Database::memoryBytes() const {
   const Impl& d = *impl_;
@@ -160,6 +165,11 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
                     W * res, H * res, options.step_m, grid_positions, kMaxGridPositions,
                     std::sqrt(W * res * H * res / kMaxGridPositions) * 1.01),
         ErrorLocation({}, 0, "step"));
+  if (res > kMaxResolution + 1e-9)
+    throw badInput(fmt::format("the map's cells are {} m, coarser than {} m: too coarse to match a scan against "
+                               "(rasterise the map at {} m or finer)",
+                               res, kMaxResolution, kMaxResolution),
+                   ErrorLocation({}, 0, "resolution"));
   // (Each candidate tests the disc of cells within the clearance: bounded, as a clearance of many
   // cells at a fine resolution would test millions per position.)
   if (options.clearance_m / res > kMaxClearanceCells)
@@ -173,6 +183,9 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
       if ((dx * dx + dy * dy) * res * res <= options.clearance_m * options.clearance_m + 1e-12)
         offsets.emplace_back(dx, dy);
   std::vector<Eigen::Vector2d> cand;  // map frame [m]
+  std::vector<std::size_t> cand_square;  // index of its square of the grid of positions
+  const auto GW = static_cast<std::size_t>(std::ceil(W * res / options.step_m));
+  const auto GH = static_cast<std::size_t>(std::ceil(H * res / options.step_m));
   for (double y = 0.5 * options.step_m; y < H * res; y += options.step_m)
     for (double x = 0.5 * options.step_m; x < W * res; x += options.step_m) {
       const int cx = static_cast<int>(x / res), cy = static_cast<int>(y / res);
@@ -185,7 +198,11 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
           break;
         }
       }
-      if (ok) cand.emplace_back(x, y);
+      if (ok) {
+        cand.emplace_back(x, y);
+        cand_square.push_back(std::min(GH - 1, static_cast<std::size_t>(y / options.step_m)) * GW +
+                              std::min(GW - 1, static_cast<std::size_t>(x / options.step_m)));
+      }
     }
   if (cand.empty())
     throw badInput(fmt::format("the map has no free cell {:.2f} m away from obstacles and unknown space "
@@ -278,9 +295,11 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
   std::vector<Position> positions;
   std::vector<LineFeature> lines;
   std::vector<float> profiles;
+  std::vector<std::uint8_t> indexed_square(GW * GH, 0);
   for (std::size_t i = 0; i < cand.size(); ++i) {
     // A position with fewer than two lines gives no pair but may still be found by its profile.
     if (per_pos[i].size() < 2 && B == 0) continue;
+    indexed_square[cand_square[i]] = 1;
     // Whole centimetres, as the database file stores them (a loaded database answers alike).
     for (std::size_t k = 0; k < B; ++k)
       profiles.push_back(static_cast<float>(std::round(cand_profiles[i * B + k] * 100.0) / 100.0));
@@ -295,8 +314,21 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
           {static_cast<float>(l.normal_angle), static_cast<float>(l.distance), static_cast<float>(l.length)});
     positions.push_back(p);
   }
-  return fromParts(options, localization::mapChecksum(map), std::move(positions), std::move(lines),
-                   std::move(profiles));
+  // Coverage: the share of free cells whose square of the grid of positions holds an indexed
+  // position (a scan taken there is near a virtual scan of the database).
+  std::size_t n_free = 0, n_covered = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (!free[static_cast<std::size_t>(y) * static_cast<std::size_t>(W) + static_cast<std::size_t>(x)]) continue;
+      ++n_free;
+      const auto gx = std::min(GW - 1, static_cast<std::size_t>((x + 0.5) * res / options.step_m));
+      const auto gy = std::min(GH - 1, static_cast<std::size_t>((y + 0.5) * res / options.step_m));
+      n_covered += indexed_square[gy * GW + gx];
+    }
+  Database db = fromParts(options, localization::mapChecksum(map), std::move(positions), std::move(lines),
+                          std::move(profiles));
+  db.impl_->coverage = n_free ? static_cast<double>(n_covered) / static_cast<double>(n_free) : 0.0;
+  return db;
 }
 
 Database Database::fromParts(const DatabaseOptions& options, std::uint64_t map_checksum,

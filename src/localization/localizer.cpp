@@ -11,6 +11,7 @@
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
 #include "src/localization/internal/database_index.hpp"
+#include "src/localization/internal/region_search.hpp"
 
 namespace lidar2d::localization {
 
@@ -37,6 +38,13 @@ void LocalizerOptions::validate() const {
     throw badOption("distinct_distance_m", distinct_distance_m);
   if (!(distinct_angle_rad >= 0) || !std::isfinite(distinct_angle_rad))
     throw badOption("distinct_angle_rad", distinct_angle_rad);
+  if (!(region_half_window_m > 0) || !(region_half_window_m <= 10))
+    throw badOption("region_half_window_m", region_half_window_m);
+  if (!(confident_score >= 0 && confident_score <= 1)) throw badOption("confident_score", confident_score);
+  if (!(confident_ratio >= 0 && confident_ratio <= 1)) throw badOption("confident_ratio", confident_ratio);
+  if (!(search_resolution_m > 0) || !std::isfinite(search_resolution_m))
+    throw badOption("search_resolution_m", search_resolution_m);
+  if (!(budget_ms >= 0)) throw badOption("budget_ms", budget_ms);
 }
 
 struct Localizer::State {
@@ -66,12 +74,13 @@ std::unique_ptr<Localizer::State> makeState(const OccupancyImage& map, Database 
   s->lf_options.max_iterations = 15;
   s->lf_options.line_search = true;  // stops at the minimum of the map's field instead of stepping across its kinks
   s->field = registration::LikelihoodField::fromMap(map, s->lf_options);
-  if (options.fallback_branch_and_bound) {
-    s->corr_options.resolution_m = std::max(map.resolution(), 0.05);
+  if (options.max_regions > 0 || options.budget_ms > 0 || options.fallback_branch_and_bound) {
+    // The branch-and-bound grid: obstacles blurred over about a cell, so that a pose off by a
+    // fraction of a cell still scores; its max-grids are the coarser resolutions of the search.
+    s->corr_options.resolution_m = std::max(map.resolution(), options.search_resolution_m);
+    s->corr_options.blur_sigma_m = 0.5 * s->corr_options.resolution_m;
     s->corr_options.occupied_min = s->db.options().occupied_min;
-    s->corr_options.min_score = 0.0;
-    s->corr_options.refine = true;
-    s->corr_options.refinement = s->lf_options;
+    s->corr_options.depth = 7;
     s->grid = registration::CorrelativeGrid::fromMap(map, s->corr_options);
   }
   return s;
@@ -96,22 +105,39 @@ Localizer::~Localizer() = default;
 const Database& Localizer::database() const { return s_->db; }
 const LocalizerOptions& Localizer::options() const { return s_->options; }
 
-double Localizer::score(const Points2& points_robot, const SE2& T_world_robot,
-                        const Eigen::Vector2d& sensor_robot) const {
-  const OccupancyImage& map = s_->map;
+namespace {
+
+// The parts of a pose's score: the share of points within hit_distance of an obstacle, the share
+// of beams crossing an obstacle more than free_margin before their end, and the mean of the
+// kernel 1 - (d / hit_distance)^2 of each point's distance d to the nearest obstacle (0 beyond):
+// how close, not only whether, the points lie to the walls.
+struct ScoreParts {
+  double hit = 0, through = 0, kernel = 0;
+  double score() const { return std::clamp(hit - through, 0.0, 1.0); }
+  // The decision's ranking: the kernel separates poses that put the same share of points
+  // "on" walls, e.g. two places along a corridor, one of which lines up its door frames exactly.
+  double fit() const { return std::clamp(kernel - through, 0.0, 1.0); }
+};
+
+ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, const SE2& T_world_robot,
+                      const Eigen::Vector2d& sensor_robot) {
+  const OccupancyImage& map = s.map;
   const double res = map.resolution();
-  const int occ = s_->db.options().occupied_min;
-  const SE2 T_map_robot = s_->T_map_world * T_world_robot;
+  const int occ = s.db.options().occupied_min;
+  const SE2 T_map_robot = s.T_map_world * T_world_robot;
   const Eigen::Vector2d o = (T_map_robot * sensor_robot) / res;  // cell units
+  const double hd = s.options.hit_distance_m;
   std::size_t n = 0, hit = 0, through = 0;
+  double kernel = 0;
   for (const auto& p : points_robot) {
     if (!p.allFinite()) continue;
     ++n;
-    const auto smp = s_->field.sample(T_world_robot * p, 0);
-    hit += smp.value < s_->options.hit_distance_m;
+    const double d = s.field.sample(T_world_robot * p, 0).value;
+    hit += d < hd;
+    if (d < hd) kernel += 1.0 - (d / hd) * (d / hd);
     // Free-space check: walk the beam cell by cell up to free_margin before the endpoint.
     const Eigen::Vector2d e = (T_map_robot * p) / res;
-    const double len = (e - o).norm() - s_->options.free_margin_m / res;
+    const double len = (e - o).norm() - s.options.free_margin_m / res;
     if (len <= 0) continue;
     const Eigen::Vector2d dir = (e - o).normalized();
     // Steps of one cell, or 5 cm on finer maps (walls there are several cells thick).
@@ -125,8 +151,20 @@ double Localizer::score(const Points2& points_robot, const SE2& T_world_robot,
       }
     }
   }
-  if (n == 0) return 0.0;
-  return std::clamp((static_cast<double>(hit) - static_cast<double>(through)) / static_cast<double>(n), 0.0, 1.0);
+  ScoreParts out;
+  if (n == 0) return out;
+  const auto dn = static_cast<double>(n);
+  out.hit = static_cast<double>(hit) / dn;
+  out.through = static_cast<double>(through) / dn;
+  out.kernel = kernel / dn;
+  return out;
+}
+
+}  // namespace
+
+double Localizer::score(const Points2& points_robot, const SE2& T_world_robot,
+                        const Eigen::Vector2d& sensor_robot) const {
+  return scoreParts(*s_, points_robot, T_world_robot, sensor_robot).score();
 }
 
 LocalizationResult Localizer::localize(const LaserScan& scan, const SE2& T_robot_laser) const {
@@ -220,33 +258,87 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     stage_b.push_back({guess, score(sub, guess, sensor_robot) + 1e-3 * pre[c].pre, pre[c].votes});
   }
   std::sort(stage_b.begin(), stage_b.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
-  // Stage C: refine the best against the likelihood field and score them on every point.
+  // Stage C: refine the best against the likelihood field and score them on every point. (The
+  // branch-and-bound stages below add their poses the same way.)
   std::vector<Candidate> cands;
-  for (std::size_t c = 0; c < stage_b.size() && c < o.max_refined; ++c) {
-    const SE2& guess = stage_b[c].guess;
+  auto addRefined = [&](const SE2& guess, double votes) {
     const registration::Result r = registration::matchLikelihoodField(s_->field, pts, guess, s_->lf_options);
     SE2 T = r.T_target_source;
     if (!T.isFinite() || (T.translation() - guess.translation()).norm() > 0.5) T = guess;
-    double sc = score(pts, T, sensor_robot);
-    const double sc_guess = score(pts, guess, sensor_robot);
-    if (sc_guess > sc) {
+    ScoreParts sc = scoreParts(*s_, pts, T, sensor_robot);
+    const ScoreParts sc_guess = scoreParts(*s_, pts, guess, sensor_robot);
+    if (sc_guess.score() > sc.score()) {
       T = guess;
       sc = sc_guess;
     }
-    cands.push_back({T, sc, stage_b[c].votes});
-  }
+    cands.push_back({T, sc.score(), votes, sc.fit()});
+  };
+  for (std::size_t c = 0; c < stage_b.size() && c < o.max_refined; ++c) addRefined(stage_b[c].guess, stage_b[c].votes);
   res.num_candidates = cands.size();
 
   auto bestOf = [&] {
-    std::sort(cands.begin(), cands.end(), [](const Candidate& a, const Candidate& b) { return a.score > b.score; });
+    std::sort(cands.begin(), cands.end(), [](const Candidate& a, const Candidate& b) { return a.fit > b.fit; });
+  };
+  auto distinct = [&](const SE2& a, const SE2& b) {
+    return (a.translation() - b.translation()).norm() > o.distinct_distance_m ||
+           std::abs(angleDiff(a.theta(), b.theta())) > o.distinct_angle_rad;
+  };
+  // An answer that needs no further search: it scores well and no distinct candidate comes close
+  // (a runner-up near the ambiguity ratio may hide a better pose the descriptors missed).
+  auto confident = [&] {
+    if (cands.empty() || cands.front().score < std::max(o.min_score, o.confident_score)) return false;
+    for (std::size_t c = 1; c < cands.size(); ++c)
+      if (distinct(cands[c].T_world_robot, cands.front().T_world_robot))
+        return cands[c].fit < o.confident_ratio * cands.front().fit;
+    return true;
   };
   bestOf();
-  if ((cands.empty() || cands.front().score < o.min_score) && o.fallback_branch_and_bound && s_->grid) {
-    const registration::CorrelativeResult r =
-        registration::matchCorrelativeGlobal(*s_->grid, pts, s_->corr_options, &s_->field);
-    if (r.T_target_source.isFinite()) {
-      cands.push_back({r.T_target_source, score(pts, r.T_target_source, sensor_robot), 0.0});
+  std::unique_ptr<internal::DiscretisedScan> disc;
+  if (!confident() && o.max_regions > 0 && s_->grid) {
+    // Stage D: candidate regions, ranked by taking each source's next best in turn: the verified
+    // candidates, the pre-scored bins, the range profiles' positions, the line votes' bins.
+    std::vector<Eigen::Vector2d> regions;
+    const std::vector<std::vector<Eigen::Vector2d>> sources = [&] {
+      std::vector<std::vector<Eigen::Vector2d>> src(4);
+      for (const Candidate& c : cands) src[0].push_back(c.T_world_robot.translation());
+      for (const Pre& p : stage_b) src[1].push_back(p.guess.translation());
+      for (const PoseVote& v : from_profiles) src[2].push_back(v.T_world_robot.translation());
+      for (std::size_t c = 0; c < ranked.size() - from_profiles.size(); ++c)
+        src[3].push_back(ranked[c].T_world_robot.translation());
+      return src;
+    }();
+    for (std::size_t rank = 0; regions.size() < o.max_regions; ++rank) {
+      bool any = false;
+      for (const auto& src : sources) {
+        if (rank >= src.size() || regions.size() >= o.max_regions) continue;
+        any = true;
+        const Eigen::Vector2d& c = src[rank];
+        if (std::none_of(regions.begin(), regions.end(),
+                         [&](const Eigen::Vector2d& q) { return (q - c).norm() < o.region_half_window_m; }))
+          regions.push_back(c);
+      }
+      if (!any) break;
+    }
+    disc = std::make_unique<internal::DiscretisedScan>(*s_->grid, sub);
+    for (const Eigen::Vector2d& c : regions) {
+      const internal::GridPose g = disc->searchWindow(c, o.region_half_window_m, Clock::time_point::max());
+      if (g.score > 0) addRefined(g.T_world_robot, 0.0);
+    }
+    res.num_regions = regions.size();
+    bestOf();
+  }
+  const bool unlimited = o.fallback_branch_and_bound;
+  if ((cands.empty() || cands.front().score < o.min_score) && (o.budget_ms > 0 || unlimited) && s_->grid) {
+    // Stage E, the last resort: the whole map within what is left of the budget.
+    const auto deadline = unlimited ? Clock::time_point::max()
+                                    : t0 + std::chrono::duration_cast<Clock::duration>(
+                                               std::chrono::duration<double, std::milli>(o.budget_ms));
+    if (Clock::now() < deadline) {
+      if (!disc) disc = std::make_unique<internal::DiscretisedScan>(*s_->grid, sub);
+      const internal::GridPose g = disc->searchAll(deadline);
       res.used_fallback = true;
+      res.fallback_complete = g.complete;
+      if (g.score > 0) addRefined(g.T_world_robot, 0.0);
       bestOf();
     }
   }
@@ -257,24 +349,20 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   const Candidate& best = cands.front();
   res.T_world_robot = best.T_world_robot;
   res.score = best.score;
-  auto distinct = [&](const SE2& a, const SE2& b) {
-    return (a.translation() - b.translation()).norm() > o.distinct_distance_m ||
-           std::abs(angleDiff(a.theta(), b.theta())) > o.distinct_angle_rad;
-  };
   for (const Candidate& c : cands) {
     bool seen = false;
     for (const auto& k : res.candidates) seen = seen || !distinct(c.T_world_robot, k.T_world_robot);
     if (!seen) res.candidates.push_back(c);
   }
   for (std::size_t c = 1; c < cands.size(); ++c) {
-    if (cands[c].score < o.min_score) break;
+    if (cands[c].score < o.min_score) continue;
     if (!distinct(cands[c].T_world_robot, best.T_world_robot)) continue;
     bool seen = false;
     for (const auto& a : res.alternatives) seen = seen || !distinct(cands[c].T_world_robot, a.T_world_robot);
     if (!seen) res.alternatives.push_back(cands[c]);
   }
   if (best.score < o.min_score) return finish("low score");
-  if (!res.alternatives.empty() && res.alternatives.front().score >= o.ambiguity_ratio * best.score)
+  if (!res.alternatives.empty() && res.alternatives.front().fit >= o.ambiguity_ratio * best.fit)
     return finish("ambiguous");
   res.declined = false;
   res.total_ms = ms(t0, Clock::now());

@@ -103,7 +103,8 @@ class Database {
   /// Builds the database of `map` (multi-threaded over positions, `threads` = 0: hardware
   /// concurrency). Throws `lidar2d::Error`: kInvalidArgument for bad options, kBadInput (field
   /// "free space") when the map has no free cell with the clearance, kBadInput (field "step") when
-  /// the grid of positions over the map would exceed 10^7 (the message names a step that fits).
+  /// the grid of positions over the map would exceed 10^7 (the message names a step that fits),
+  /// kBadInput (field "resolution") for a map coarser than 0.2 m per cell.
   /// `progress(done, total, user)` is called from the calling thread as positions are indexed.
   static Database build(const OccupancyImage& map, const DatabaseOptions& options = {}, unsigned threads = 0,
                         ProgressCallback progress = nullptr, void* progress_user = nullptr);
@@ -124,6 +125,11 @@ class Database {
   /// [-pi + k w, -pi + (k + 1) w), w = 2 pi / bins (max_range_m when it saw none).
   const std::vector<float>& profiles() const;
   std::size_t numPairs() const;     ///< indexed line pairs
+  /// Share of the map's free cells whose square of the grid of positions (step x step) holds an
+  /// indexed position, in [0, 1]: free space near walls and unknown cells, and passages narrower
+  /// than twice the clearance, are not indexed (scans there may be declined). NaN for a database
+  /// assembled with fromParts (a file does not store it).
+  double coverage() const;
   std::size_t memoryBytes() const;  ///< approximate heap use, index included
   bool empty() const;
 
@@ -168,8 +174,24 @@ struct LocalizerOptions {
   /// steps of one sector, best matches the scan's), verified with the line candidates; they find
   /// the scans whose lines give no usable pair (corridors, clutter). 0 = off.
   std::size_t profile_candidates = 64;
-  /// When no descriptor candidate scores at least min_score, search the whole map by branch and
-  /// bound (slow: seconds on a building-sized map). Off by default.
+  /// Cascade, stage D: when the descriptors give no confident answer (declined, a best score
+  /// below `confident_score`, or a distinct runner-up within `confident_ratio`), the best `max_regions` candidate regions (distinct positions of the
+  /// verified, pre-scored, range-profile and line-vote candidates, ranked in turn) are each searched
+  /// by branch and bound over +-`region_half_window_m` and every heading; their best poses are
+  /// refined and scored like the descriptor candidates. 0 = off.
+  std::size_t max_regions = 24;
+  double region_half_window_m = 0.6;  ///< half-width of each region's square translation window [m], > 0
+  double confident_score = 0.8;  ///< answers scoring at least this skip stage D ..., in [0, 1]
+  double confident_ratio = 0.9;  ///< ... when no distinct candidate's fit reaches this fraction of the best's, in [0, 1]
+  /// Cell size of the branch-and-bound grids (the map's when coarser) [m], > 0; its max-grids give
+  /// the coarser resolutions of the search (Hess 2016).
+  double search_resolution_m = 0.1;
+  /// Cascade, stage E, the last resort: when still no candidate scores at least min_score, the
+  /// whole map is searched by branch and bound over every heading until the query has taken
+  /// `budget_ms` in all (the best pose found by then is verified). 0 = no whole-map search.
+  double budget_ms = 150.0;
+  /// Stage E without the budget: the exhaustive whole-map search runs to its end (seconds per
+  /// scan on a building-sized map).
   bool fallback_branch_and_bound = false;
   void validate() const;
 };
@@ -195,13 +217,20 @@ std::vector<PoseVote> voteLinePairs(const Database& database, const std::vector<
 struct Candidate {
   SE2 T_world_robot;   ///< refined pose
   double score = 0.0;  ///< Localizer::score of the pose, in [0, 1]
-  double votes = 0.0;  ///< descriptor votes of its bin (0 for the fallback)
+  double votes = 0.0;  ///< descriptor votes of its bin (0 for the branch-and-bound stages)
+  /// How closely the points lie on the walls: mean of 1 - (d / hit_distance)^2 over the points
+  /// (0 beyond hit_distance) minus the share of beams through walls, in [0, 1]. Candidates are
+  /// ranked by it and the ambiguity test compares it (it separates poses with equal `score`).
+  double fit = 0.0;
 };
 
 /// The answer for one scan.
 struct LocalizationResult {
   bool declined = true;  ///< true: "unknown" (see reason); T_world_robot and score are then the best guess if any
-  std::string reason;    ///< why it declined ("no lines", "no candidate", "low score", "ambiguous", "no points")
+  /// Why it declined: "no points" (fewer than 10 valid beams), "no lines" / "no candidate" (nothing
+  /// to verify), "low score",
+  /// "ambiguous" (a distinct pose scores nearly as well: `candidates` lists them).
+  std::string reason;
   SE2 T_world_robot;     ///< best pose
   double score = 0.0;    ///< its score, in [0, 1]
   std::vector<Candidate> alternatives;  ///< distinct poses other than the best, best first (score >= min_score)
@@ -213,7 +242,9 @@ struct LocalizationResult {
   std::size_t num_hits = 0;             ///< database pairs matched
   std::size_t num_candidates = 0;       ///< candidates verified
   std::size_t num_profile_candidates = 0;  ///< of the pre-scored candidates, those from the range profiles
-  bool used_fallback = false;           ///< the branch-and-bound fallback ran
+  std::size_t num_regions = 0;          ///< candidate regions searched by branch and bound (stage D)
+  bool used_fallback = false;           ///< the whole-map search ran (stage E)
+  bool fallback_complete = false;       ///< ... and finished within the budget
   double describe_ms = 0, lookup_ms = 0, verify_ms = 0, total_ms = 0;  ///< timings [ms]
 };
 

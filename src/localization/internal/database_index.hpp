@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <nanoflann.hpp>
 #include <numbers>
@@ -80,6 +81,7 @@ struct Database::Impl {
   std::vector<float> doubled;         // each profile twice in a row: turning it is then a contiguous slice
   std::size_t coarse_factor = 1;      // sectors merged per coarse sector (the prefilter of the query)
   std::vector<float> coarse_doubled;  // the same at profile_bins / coarse_factor sectors (nearest of each group)
+  double coverage = std::numeric_limits<double>::quiet_NaN();  // Database::coverage()
 
   // Indexes every non-parallel pair of lines of every position (both orders are not needed: the
   // query tries both orders of its own pairs) and lays out the profiles for the query.
