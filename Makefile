@@ -5,12 +5,21 @@ ASAN_BUILD ?= build-asan
 CMAKE_FLAGS ?=
 DEMO_OUT ?= out
 
+# ccache, when installed (tools/install-deps.sh installs it), caches compilations across build
+# directories and clones: a clean clone rebuilds in a fraction of the time when the cache has seen
+# the same sources. CCACHE_BASEDIR makes its keys independent of where the clone lives.
+CCACHE := $(shell command -v ccache 2>/dev/null)
+ifneq ($(CCACHE),)
+LAUNCHER := -DCMAKE_CXX_COMPILER_LAUNCHER=$(CCACHE) -DCMAKE_C_COMPILER_LAUNCHER=$(CCACHE)
+export CCACHE_BASEDIR := $(CURDIR)
+endif
+
 .PHONY: all build test test-asan test-tsan-bags fuzz bench demo clean format
 
 all: build
 
 $(BUILD)/CMakeCache.txt:
-	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release $(CMAKE_FLAGS)
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release $(LAUNCHER) $(CMAKE_FLAGS)
 
 build: $(BUILD)/CMakeCache.txt
 	cmake --build $(BUILD) -j$(JOBS)
@@ -21,7 +30,7 @@ test: build
 # -O1 (ASan's recommended level; asserts stay on) and -g1 (line tables, enough for the sanitizers'
 # stack traces): the tests run about 7x faster than at -O0 (14 min -> under 2 min on two cores).
 $(ASAN_BUILD)/CMakeCache.txt:
-	cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-g1 -O1" -DLIDAR2D_SANITIZE=ON -DLIDAR2D_BUILD_BENCH=OFF $(CMAKE_FLAGS)
+	cmake -S . -B $(ASAN_BUILD) -DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-g1 -O1" -DLIDAR2D_SANITIZE=ON -DLIDAR2D_BUILD_BENCH=OFF $(LAUNCHER) $(CMAKE_FLAGS)
 
 # AddressSanitizer + UndefinedBehaviorSanitizer build of the whole test suite.
 test-asan: $(ASAN_BUILD)/CMakeCache.txt

@@ -147,7 +147,7 @@ TEST_F(OutputPaths, UnusableOutputFailsBeforeTheWork) {
 // The progress line of `args` run on a pseudo-terminal (util-linux `script`), or nullopt without it.
 std::optional<std::string> onTerminal(const std::vector<std::string>& args, const fs::path& capture) {
   if (!fs::exists("/usr/bin/script")) return std::nullopt;
-  std::string cmd = LIDAR2D_CLI_PATH;
+  std::string cmd = lidar2d::test::cliPath();
   for (const auto& a : args) cmd += " '" + a + "'";
   const std::string shell = "/usr/bin/script -qec \"" + cmd + "\" /dev/null > '" + capture.string() + "' 2>&1";
   if (std::system(shell.c_str()) != 0) return std::nullopt;

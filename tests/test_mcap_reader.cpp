@@ -181,7 +181,7 @@ TEST(McapReader, ScanTopicOverrideAndOdometryNone) {
 // every frame read from both must be identical, bit for bit.
 TEST(McapReader, RealBagConvertedToMcapGivesTheSameFramesAsTheDb3) {
   LIDAR2D_REQUIRE_DATA("ros2/macfirst_floor_take_2");
-  const fs::path mcap = fs::path(LIDAR2D_FIXTURE_DIR) / "macfirst_floor_take_2.mcap";
+  const fs::path mcap = lidar2d::test::fixtureDir() / "macfirst_floor_take_2.mcap";
   if (!fs::exists(mcap))
     GTEST_SKIP() << mcap << " is missing: the build makes it where node, zstd and tools/mcap-fixtures/node_modules "
                  << "(npm ci there) are installed";

@@ -2,10 +2,11 @@
 # Installs everything lidar2d needs to build, test and benchmark on Debian 12 (bookworm).
 # Each package is used: the libraries by CMakeLists.txt's find_package calls (OpenCV's core and
 # imgproc via cmake/OpenCVMinimal.cmake), gtest/gmock by tests/, benchmark by bench/, python3-rosbag
-# by tools/make-test-bags.py (test fixtures), chromium by the SLAM report's rendering test.
+# by tools/make-test-bags.py (test fixtures), chromium by the SLAM report's rendering test, ccache
+# by the Makefile (compilation cache, used when present).
 # Idempotent: does nothing (not even 'apt-get update') when every package is already installed.
 set -eu
-PKGS="build-essential make cmake git
+PKGS="build-essential make cmake git ccache
   libeigen3-dev libceres-dev libnanoflann-dev
   libopencv-core-dev libopencv-imgproc-dev libpng-dev
   libcli11-dev libfmt-dev libyaml-cpp-dev nlohmann-json3-dev

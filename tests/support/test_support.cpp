@@ -25,6 +25,10 @@ std::filesystem::path sourceFile(const std::string& relative) {
   return std::filesystem::path(LIDAR2D_SOURCE_DIR) / relative;
 }
 
+std::string cliPath() { return LIDAR2D_CLI_PATH; }
+
+std::filesystem::path fixtureDir() { return LIDAR2D_FIXTURE_DIR; }
+
 TempDir::TempDir() {
   std::string templ = (std::filesystem::temp_directory_path() / "lidar2d-test-XXXXXX").string();
   if (!::mkdtemp(templ.data())) throw std::runtime_error("mkdtemp failed");

@@ -21,6 +21,10 @@ std::filesystem::path dataDir();
 std::filesystem::path dataFile(const std::string& relative);
 /// Path of a file of the source tree (docs, headers), for tests that check them.
 std::filesystem::path sourceFile(const std::string& relative);
+/// The lidar2d program built with the tests.
+std::string cliPath();
+/// The folder of the fixtures the build generates (tools/make-test-bags.py, tests/CMakeLists.txt).
+std::filesystem::path fixtureDir();
 
 /// Skips the current test with a message when a data file is missing.
 #define LIDAR2D_REQUIRE_DATA(relative)                                                            \
