@@ -5,7 +5,7 @@ ASAN_BUILD ?= build-asan
 CMAKE_FLAGS ?=
 DEMO_OUT ?= out
 
-.PHONY: all build test test-asan test-tsan-bags fuzz bench demo clean format
+.PHONY: all build python test test-asan test-tsan-bags fuzz bench demo clean format
 
 all: build
 
@@ -14,6 +14,11 @@ $(BUILD)/CMakeCache.txt:
 
 build: $(BUILD)/CMakeCache.txt
 	cmake --build $(BUILD) -j$(JOBS)
+
+# The Python module and package under $(BUILD)/python (import it with PYTHONPATH=$(BUILD)/python).
+python: $(BUILD)/CMakeCache.txt
+	cmake --build $(BUILD) -j$(JOBS) --target lidar2d_python
+	@echo "python: built $(BUILD)/python/lidar2d; use it with PYTHONPATH=$(BUILD)/python /usr/bin/python3"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j$(JOBS)

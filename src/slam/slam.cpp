@@ -209,23 +209,33 @@ void Slam::finish() {
   s.stats.total_seconds += secondsSince(t0);
 }
 
+namespace {
+ScanEstimate estimateOf(const internal::SlamState& s, const internal::ScanRecord& r) {
+  ScanEstimate e;
+  e.frame_index = r.frame_index;
+  e.time = r.time;
+  e.node = r.node;
+  e.is_node = r.is_node;
+  e.matched = r.matched;
+  e.degenerate = r.degenerate;
+  e.seconds = r.seconds;
+  e.T_world_robot = s.nodes[r.node].T_world_robot * r.T_node_scan;
+  return e;
+}
+}  // namespace
+
 std::vector<ScanEstimate> Slam::trajectory() const {
   const internal::SlamState& s = impl_->state;
   std::vector<ScanEstimate> out;
   out.reserve(s.scans.size());
-  for (const internal::ScanRecord& r : s.scans) {
-    ScanEstimate e;
-    e.frame_index = r.frame_index;
-    e.time = r.time;
-    e.node = r.node;
-    e.is_node = r.is_node;
-    e.matched = r.matched;
-    e.degenerate = r.degenerate;
-    e.seconds = r.seconds;
-    e.T_world_robot = s.nodes[r.node].T_world_robot * r.T_node_scan;
-    out.push_back(e);
-  }
+  for (const internal::ScanRecord& r : s.scans) out.push_back(estimateOf(s, r));
   return out;
+}
+
+ScanEstimate Slam::latest() const {
+  const internal::SlamState& s = impl_->state;
+  if (s.scans.empty()) throw invalidArgument("no scan added yet", {"Slam", 0, "latest"});
+  return estimateOf(s, s.scans.back());
 }
 
 const std::vector<Node>& Slam::nodes() const { return impl_->state.nodes; }
