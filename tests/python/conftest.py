@@ -26,7 +26,8 @@ def office_log(tmp_path_factory, office_frames):
 
 @pytest.fixture(scope="session")
 def corridor_frames():
-    return lidar2d.simulate("corridor", scans=60, seed=2)
+    # 200 scans: the start room, then (from about scan 160) down the long corridor.
+    return lidar2d.simulate("corridor", scans=200, seed=2)
 
 
 @pytest.fixture(scope="session")
