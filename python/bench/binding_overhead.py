@@ -40,22 +40,27 @@ print(time.perf_counter() - t0)
 
 
 def wall(cmd):
+    """Wall time [s], CPU time (user + sys) [s] and stdout of a process."""
+    r0 = os.times()
     t0 = time.perf_counter()
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    return time.perf_counter() - t0, out
+    r1 = os.times()
+    return time.perf_counter() - t0, (r1.children_user - r0.children_user) + (r1.children_system - r0.children_system), out
 
 
-res = {"cli": [], "cli_slam_s": [], "run_slam": [], "loop_slam_s": []}
+res = {"cli": [], "cli_cpu": [], "cli_slam_s": [], "run_slam": [], "run_slam_cpu": [], "loop_slam_s": []}
 for i in range(runs):
     d = os.path.join(work, f"cli{i}")
-    t, _ = wall([cli, "slam", log, "-o", d, "--quiet"])
+    t, cpu, _ = wall([cli, "slam", log, "-o", d, "--quiet"])
     res["cli"].append(t)
+    res["cli_cpu"].append(cpu)
     res["cli_slam_s"].append(json.load(open(os.path.join(d, "summary.json")))["slam_s"])
     d = os.path.join(work, f"py{i}")
     os.makedirs(d)
-    t, _ = wall([sys.executable, "-c", RUN, log, d])
+    t, cpu, _ = wall([sys.executable, "-c", RUN, log, d])
     res["run_slam"].append(t)
-    _, out = wall([sys.executable, "-c", LOOP, log, os.path.join(work, f"loop{i}.txt")])
+    res["run_slam_cpu"].append(cpu)
+    _, _, out = wall([sys.executable, "-c", LOOP, log, os.path.join(work, f"loop{i}.txt")])
     res["loop_slam_s"].append(float(out))
     same = open(os.path.join(work, f"cli{i}", "trajectory.txt")).read() == open(os.path.join(d, "trajectory.txt")).read()
     same_loop = open(os.path.join(work, f"cli{i}", "trajectory.txt")).read() == open(os.path.join(work, f"loop{i}.txt")).read()
@@ -64,5 +69,7 @@ for i in range(runs):
 med = {k: statistics.median(v) for k, v in res.items()}
 print(f"median whole process: lidar2d slam {med['cli']:.2f} s, run_slam {med['run_slam']:.2f} s "
       f"({100 * (med['run_slam'] / med['cli'] - 1):+.1f}%)")
+print(f"median CPU time (user + sys): lidar2d slam {med['cli_cpu']:.2f} s, run_slam {med['run_slam_cpu']:.2f} s "
+      f"({100 * (med['run_slam_cpu'] / med['cli_cpu'] - 1):+.1f}%)")
 print(f"median SLAM time (slam_s): program {med['cli_slam_s']:.2f} s, Python loop {med['loop_slam_s']:.2f} s "
       f"({100 * (med['loop_slam_s'] / med['cli_slam_s'] - 1):+.1f}%)")

@@ -59,6 +59,16 @@ def _out_dirs(logs: list[str], out: str) -> list[str]:
     return dirs
 
 
+def _size(path: str) -> int:
+    """Bytes of a log file or folder (0 when it cannot be read: the task reports that)."""
+    try:
+        if os.path.isdir(path):
+            return sum(e.stat().st_size for e in os.scandir(path) if e.is_file())
+        return os.path.getsize(path)
+    except OSError:
+        return 0
+
+
 def _sha1(data: bytes) -> str:
     return hashlib.sha1(data).hexdigest()[:16]
 
@@ -231,8 +241,12 @@ def run_batch(logs: list[str], out: str, task: str = "slam", scheduler: str | No
                                    dashboard_address=None)
             client = Client(cluster)
         try:
-            futures = {client.submit(run_task, log, task, d, pure=False, key=f"lidar2d-{task}-{i}-{os.getpid()}"): i
-                       for i, (log, d) in enumerate(zip(logs, dirs))}
+            # Largest logs first (by bytes on disk, a proxy for their work): a long task started last
+            # would leave the other workers idle at the end (longest-processing-time-first scheduling).
+            order = sorted(range(len(logs)), key=lambda i: -_size(logs[i]))
+            futures = {client.submit(run_task, logs[i], task, dirs[i], pure=False, priority=len(logs) - rank,
+                                     key=f"lidar2d-{task}-{i}-{os.getpid()}"): i
+                       for rank, i in enumerate(order)}
             for done, future in enumerate(as_completed(futures), start=1):
                 i = futures[future]
                 try:
