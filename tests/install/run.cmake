@@ -1,6 +1,7 @@
 # Installs the build tree BUILD_DIR into WORK_DIR/prefix, then configures, builds and runs the
 # consumer project tests/install/consumer against it (find_package(lidar2d) only through
-# CMAKE_PREFIX_PATH). Any failing step fails the test with that step's output.
+# CMAKE_PREFIX_PATH), compiled with CONSUMER_FLAGS (the sanitizer build's). Any failing step fails the
+# test with that step's output.
 file(REMOVE_RECURSE ${WORK_DIR})
 function(step name)
   execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
@@ -20,7 +21,7 @@ if(EXISTS ${prefix}/include/lidar2d/io/internal OR EXISTS ${prefix}/src)
   message(FATAL_ERROR "install test: library-private headers were installed")
 endif()
 step(configure ${CMAKE_COMMAND} -S ${SOURCE_DIR}/tests/install/consumer -B ${WORK_DIR}/build
-     -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix})
+     -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix} "-DCMAKE_CXX_FLAGS=${CONSUMER_FLAGS}")
 step(build ${CMAKE_COMMAND} --build ${WORK_DIR}/build)
 step(run ${WORK_DIR}/build/consumer)
 message(STATUS "${STEP_OUTPUT}")
