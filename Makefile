@@ -14,7 +14,7 @@ LAUNCHER := -DCMAKE_CXX_COMPILER_LAUNCHER=$(CCACHE) -DCMAKE_C_COMPILER_LAUNCHER=
 export CCACHE_BASEDIR := $(CURDIR)
 endif
 
-.PHONY: all build test test-asan test-tsan-bags fuzz bench demo clean format
+.PHONY: all build python test test-asan test-tsan-bags fuzz bench demo clean format
 
 all: build
 
@@ -23,6 +23,11 @@ $(BUILD)/CMakeCache.txt:
 
 build: $(BUILD)/CMakeCache.txt
 	cmake --build $(BUILD) -j$(JOBS)
+
+# The Python module and package under $(BUILD)/python (import it with PYTHONPATH=$(BUILD)/python).
+python: $(BUILD)/CMakeCache.txt
+	cmake --build $(BUILD) -j$(JOBS) --target lidar2d_python
+	@echo "python: built $(BUILD)/python/lidar2d; use it with PYTHONPATH=$(BUILD)/python /usr/bin/python3"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j$(JOBS)

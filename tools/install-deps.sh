@@ -2,8 +2,10 @@
 # Installs everything lidar2d needs to build, test and benchmark on Debian 12 (bookworm).
 # Each package is used: the libraries by CMakeLists.txt's find_package calls (OpenCV's core and
 # imgproc via cmake/OpenCVMinimal.cmake), gtest/gmock by tests/, benchmark by bench/, python3-rosbag
-# by tools/make-test-bags.py (test fixtures), chromium by the SLAM report's rendering test, ccache
-# by the Makefile (compilation cache, used when present).
+# by tools/make-test-bags.py (test fixtures), chromium by the SLAM report's rendering test,
+# pybind11-dev and python3-dev by the Python module (python/), python3-numpy by its arrays,
+# python3-distributed by its Dask batch runner (lidar2d.batch), python3-pytest by tests/python,
+# ccache by the Makefile (compilation cache, used when present).
 # Idempotent: does nothing (not even 'apt-get update') when every package is already installed.
 set -eu
 PKGS="build-essential make cmake git ccache
@@ -13,6 +15,7 @@ PKGS="build-essential make cmake git ccache
   zlib1g-dev libbz2-dev liblz4-dev libzstd-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-rosbag
+  python3-dev pybind11-dev python3-numpy python3-distributed python3-pytest
   chromium"
 missing=""
 for p in $PKGS; do

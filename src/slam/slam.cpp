@@ -163,6 +163,9 @@ struct Slam::Impl {
   internal::LoopClosure loops;
   internal::DescriptorLoops descriptors;
   bool finished = false;
+  // state.T_world_local when the back end was last waited for: the caller's thread reads this one
+  // (Slam::latest) while the back end may be changing the other.
+  SE2 T_world_local_seen;
   // Runs the newest node's back-end work (backEnd) with back_end_thread. Declared last: destroyed
   // (joined) before the state it works on.
   std::unique_ptr<Worker> back_end = state.opt.back_end_thread ? std::make_unique<Worker>() : nullptr;
@@ -171,6 +174,7 @@ struct Slam::Impl {
   /// touches (nodes' world poses, submaps, constraints, its counters) is the caller's afterwards.
   void sync() {
     if (back_end) back_end->wait();
+    T_world_local_seen = state.T_world_local;
     for (Event& e : state.back_end_events) state.events.push_back(std::move(e));
     state.back_end_events.clear();
   }
@@ -316,24 +320,47 @@ void Slam::finish() {
   s.stats.total_seconds += secondsSince(t0);
 }
 
+namespace {
+ScanEstimate estimateOf(const internal::SlamState& s, const internal::ScanRecord& r) {
+  ScanEstimate e;
+  e.frame_index = r.frame_index;
+  e.time = r.time;
+  e.node = r.node;
+  e.is_node = r.is_node;
+  e.matched = r.matched;
+  e.degenerate = r.degenerate;
+  e.seconds = r.seconds;
+  e.T_world_robot = s.nodes[r.node].T_world_robot * r.T_node_scan;
+  return e;
+}
+}  // namespace
+
 std::vector<ScanEstimate> Slam::trajectory() const {
   impl_->sync();
   const internal::SlamState& s = impl_->state;
   std::vector<ScanEstimate> out;
   out.reserve(s.scans.size());
-  for (const internal::ScanRecord& r : s.scans) {
-    ScanEstimate e;
-    e.frame_index = r.frame_index;
-    e.time = r.time;
-    e.node = r.node;
-    e.is_node = r.is_node;
-    e.matched = r.matched;
-    e.degenerate = r.degenerate;
-    e.seconds = r.seconds;
-    e.T_world_robot = s.nodes[r.node].T_world_robot * r.T_node_scan;
-    out.push_back(e);
-  }
+  for (const internal::ScanRecord& r : s.scans) out.push_back(estimateOf(s, r));
   return out;
+}
+
+ScanEstimate Slam::latest() const {
+  const internal::SlamState& s = impl_->state;
+  if (s.scans.empty()) throw invalidArgument("no scan added yet", {"Slam", 0, "latest"});
+  // Without waiting for the back end: the front-end pose of the scan (never changed once set) in
+  // the world frame as of the back end's last finished work (the newest node's world pose is
+  // derived the same way).
+  const internal::ScanRecord& r = s.scans.back();
+  ScanEstimate e;
+  e.frame_index = r.frame_index;
+  e.time = r.time;
+  e.node = r.node;
+  e.is_node = r.is_node;
+  e.matched = r.matched;
+  e.degenerate = r.degenerate;
+  e.seconds = r.seconds;
+  e.T_world_robot = impl_->T_world_local_seen * s.nodes[r.node].T_local_robot * r.T_node_scan;
+  return e;
 }
 
 const std::vector<Node>& Slam::nodes() const {

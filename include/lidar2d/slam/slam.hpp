@@ -108,6 +108,13 @@ class Slam {
 
   /// Every scan added so far, in input order, with its current estimate.
   std::vector<ScanEstimate> trajectory() const;
+
+  /// The current estimate of the scan added last (every `add` records one scan), in O(1) where
+  /// `trajectory()` copies every scan: for a caller that wants each scan's pose as it goes (the
+  /// Python binding's `Slam.add`). It does not wait for the back-end thread: the pose is the
+  /// front end's, in the world frame as of the back end's last finished work. Throws
+  /// `lidar2d::Error` (kInvalidArgument) before the first `add`.
+  ScanEstimate latest() const;
   const std::vector<Node>& nodes() const;
   /// Sequential, odometry and loop constraints (accepted and rejected).
   const std::vector<Constraint>& constraints() const;

@@ -1,0 +1,32 @@
+# Installs the build tree BUILD_DIR into WORK_DIR/prefix, then configures, builds and runs the
+# consumer project tests/install/consumer against it (find_package(lidar2d) only through
+# CMAKE_PREFIX_PATH), compiled with CONSUMER_FLAGS (the sanitizer build's). Any failing step fails the
+# test with that step's output.
+file(REMOVE_RECURSE ${WORK_DIR})
+function(step name)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "install test: ${name} failed (${rc}):\n${out}\n${err}")
+  endif()
+  set(STEP_OUTPUT "${out}" PARENT_SCOPE)
+endfunction()
+set(prefix ${WORK_DIR}/prefix)
+step(install ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix})
+foreach(f include/lidar2d/core/se2.hpp lib/cmake/lidar2d/lidar2dConfig.cmake bin/lidar2d)
+  if(NOT EXISTS ${prefix}/${f})
+    message(FATAL_ERROR "install test: ${prefix}/${f} was not installed")
+  endif()
+endforeach()
+if(EXISTS ${prefix}/include/lidar2d/io/internal OR EXISTS ${prefix}/src)
+  message(FATAL_ERROR "install test: library-private headers were installed")
+endif()
+step(configure ${CMAKE_COMMAND} -S ${SOURCE_DIR}/tests/install/consumer -B ${WORK_DIR}/build
+     -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix} "-DCMAKE_CXX_FLAGS=${CONSUMER_FLAGS}")
+step(build ${CMAKE_COMMAND} --build ${WORK_DIR}/build)
+step(run ${WORK_DIR}/build/consumer)
+message(STATUS "${STEP_OUTPUT}")
+if(NOT STEP_OUTPUT MATCHES "consumer: ok")
+  message(FATAL_ERROR "install test: the consumer printed no 'consumer: ok'")
+endif()
+step(cli ${prefix}/bin/lidar2d --help)
+file(REMOVE_RECURSE ${WORK_DIR})
