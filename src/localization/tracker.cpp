@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <utility>
+#include <vector>
 
 #include "lidar2d/core/error.hpp"
 #include "src/localization/internal/database_index.hpp"
@@ -100,6 +101,7 @@ TrackResult Tracker::add(const Frame& frame) {
   // between checked poses (constant velocity), else none.
   SE2 step;
   const bool odom_ok = frame.T_odom_robot && frame.T_odom_robot->isFinite();
+  const bool had_odom = s.last_odom.has_value();
   if (odom_ok && s.last_odom)
     step = s.last_odom->inverse() * *frame.T_odom_robot;
   else if (s.step)
@@ -127,18 +129,27 @@ TrackResult Tracker::add(const Frame& frame) {
   if (prior) {
     const auto t0 = Clock::now();
     const Points2 sub = subsample(points, o.max_points);
-    const registration::Result m = registration::matchLikelihoodField(s.field, sub, *prior, o.field);
-    r.iterations = m.iterations;
-    const SE2 correction = prior->inverse() * m.T_target_source;
+    // Without odometry the constant-velocity prior is wrong where the robot starts or stops
+    // turning (20 degrees per scan on a tight arc); the last pose itself (zero velocity) is then
+    // tried as a second prior. With odometry its step is trusted alone.
+    std::vector<SE2> priors{*prior};
+    if (!(odom_ok && had_odom) && s.step) priors.push_back(*s.pose);
+    registration::Result m;
     std::string why;
-    if (!m.T_target_source.isFinite() || m.num_inliers < o.field.min_points) {
-      why = "no match";
-    } else if (correction.translation().norm() > o.max_correction_m ||
-               std::abs(correction.theta()) > o.max_correction_rad) {
-      why = "jump";
-    } else {
-      r.score = s.loc->score(sub, m.T_target_source, sensor);
-      if (r.score < o.min_track_score) why = "low score";
+    for (const SE2& init : priors) {
+      m = registration::matchLikelihoodField(s.field, sub, init, o.field);
+      r.iterations += m.iterations;
+      const SE2 correction = init.inverse() * m.T_target_source;
+      if (!m.T_target_source.isFinite() || m.num_inliers < o.field.min_points) {
+        why = "no match";
+      } else if (correction.translation().norm() > o.max_correction_m ||
+                 std::abs(correction.theta()) > o.max_correction_rad) {
+        why = "jump";
+      } else {
+        r.score = s.loc->score(sub, m.T_target_source, sensor);
+        why = r.score < o.min_track_score ? "low score" : "";
+      }
+      if (why.empty()) break;
     }
     r.track_ms = msSince(t0);
     if (why.empty()) {
