@@ -116,7 +116,7 @@ TEST(Tracker, TracksWithoutOdometryByConstantVelocity) {
   const auto res = trackAll(tracker, frames);
   // Weaker than with odometry: where the robot enters or leaves a tight arc (about 18 degrees per
   // scan at 5 Hz) neither constant velocity nor standing still is a close enough prior, and those
-  // scans are lost or re-fixed globally (86.5% within when written).
+  // scans are lost or re-fixed globally.
   expectAccurate(frames, res, 0.8);
 }
 

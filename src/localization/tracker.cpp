@@ -1,5 +1,7 @@
 #include "lidar2d/localization/tracker.hpp"
 
+#include <Eigen/Core>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -7,6 +9,7 @@
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/degeneracy/degeneracy.hpp"
 #include "src/localization/internal/database_index.hpp"
 
 namespace lidar2d::localization {
@@ -133,9 +136,14 @@ TrackResult Tracker::add(const Frame& frame) {
     // turning (20 degrees per scan on a tight arc); the last pose itself (zero velocity) is then
     // tried as a second prior. With odometry its step is trusted alone.
     std::vector<SE2> priors{*prior};
-    if (!(odom_ok && had_odom) && s.step) priors.push_back(*s.pose);
+    const bool with_odometry = odom_ok && had_odom;
+    if (!with_odometry && s.step) priors.push_back(*s.pose);
     registration::Result m;
     std::string why;
+    // Without odometry the prior may be metres off along a direction the scan does not constrain
+    // (a corridor: the match slides along it and still explains the scan), so a degenerate scan
+    // (degeneracy::analyze) is not tracked; with odometry the prior holds that direction.
+    const bool unconstrained = !with_odometry && degeneracy::analyze(points).degenerate();
     for (const SE2& init : priors) {
       m = registration::matchLikelihoodField(s.field, sub, init, o.field);
       r.iterations += m.iterations;
@@ -145,6 +153,8 @@ TrackResult Tracker::add(const Frame& frame) {
       } else if (correction.translation().norm() > o.max_correction_m ||
                  std::abs(correction.theta()) > o.max_correction_rad) {
         why = "jump";
+      } else if (unconstrained) {
+        why = "unconstrained";
       } else {
         r.score = s.loc->score(sub, m.T_target_source, sensor);
         why = r.score < o.min_track_score ? "low score" : "";
@@ -172,6 +182,7 @@ TrackResult Tracker::add(const Frame& frame) {
   const LocalizationResult g = s.loc->localize(points, sensor);
   r.global_ms = msSince(t0);
   const bool answered = !g.declined && g.score >= o.min_global_score;
+  const std::optional<SE2> previous = s.candidate;
   if (answered) {
     const SE2 e = s.candidate ? (*s.candidate * step).inverse() * g.T_world_robot : SE2();
     const bool agrees = s.candidate && e.translation().norm() <= 2 * o.max_correction_m &&
@@ -190,7 +201,9 @@ TrackResult Tracker::add(const Frame& frame) {
     r.reason.clear();
     s.fixed_once = true;
     s.pose = g.T_world_robot;
-    s.step.reset();
+    // The step between the last two agreeing answers: the constant-velocity prior of the next scan
+    // when there is no odometry (standing still would be metres off on a log of keyframes).
+    s.step = s.confirmations >= 2 ? std::optional<SE2>(previous->inverse() * g.T_world_robot) : std::nullopt;
     s.lost = 0;
     s.candidate.reset();
     s.confirmations = 0;
