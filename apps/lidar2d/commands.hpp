@@ -24,6 +24,8 @@ void addSlamCommand(CLI::App& app);
 void addDegeneracyCommand(CLI::App& app);
 /// Adds `localize-index` and `localize`.
 void addLocalizeCommands(CLI::App& app);
+/// Adds `track`.
+void addTrackCommand(CLI::App& app);
 
 /// Adds the reader flags shared by every command that reads a log (--scan-topic, --odom-topic,
 /// --carmen-laser, --carmen-poses) bound to `options`.

@@ -70,6 +70,7 @@ int main(int argc, char** argv) {
   lidar2d::cli::addSlamCommand(app);
   lidar2d::cli::addDegeneracyCommand(app);
   lidar2d::cli::addLocalizeCommands(app);
+  lidar2d::cli::addTrackCommand(app);
   lidar2d::cli::requireFiniteNumbers(app);
   lidar2d::cli::showValuesInWords(app);
   if (argc > 1 && !knownCommandOrOption(app, argv[1])) return 2;

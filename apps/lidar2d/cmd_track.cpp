@@ -1,0 +1,187 @@
+// lidar2d track MAP LOG -o FILE [--db DB] [--json FILE] [--eval] [--no-odometry]: localization in a
+// known map without an initial pose (localization::Tracker). Output: one line per scan,
+// `t x y theta status score`, status `global` (placed by global localization), `tracking` (matched
+// from the odometry or constant-velocity prior, checked against the map) or `lost` (pose `nan`).
+// --json writes a summary: share of each status, time to the first fix, relocalizations, timings,
+// and with --eval the accuracy against the log's truth.
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "map_input.hpp"
+#include "progress.hpp"
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/eval/metrics.hpp"
+#include "lidar2d/io/atomic_file.hpp"
+#include "lidar2d/io/localization_db.hpp"
+#include "lidar2d/io/map_file.hpp"
+#include "lidar2d/localization/tracker.hpp"
+
+namespace lidar2d::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+struct TrackArgs {
+  std::string map;
+  BareMapOptions bare;
+  std::string log;
+  std::string db;
+  std::string output;
+  std::string json;
+  bool eval = false;
+  bool no_odometry = false;
+  bool quiet = false;
+  localization::TrackerOptions options;
+  io::ReaderOptions reader;
+};
+
+nlohmann::json timing(const std::vector<double>& ms) {
+  if (ms.empty()) return nullptr;
+  return {{"count", ms.size()},
+          {"median", eval::percentile(ms, 0.5)},
+          {"p99", eval::percentile(ms, 0.99)},
+          {"max", eval::percentile(ms, 1.0)}};
+}
+
+void runTrack(const TrackArgs& a) {
+  const CreatedFolders out_folders = prepareOutputFile(a.output);
+  std::optional<CreatedFolders> json_folders;
+  if (!a.json.empty()) json_folders.emplace(prepareOutputFile(a.json));
+  const auto t0 = Clock::now();
+  const io::MapFile map = readMapChecked(a.map, a.bare);
+  std::optional<localization::Database> db;
+  if (!a.db.empty()) db = io::readLocalizationDatabase(a.db);
+  std::unique_ptr<localization::Tracker> tracker;
+  try {
+    tracker = std::make_unique<localization::Tracker>(map.map, std::move(db), a.options);
+  } catch (const Error& e) {
+    throw Error(e.kind(), e.message(), ErrorLocation(a.db.empty() ? a.map : a.db, 0, e.where().field));
+  }
+  const double setup_s = std::chrono::duration<double>(Clock::now() - t0).count();
+
+  auto source = io::openLog(a.log, a.reader);
+  io::AtomicFile out(a.output);
+  out.stream() << "# lidar2d track: t x y theta status score (status global|tracking|lost; nan pose when lost)\n";
+  std::size_t scans = 0, counts[3] = {0, 0, 0}, relocalizations = 0;
+  std::size_t within = 0, tracking_within = 0, wrong_tracking = 0, wrong_global = 0;
+  std::optional<double> first_time, first_fix_time;
+  std::vector<double> track_ms, global_ms, scan_ms;
+  RateProgress progress(a.quiet, "tracking", "scans", source->sizeHint());
+  while (auto f = source->next()) {
+    progress.update(f->index);
+    if (a.no_odometry) f->T_odom_robot.reset();
+    if (a.eval && !f->T_world_robot)
+      throw badInput(fmt::format("scan {} (time {:.6f}) has no ground-truth pose; --eval needs a log with truth",
+                                 f->index, f->time),
+                     ErrorLocation(a.log));
+    const localization::TrackResult r = tracker->add(*f);
+    ++scans;
+    ++counts[static_cast<int>(r.status)];
+    if (!first_time) first_time = f->time;
+    if (!first_fix_time && r.status != localization::TrackStatus::kLost) first_fix_time = f->time;
+    relocalizations += r.relocalized ? 1 : 0;
+    if (r.status == localization::TrackStatus::kTracking) track_ms.push_back(r.track_ms);
+    if (r.global_ms > 0) global_ms.push_back(r.global_ms);
+    scan_ms.push_back(r.track_ms + r.global_ms);
+    if (r.status == localization::TrackStatus::kLost) {
+      out.stream() << fmt::format("{:.9f} nan nan nan lost 0\n", f->time);
+    } else {
+      const SE2& T = r.T_world_robot;
+      out.stream() << fmt::format("{:.9f} {:.6f} {:.6f} {:.6f} {} {:.4f}\n", f->time, T.x(), T.y(), T.theta(),
+                                  localization::toString(r.status), r.score);
+    }
+    if (a.eval && r.status != localization::TrackStatus::kLost) {
+      const SE2 e = f->T_world_robot->inverse() * r.T_world_robot;
+      const bool ok = e.translation().norm() <= 0.1 && std::abs(e.theta()) <= 2.0 * kDeg;
+      const bool wrong = e.translation().norm() > 0.5 || std::abs(e.theta()) > 10.0 * kDeg;
+      within += ok;
+      const bool tracking = r.status == localization::TrackStatus::kTracking;
+      tracking_within += ok && tracking;
+      wrong_tracking += wrong && tracking;
+      wrong_global += wrong && !tracking;
+    }
+  }
+  progress.clear();
+  if (scans == 0) throw badInput("the log has no scan to track", ErrorLocation(a.log));
+  out.commit();
+
+  const auto share = [&](std::size_t n) { return static_cast<double>(n) / static_cast<double>(scans); };
+  nlohmann::json j;
+  j["map"] = a.map;
+  j["log"] = a.log;
+  j["database"] = a.db.empty() ? nlohmann::json("built in memory") : nlohmann::json(a.db);
+  j["setup_s"] = setup_s;
+  j["scans"] = scans;
+  j["status"] = {{"global", share(counts[0])}, {"tracking", share(counts[1])}, {"lost", share(counts[2])}};
+  j["status_counts"] = {{"global", counts[0]}, {"tracking", counts[1]}, {"lost", counts[2]}};
+  j["time_to_first_fix_s"] = first_fix_time ? nlohmann::json(*first_fix_time - *first_time) : nlohmann::json(nullptr);
+  j["relocalizations"] = relocalizations;
+  j["tracked_scan_ms"] = timing(track_ms);
+  j["global_fix_ms"] = timing(global_ms);
+  j["scan_ms"] = timing(scan_ms);
+  j["total_s"] = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (a.eval) {
+    j["eval"] = {{"tracking_within_share", share(tracking_within)},
+                 {"within_share", share(within)},
+                 {"wrong_while_tracking", wrong_tracking},
+                 {"wrong_global", wrong_global},
+                 {"definition",
+                  "within: 0.1 m and 2 deg of the truth (shares of all scans); wrong: more than 0.5 m or 10 deg off"}};
+  }
+  if (!a.json.empty()) io::writeFileAtomically(a.json, j.dump(2) + "\n");
+  if (!a.quiet) {
+    std::cerr << fmt::format("tracked {} scans: {:.1f}% tracking, {:.1f}% global, {:.1f}% lost; {} relocalizations",
+                             scans, 100 * share(counts[1]), 100 * share(counts[0]), 100 * share(counts[2]),
+                             relocalizations);
+    if (!track_ms.empty()) std::cerr << fmt::format("; median {:.2f} ms per tracked scan", eval::percentile(track_ms, 0.5));
+    if (a.eval)
+      std::cerr << fmt::format("; {:.1f}% tracking within 10 cm / 2 deg, {} wrong while tracking",
+                               100 * share(tracking_within), wrong_tracking);
+    std::cerr << fmt::format(" -> {}\n", a.output);
+  }
+}
+
+}  // namespace
+
+void addTrackCommand(CLI::App& app) {
+  auto a = std::make_shared<TrackArgs>();
+  auto* sub = app.add_subcommand(
+      "track",
+      "Localization in a known map without an initial pose: global localization, then tracking from odometry, "
+      "recovering by itself; writes 't x y theta status score' per scan (status global|tracking|lost)");
+  sub->add_option("MAP", a->map, "map: a map_server YAML, or a bare PGM/PNG image with --resolution")->required();
+  addBareMapOptions(sub, a->bare, "MAP");
+  sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
+  sub->add_option("-o,--output", a->output, "output file, one line per scan")->required();
+  sub->add_option("--db", a->db, "database from 'lidar2d localize-index' (default: built in memory)");
+  sub->add_option("--json", a->json, "write a JSON summary (status shares, first fix, timings; accuracy with --eval)");
+  sub->add_flag("--eval", a->eval,
+                "compare with the log's truth: share within 10 cm / 2 deg, poses more than 0.5 m / 10 deg off");
+  sub->add_flag("--no-odometry", a->no_odometry, "ignore the log's odometry (constant-velocity prior)");
+  sub->add_option("--min-score", a->options.min_track_score,
+                  "a tracked scan explaining less than this fraction of its points fails")
+      ->capture_default_str();
+  sub->add_option("--min-global-score", a->options.min_global_score,
+                  "a global fix scoring below this is not taken (the scan stays lost)")
+      ->capture_default_str();
+  sub->add_option("--max-lost", a->options.max_lost_scans,
+                  "failed scans in a row after which the prior is dropped (global localization only)")
+      ->capture_default_str();
+  sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
+  addReaderOptions(sub, a->reader);
+  sub->callback([a] { runTrack(*a); });
+}
+
+}  // namespace lidar2d::cli

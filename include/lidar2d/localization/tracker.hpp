@@ -1,0 +1,121 @@
+#pragma once
+/// @file
+/// Localization in a known map, scan by scan, without an initial pose (`lidar2d track`).
+///
+/// The first scans are placed by global localization (Localizer, one scan each); once a scan is
+/// placed, every next scan is tracked: its prior is the last pose moved by the odometry's step
+/// (or, without odometry, by the last step: constant velocity), the scan is matched to the map's
+/// likelihood field from that prior (registration::matchLikelihoodField, Gauss-Newton with line
+/// search) and the match is accepted only when the map explains it (Localizer::score at least
+/// `min_track_score`: points on obstacles minus beams through obstacles) and the correction from
+/// the prior stays plausible. A scan that fails is tried at once by global localization (a robot
+/// carried elsewhere, "kidnapped", is found again); a global answer is taken only when it scores
+/// `min_global_score` and `confirm_fixes` answers in a row agree with the odometry between them.
+/// Until then, or when global localization declines, the scan is
+/// `lost` and the prior is kept for the next scans, up to `max_lost_scans`, after which only global
+/// localization runs until it answers. A pose is never reported as `tracking` unless its match
+/// passed the checks: an unchecked pose is `lost` (with a NaN pose).
+///
+/// Memory is constant over any log length: the tracker keeps the map's field, the localizer and
+/// the last pose, odometry and step, nothing per scan.
+///
+/// Frames: `T_world_robot` in the map's world frame; odometry `T_odom_robot` in any frame (only
+/// its steps are used).
+
+#include <cstddef>
+#include <memory>
+#include <numbers>
+#include <optional>
+#include <string>
+
+#include "lidar2d/core/frame.hpp"
+#include "lidar2d/core/occupancy_image.hpp"
+#include "lidar2d/core/se2.hpp"
+#include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/registration/likelihood_field.hpp"
+
+namespace lidar2d::localization {
+
+/// Options of the tracker. `validate()` throws `lidar2d::Error` (kInvalidArgument) naming the
+/// first field out of its domain.
+struct TrackerOptions {
+  LocalizerOptions localizer;  ///< global localization (first fix, recovery)
+  DatabaseOptions database;    ///< database built when none is given
+  /// Likelihood field of the map for tracking; fromMap's defaults with the line search on.
+  registration::LikelihoodFieldOptions field = trackingField();
+  std::size_t max_points = 240;  ///< scan points (evenly subsampled) used to match and score a tracked scan, >= 10
+  double min_track_score = 0.5;  ///< a tracked match explaining less of the scan than this (Localizer::score) fails, in [0, 1]
+  /// A global fix scoring below this is not taken (the scan stays `lost`): stricter than the
+  /// localizer's own min_score, because the scans after a fix are tracked from it, and a wrong fix
+  /// in a part of the building the map lacks (a room like a mapped one) would be tracked on, in [0, 1]
+  double min_global_score = 0.7;
+  /// Global answers in a row, each consistent with the previous moved by the prior's step (within
+  /// max_correction_m / max_correction_rad, doubled), needed before a fix is taken; the scans before it are
+  /// `lost`. One wrong answer in a place the map lacks is common; the same wrong place found again
+  /// and again in agreement with odometry is not. >= 1
+  std::size_t confirm_fixes = 3;
+  /// A match moving the pose farther than this from its prior fails (the prior, from odometry or
+  /// constant velocity, is not that wrong between two scans; a larger jump is a wrong minimum) [m], > 0
+  double max_correction_m = 0.5;
+  double max_correction_rad = 15.0 * std::numbers::pi / 180.0;  ///< the same for the heading [rad], > 0
+  /// Failed scans in a row after which the prior is dropped and only global localization runs, >= 1
+  std::size_t max_lost_scans = 5;
+  void validate() const;
+  static registration::LikelihoodFieldOptions trackingField() {
+    registration::LikelihoodFieldOptions o;
+    o.line_search = true;
+    return o;
+  }
+};
+
+/// What placed a scan.
+enum class TrackStatus {
+  kGlobal,    ///< global localization (first fix or a recovery)
+  kTracking,  ///< scan-to-map match from the prior, checked
+  kLost,      ///< no checked pose (T_world_robot is NaN)
+};
+
+/// "global", "tracking" or "lost".
+const char* toString(TrackStatus status);
+
+/// The answer for one scan.
+struct TrackResult {
+  TrackStatus status = TrackStatus::kLost;
+  SE2 T_world_robot;     ///< pose in the map's world frame; NaN when lost
+  double score = 0.0;    ///< Localizer::score of the pose (0 when lost), in [0, 1]
+  bool relocalized = false;  ///< a global fix after an earlier fix (a recovery, not the first fix)
+  std::string reason;    ///< why a scan was not tracked ("no fix yet", "low score", "jump", "not converged", ...)
+  int iterations = 0;    ///< likelihood-field iterations of the tracking match (0 if none)
+  double track_ms = 0.0;   ///< time of the tracking match and its score [ms]
+  double global_ms = 0.0;  ///< time of global localization on this scan (0 if it did not run) [ms]
+};
+
+/// Tracks one robot in one map. Non-copyable; `add` is not thread-safe (one tracker per robot).
+class Tracker {
+ public:
+  /// Builds the localizer (with `database`, or a database built in memory from
+  /// `options.database`) and the tracking field of `map`. Throws `lidar2d::Error`: kInvalidArgument
+  /// for bad options; kBadInput when the map has no free space or the database belongs to another
+  /// map (field "map checksum").
+  explicit Tracker(const OccupancyImage& map, std::optional<Database> database = std::nullopt,
+                   const TrackerOptions& options = {});
+  ~Tracker();
+  Tracker(const Tracker&) = delete;
+  Tracker& operator=(const Tracker&) = delete;
+
+  /// Places the next scan of the robot (`frame.scan` through `frame.T_robot_laser`; its
+  /// `T_odom_robot`, when present on this and the previous frame, gives the prior's step; its
+  /// truth is ignored). Never throws for bad data: a scan without valid beams is `lost`.
+  TrackResult add(const Frame& frame);
+  /// Forgets the pose (the next scan is placed by global localization).
+  void reset();
+
+  const Localizer& localizer() const;
+  const TrackerOptions& options() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> s_;
+};
+
+}  // namespace lidar2d::localization

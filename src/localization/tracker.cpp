@@ -1,0 +1,216 @@
+#include "lidar2d/localization/tracker.hpp"
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <utility>
+#include <vector>
+
+#include "lidar2d/core/error.hpp"
+#include "lidar2d/degeneracy/degeneracy.hpp"
+#include "src/localization/internal/database_index.hpp"
+
+namespace lidar2d::localization {
+
+using internal::badOption;
+
+void TrackerOptions::validate() const {
+  localizer.validate();
+  database.validate();
+  field.validate();
+  if (max_points < 10) throw badOption("max_points", static_cast<double>(max_points));
+  if (!(min_track_score >= 0 && min_track_score <= 1)) throw badOption("min_track_score", min_track_score);
+  if (!(max_correction_m > 0) || !std::isfinite(max_correction_m)) throw badOption("max_correction_m", max_correction_m);
+  if (!(max_correction_rad > 0) || !std::isfinite(max_correction_rad))
+    throw badOption("max_correction_rad", max_correction_rad);
+  if (!(min_global_score >= 0 && min_global_score <= 1)) throw badOption("min_global_score", min_global_score);
+  if (confirm_fixes < 1) throw badOption("confirm_fixes", static_cast<double>(confirm_fixes));
+  if (max_lost_scans < 1) throw badOption("max_lost_scans", static_cast<double>(max_lost_scans));
+}
+
+const char* toString(TrackStatus status) {
+  switch (status) {
+    case TrackStatus::kGlobal: return "global";
+    case TrackStatus::kTracking: return "tracking";
+    case TrackStatus::kLost: return "lost";
+  }
+  return "lost";
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+SE2 nanPose() {
+  const double n = std::numeric_limits<double>::quiet_NaN();
+  return {n, n, n};
+}
+
+// At most `n` of `points`, evenly spaced in scan order (the scan's shape is kept; the match and
+// score cost grow with the points, and a few hundred constrain a pose as well as a thousand).
+Points2 subsample(const Points2& points, std::size_t n) {
+  if (points.size() <= n) return points;
+  Points2 out;
+  out.reserve(n);
+  for (std::size_t k = 0; k < n; ++k) out.push_back(points[k * points.size() / n]);
+  return out;
+}
+
+}  // namespace
+
+struct Tracker::State {
+  State(const OccupancyImage& map, std::optional<Database> db, const TrackerOptions& options)
+      : o((options.validate(), options)),
+        loc(db ? std::make_unique<Localizer>(map, std::move(*db), options.localizer)
+               : std::make_unique<Localizer>(map, options.localizer, options.database)),
+        field(registration::LikelihoodField::fromMap(map, options.field)) {}
+  const TrackerOptions o;
+  std::unique_ptr<Localizer> loc;
+  registration::LikelihoodField field;
+  std::optional<SE2> pose;  ///< last checked pose, or the prior carried over lost scans
+  std::optional<SE2> last_odom;
+  std::optional<SE2> step;  ///< last per-scan motion between checked poses (constant velocity)
+  std::optional<SE2> candidate;   ///< last global answer not yet confirmed
+  std::size_t confirmations = 0;  ///< global answers in a row agreeing with it
+  std::size_t lost = 0;     ///< failed scans in a row since the last checked pose
+  bool fixed_once = false;
+};
+
+Tracker::Tracker(const OccupancyImage& map, std::optional<Database> database, const TrackerOptions& options)
+    : s_(std::make_unique<State>(map, std::move(database), options)) {}
+Tracker::~Tracker() = default;
+
+const Localizer& Tracker::localizer() const { return *s_->loc; }
+const TrackerOptions& Tracker::options() const { return s_->o; }
+
+void Tracker::reset() {
+  s_->pose.reset();
+  s_->candidate.reset();
+  s_->confirmations = 0;
+  s_->step.reset();
+  s_->lost = 0;
+}
+
+TrackResult Tracker::add(const Frame& frame) {
+  State& s = *s_;
+  const TrackerOptions& o = s.o;
+  TrackResult r;
+  r.T_world_robot = nanPose();
+
+  // The prior's step: odometry when this and the previous frame have it, else the last step
+  // between checked poses (constant velocity), else none.
+  SE2 step;
+  const bool odom_ok = frame.T_odom_robot && frame.T_odom_robot->isFinite();
+  const bool had_odom = s.last_odom.has_value();
+  if (odom_ok && s.last_odom)
+    step = s.last_odom->inverse() * *frame.T_odom_robot;
+  else if (s.step)
+    step = *s.step;
+  s.last_odom = odom_ok ? frame.T_odom_robot : std::nullopt;
+
+  Points2 points;
+  for (const auto& p : frame.scan.toPoints(frame.T_robot_laser))
+    if (p.allFinite()) points.push_back(p);
+  const Eigen::Vector2d sensor = frame.T_robot_laser.translation();
+  const std::optional<SE2> prior = s.pose ? std::optional<SE2>(*s.pose * step) : std::nullopt;
+
+  auto fail = [&](std::string reason) {
+    r.reason = std::move(reason);
+    if (prior && ++s.lost < o.max_lost_scans) {
+      s.pose = prior;
+    } else {
+      s.pose.reset();
+      s.step.reset();
+    }
+    return r;
+  };
+  if (points.size() < o.field.min_points) return fail("no points");
+
+  if (prior) {
+    const auto t0 = Clock::now();
+    const Points2 sub = subsample(points, o.max_points);
+    // Without odometry the constant-velocity prior is wrong where the robot starts or stops
+    // turning (20 degrees per scan on a tight arc); the last pose itself (zero velocity) is then
+    // tried as a second prior. With odometry its step is trusted alone.
+    std::vector<SE2> priors{*prior};
+    const bool with_odometry = odom_ok && had_odom;
+    if (!with_odometry && s.step) priors.push_back(*s.pose);
+    registration::Result m;
+    std::string why;
+    // Without odometry the prior may be metres off along a direction the scan does not constrain
+    // (a corridor: the match slides along it and still explains the scan), so a degenerate scan
+    // (degeneracy::analyze) is not tracked; with odometry the prior holds that direction.
+    const bool unconstrained = !with_odometry && degeneracy::analyze(points).degenerate();
+    for (const SE2& init : priors) {
+      m = registration::matchLikelihoodField(s.field, sub, init, o.field);
+      r.iterations += m.iterations;
+      const SE2 correction = init.inverse() * m.T_target_source;
+      if (!m.T_target_source.isFinite() || m.num_inliers < o.field.min_points) {
+        why = "no match";
+      } else if (correction.translation().norm() > o.max_correction_m ||
+                 std::abs(correction.theta()) > o.max_correction_rad) {
+        why = "jump";
+      } else if (unconstrained) {
+        why = "unconstrained";
+      } else {
+        r.score = s.loc->score(sub, m.T_target_source, sensor);
+        why = r.score < o.min_track_score ? "low score" : "";
+      }
+      if (why.empty()) break;
+    }
+    r.track_ms = msSince(t0);
+    if (why.empty()) {
+      // The step is measured between checked poses only; carried priors are not evidence.
+      if (s.lost == 0) s.step = s.pose->inverse() * m.T_target_source;
+      s.pose = m.T_target_source;
+      s.lost = 0;
+      s.candidate.reset();
+      r.status = TrackStatus::kTracking;
+      r.T_world_robot = m.T_target_source;
+      return r;
+    }
+    r.reason = why;
+    r.score = 0.0;
+  }
+
+  // Global localization: the first fix, or at once when tracking fails (a kidnapped robot is found
+  // on the scan it is first seen on, not after the prior has run out).
+  const auto t0 = Clock::now();
+  const LocalizationResult g = s.loc->localize(points, sensor);
+  r.global_ms = msSince(t0);
+  const bool answered = !g.declined && g.score >= o.min_global_score;
+  const std::optional<SE2> previous = s.candidate;
+  if (answered) {
+    const SE2 e = s.candidate ? (*s.candidate * step).inverse() * g.T_world_robot : SE2();
+    const bool agrees = s.candidate && e.translation().norm() <= 2 * o.max_correction_m &&
+                        std::abs(e.theta()) <= 2 * o.max_correction_rad;
+    s.confirmations = agrees ? s.confirmations + 1 : 1;
+    s.candidate = g.T_world_robot;
+  } else {
+    s.candidate.reset();
+    s.confirmations = 0;
+  }
+  if (answered && s.confirmations >= o.confirm_fixes) {
+    r.status = TrackStatus::kGlobal;
+    r.T_world_robot = g.T_world_robot;
+    r.score = g.score;
+    r.relocalized = s.fixed_once;
+    r.reason.clear();
+    s.fixed_once = true;
+    s.pose = g.T_world_robot;
+    // The step between the last two agreeing answers: the constant-velocity prior of the next scan
+    // when there is no odometry (standing still would be metres off on a log of keyframes).
+    s.step = s.confirmations >= 2 ? std::optional<SE2>(previous->inverse() * g.T_world_robot) : std::nullopt;
+    s.lost = 0;
+    s.candidate.reset();
+    s.confirmations = 0;
+    return r;
+  }
+  const std::string why = answered ? "unconfirmed" : g.declined ? g.reason : "low score";
+  return fail(prior ? r.reason + ", global " + why : (s.fixed_once ? "global " : "no fix yet, global ") + why);
+}
+
+}  // namespace lidar2d::localization
