@@ -33,10 +33,7 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool de
     sqrt_info(2, 2) = 1.0 / s.opt.sequential_sigma_rad;
   }
   s.addEdge(std::move(c), sqrt_info, 0.0);
-  // Across a lost track odometry is no evidence either (a kidnapped robot's odometry is wrong):
-  // closures that tie the new fragment to the map place it; where none does, checkAtEnd lets
-  // odometry win.
-  if (!restart && s.node_odometry[n - 1] && s.node_odometry[n]) {
+  if (s.node_odometry[n - 1] && s.node_odometry[n]) {
     Constraint o;
     o.kind = Constraint::Kind::kOdometry;
     o.from = n - 1;
@@ -44,6 +41,9 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool de
     o.T_from_to = s.node_odometry[n - 1]->inverse() * *s.node_odometry[n];
     const double sm = s.opt.odometry_sigma_m + 0.1 * o.T_from_to.translation().norm();
     const double sr = s.opt.odometry_sigma_rad + 0.1 * std::abs(o.T_from_to.theta());
+    // Across a lost track it is the only link to the map before it, until a relocalization either
+    // agrees with it or shows the robot was carried (LoopClosure::acceptLoop drops it then).
+    if (restart) s.restart_odometry = {s.edges.size(), s.constraints.size(), n};
     s.addEdge(std::move(o), diagSqrtInfo(sm, sr), 0.0);
   }
 }

@@ -4,10 +4,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <utility>
 
 #include "lidar2d/mapping/export.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
+#include "src/slam/internal/motion_prior.hpp"
 #include "src/slam/internal/points.hpp"
 
 namespace lidar2d::slam::internal {
@@ -166,6 +168,7 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   }
   if (s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since) {
     ++s_.stats.relocalizations;
+    dropCarriedOdometry(c);
     s_.back_end_events.push_back({s_.node_frame_index[c.to], s_.nodes[c.to].time,
                          fmt::format("relocalized: the fragment from node {} (after lost tracking) is tied to submap {} "
                                      "by node {}",
@@ -181,6 +184,31 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   // chain of stiff front-end edges that far. It has passed the stricter tests (and a second
   // closure confirms it), so it is a plain quadratic constraint.
   s_.addEdge(std::move(c), diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad), descriptor ? 0.0 : opt.loop_huber);
+}
+
+void LoopClosure::dropCarriedOdometry(const Constraint& c) {
+  if (!s_.restart_odometry || s_.restart_odometry->node != *s_.untied_since) return;
+  const SlamState::RestartOdometry ro = *s_.restart_odometry;
+  s_.restart_odometry.reset();
+  const std::size_t r = ro.node;
+  // The step across the lost track the closure implies (node r - 1 as estimated, node c.to where
+  // the closure puts it, node r by the front end's poses after the lost track), in the odometry
+  // step's own sigmas.
+  Constraint& odo = s_.constraints[ro.constraint];
+  const SE2 T_world_to_by_closure = s_.nodes[c.from].T_world_robot * c.T_from_to;
+  const SE2 T_r_to = s_.nodes[r].T_local_robot.inverse() * s_.nodes[c.to].T_local_robot;
+  const SE2 step = s_.nodes[r - 1].T_world_robot.inverse() * T_world_to_by_closure * T_r_to.inverse();
+  const MotionPrediction p = odometryPrediction(opt, odo.T_from_to, s_.nodes[r].time - s_.nodes[r - 1].time);
+  const double sigmas = p.distance(step);
+  if (!(sigmas > opt.prior_gate_sigmas)) return;
+  s_.edges.erase(s_.edges.begin() + static_cast<std::ptrdiff_t>(ro.edge));
+  odo.accepted = false;
+  odo.reason = fmt::format("contradicted by the relocalization by {:.1f} sigmas (the robot was carried)", sigmas);
+  s_.back_end_events.push_back(
+      {s_.node_frame_index[r], s_.nodes[r].time,
+       fmt::format("the odometry across the lost track at node {} contradicts the relocalization by {:.1f} sigmas: "
+                   "the robot was carried, the odometry link is dropped",
+                   r, sigmas)});
 }
 
 void LoopClosure::expirePending() {

@@ -45,6 +45,10 @@ class LoopClosure {
 
   registration::CorrelativeGrid submapGrid(const Submap& sm) const;
   void acceptLoop(Constraint c, Submap& sm);
+  /// `c` ties the untied fragment to the map before it: when it contradicts the odometry across
+  /// the lost track beyond prior_gate_sigmas, that odometry is wrong (a kidnapped robot) and its
+  /// constraint leaves the graph (listed as rejected, with an event).
+  void dropCarriedOdometry(const Constraint& c);
 
   SlamState& s_;
   const SlamOptions& opt;

@@ -99,6 +99,12 @@ struct SlamState {
   // closure ties the fragment to the nodes before it: the descriptor search relocalizes its nodes
   // against every earlier submap, without the drift limits (its link is only the prediction).
   std::optional<std::size_t> untied_since;
+  // The odometry constraint across the latest lost track (indices into edges and constraints, and
+  // its `to` node), while the fragment is untied: the relocalization checks it.
+  struct RestartOdometry {
+    std::size_t edge = 0, constraint = 0, node = 0;
+  };
+  std::optional<RestartOdometry> restart_odometry;
   std::size_t nodes_since_optimization = 0;
   std::size_t loops_since_optimization = 0;
   bool searched_loop_pending = false;     // a searched closure was accepted since the last optimisation
