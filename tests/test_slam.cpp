@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <numbers>
 
 #include "lidar2d/core/error.hpp"
@@ -56,6 +58,23 @@ std::vector<SE2> runSlam(const std::vector<Frame>& frames, const SlamOptions& o,
   }
   if (keep) *keep = last.get();
   return out;
+}
+
+/// Frames [0, cut) of `a`, then the robot carried to where it was at frame `from` (its odometry
+/// does not know it: it goes on from frame cut - 1's) driving frames [from, to) again; time goes on.
+std::vector<Frame> carried(const std::vector<Frame>& a, std::size_t cut, std::size_t from, std::size_t to) {
+  EXPECT_LE(to, a.size());
+  std::vector<Frame> frames(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(cut));
+  const SE2 T_odom_carried = *frames.back().T_odom_robot * (*a[from].T_odom_robot).inverse();
+  const double dt = std::max(0.0, frames.back().time + 0.1 - a[from].time);
+  for (std::size_t i = from; i < to; ++i) {
+    Frame f = a[i];
+    f.index = frames.size();
+    f.time += dt;
+    f.T_odom_robot = T_odom_carried * *a[i].T_odom_robot;
+    frames.push_back(f);
+  }
+  return frames;
 }
 
 std::vector<SE2> odometryInTruthFrame(const std::vector<Frame>& frames) {
@@ -254,15 +273,7 @@ TEST(Slam, KidnappedRobotIsReportedAndTheRunContinues) {
   // Two stretches of the office route glued together: the second starts elsewhere (7 m away,
   // turned by 90 degrees, in another room) with odometry that does not know it (a robot carried
   // away).
-  const auto a = simulateWorld("office", 5);
-  std::vector<Frame> frames(a.begin(), a.begin() + 250);
-  const SE2 T_odom_carried = *frames.back().T_odom_robot * (*a[1050].T_odom_robot).inverse();
-  for (std::size_t i = 1050; i < 1250; ++i) {
-    Frame f = a[i];
-    f.index = frames.size();
-    f.T_odom_robot = T_odom_carried * *a[i].T_odom_robot;
-    frames.push_back(f);
-  }
+  const auto frames = carried(simulateWorld("office", 5), 250, 1050, 1250);
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
   ASSERT_EQ(est.size(), frames.size());
@@ -282,18 +293,7 @@ TEST(Slam, KidnappedIntoTheMappedAreaIsRelocalizedIntoOneMap) {
   // (3 m away, turned by 90 degrees; its odometry does not know) and drives that stretch again: the
   // fragment after the lost track must be found in the map built before it, and the run ends as
   // one map in the truth's frame.
-  const auto a = simulateWorld("office", 5);
-  ASSERT_GT(a.size(), 600u);
-  std::vector<Frame> frames(a.begin(), a.begin() + 600);
-  const SE2 T_odom_carried = *frames.back().T_odom_robot * (*a[250].T_odom_robot).inverse();
-  const double dt = frames.back().time + 0.1 - a[250].time;
-  for (std::size_t i = 250; i < 550; ++i) {
-    Frame f = a[i];
-    f.index = frames.size();
-    f.time += dt;
-    f.T_odom_robot = T_odom_carried * *a[i].T_odom_robot;
-    frames.push_back(f);
-  }
+  const auto frames = carried(simulateWorld("office", 5), 600, 250, 550);
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
   ASSERT_EQ(est.size(), frames.size());

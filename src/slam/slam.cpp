@@ -321,7 +321,8 @@ void Slam::finish() {
 }
 
 namespace {
-ScanEstimate estimateOf(const internal::SlamState& s, const internal::ScanRecord& r) {
+/// Scan `r`'s estimate, at `T_world_robot`.
+ScanEstimate estimateOf(const internal::ScanRecord& r, const SE2& T_world_robot) {
   ScanEstimate e;
   e.frame_index = r.frame_index;
   e.time = r.time;
@@ -330,7 +331,7 @@ ScanEstimate estimateOf(const internal::SlamState& s, const internal::ScanRecord
   e.matched = r.matched;
   e.degenerate = r.degenerate;
   e.seconds = r.seconds;
-  e.T_world_robot = s.nodes[r.node].T_world_robot * r.T_node_scan;
+  e.T_world_robot = T_world_robot;
   return e;
 }
 }  // namespace
@@ -340,7 +341,7 @@ std::vector<ScanEstimate> Slam::trajectory() const {
   const internal::SlamState& s = impl_->state;
   std::vector<ScanEstimate> out;
   out.reserve(s.scans.size());
-  for (const internal::ScanRecord& r : s.scans) out.push_back(estimateOf(s, r));
+  for (const internal::ScanRecord& r : s.scans) out.push_back(estimateOf(r, s.nodes[r.node].T_world_robot * r.T_node_scan));
   return out;
 }
 
@@ -351,16 +352,7 @@ ScanEstimate Slam::latest() const {
   // the world frame as of the back end's last finished work (the newest node's world pose is
   // derived the same way).
   const internal::ScanRecord& r = s.scans.back();
-  ScanEstimate e;
-  e.frame_index = r.frame_index;
-  e.time = r.time;
-  e.node = r.node;
-  e.is_node = r.is_node;
-  e.matched = r.matched;
-  e.degenerate = r.degenerate;
-  e.seconds = r.seconds;
-  e.T_world_robot = impl_->T_world_local_seen * s.nodes[r.node].T_local_robot * r.T_node_scan;
-  return e;
+  return estimateOf(r, impl_->T_world_local_seen * s.nodes[r.node].T_local_robot * r.T_node_scan);
 }
 
 const std::vector<Node>& Slam::nodes() const {
