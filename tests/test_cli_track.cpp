@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "support/table_rows.hpp"
 #include "support/test_support.hpp"
 
 namespace lidar2d {
@@ -36,18 +37,7 @@ class CliTrack : public ::testing::Test {
   }
   static void TearDownTestSuite() { delete dir_; }
   static std::string path(const std::string& name) { return (*dir_ / name).string(); }
-  static std::vector<std::vector<std::string>> rows(const std::string& file) {
-    std::ifstream in(file);
-    std::vector<std::vector<std::string>> out;
-    for (std::string line; std::getline(in, line);) {
-      if (line.empty() || line[0] == '#') continue;
-      std::istringstream ss(line);
-      std::vector<std::string> f;
-      for (std::string w; ss >> w;) f.push_back(w);
-      out.push_back(f);
-    }
-    return out;
-  }
+  static std::vector<std::vector<std::string>> rows(const std::string& file) { return test::tableRows(file); }
   static void expectFormat(const std::string& file, std::size_t scans) {
     const auto lines = rows(file);
     ASSERT_EQ(lines.size(), scans);

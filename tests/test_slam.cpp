@@ -77,6 +77,13 @@ std::vector<Frame> carried(const std::vector<Frame>& a, std::size_t cut, std::si
   return frames;
 }
 
+/// Every event of a run, one per line.
+std::string eventText(const Slam& slam) {
+  std::string all;
+  for (const auto& ev : slam.events()) all += ev.what + "\n";
+  return all;
+}
+
 std::vector<SE2> odometryInTruthFrame(const std::vector<Frame>& frames) {
   // The simulator's odometry starts at the truth, so it is already in the world frame.
   std::vector<SE2> out;
@@ -258,8 +265,7 @@ TEST(Slam, SurvivesGapsBackwardsTimeMissingOdometryAndAKidnapping) {
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
   ASSERT_EQ(est.size(), frames.size());
-  std::string all;
-  for (const auto& ev : slam->events()) all += ev.what + "\n";
+  const std::string all = eventText(*slam);
   EXPECT_NE(all.find("gap"), std::string::npos) << all;
   EXPECT_NE(all.find("backwards"), std::string::npos) << all;
   EXPECT_NE(all.find("without odometry"), std::string::npos) << all;
@@ -277,8 +283,7 @@ TEST(Slam, KidnappedRobotIsReportedAndTheRunContinues) {
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
   ASSERT_EQ(est.size(), frames.size());
-  std::string all;
-  for (const auto& ev : slam->events()) all += ev.what + "\n";
+  const std::string all = eventText(*slam);
   EXPECT_NE(all.find("lost track"), std::string::npos) << all;
   for (const auto& p : est) EXPECT_TRUE(p.isFinite());
   // Each fragment that no loop closure tied to the first is reported.
@@ -297,8 +302,7 @@ TEST(Slam, KidnappedIntoTheMappedAreaIsRelocalizedIntoOneMap) {
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
   ASSERT_EQ(est.size(), frames.size());
-  std::string all;
-  for (const auto& ev : slam->events()) all += ev.what + "\n";
+  const std::string all = eventText(*slam);
   EXPECT_NE(all.find("lost track"), std::string::npos) << all;
   EXPECT_NE(all.find("relocalized"), std::string::npos) << all;
   EXPECT_NE(all.find("the robot was carried"), std::string::npos) << all;

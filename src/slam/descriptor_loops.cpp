@@ -78,14 +78,15 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
   // another frame), then one in descriptor_every_nodes as usual.
   const std::optional<std::size_t> untied = s_.untied_since;
   const bool relocalizing = untied && n >= *untied;
+  // Submaps before the fragment being relocalized lie in another frame: no age or drift limits.
+  const auto before_fragment = [&](const Submap& sm) { return relocalizing && sm.nodes.back() < *untied; };
   const bool due = n % static_cast<std::size_t>(opt.descriptor_every_nodes) == 0;
   if (!confirming && !(relocalizing && (n - *untied < kRelocalizeEveryNode || due)) && !(quiet && due)) return;
   std::vector<std::size_t> targets;
   for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
     const Submap& sm = s_.submaps[s];
     if (!sm.db || sm.db->empty()) continue;
-    const bool before_fragment = relocalizing && sm.nodes.back() < *untied;
-    if (!before_fragment && sm.nodes.back() + static_cast<std::size_t>(opt.descriptor_min_age_nodes) > n) continue;
+    if (!before_fragment(sm) && sm.nodes.back() + static_cast<std::size_t>(opt.descriptor_min_age_nodes) > n) continue;
     targets.push_back(s);
   }
   if (targets.empty()) return;
@@ -150,8 +151,7 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
       const double path = s_.node_path_m[n] - s_.node_path_m[sm.nodes.back()];
       const double allowed = opt.descriptor_max_correction_m + opt.descriptor_drift_fraction * path;
       // Across a lost track the estimate is only the prediction: any correction is plausible.
-      const bool across_lost_track = relocalizing && sm.nodes.back() < *untied;
-      if (!across_lost_track && (correction > allowed || turn > opt.descriptor_max_rotation_rad)) {
+      if (!before_fragment(sm) && (correction > allowed || turn > opt.descriptor_max_rotation_rad)) {
         c.accepted = false;
         c.reason = fmt::format("implausible correction of {:.1f} m / {:.0f} deg after {:.0f} m of path", correction,
                                turn / kDeg, path);
