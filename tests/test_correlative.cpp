@@ -51,25 +51,60 @@ const Office& office() {
   return o;
 }
 
-TEST(CorrelativeGrid, MaxGridsEqualBruteForceWindowMax) {
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-2.0, 2.0);
-  Points2 pts;
-  for (int i = 0; i < 60; ++i) pts.emplace_back(u(rng), u(rng));
-  CorrelativeOptions o;
-  o.depth = 5;
-  o.connect_max_gap_m = 0.0;
-  const auto g = CorrelativeGrid::fromPoints(pts, o);
-  ASSERT_EQ(g.depth(), 5);
+/// Every max-grid value (every `step`-th cell, one cell beyond each border) against the brute-force
+/// max of the score grid over its window.
+void expectMaxGridsAreWindowMaxima(const CorrelativeGrid& g, int step) {
   for (int h = 0; h < g.depth(); ++h) {
     const int w = 1 << h;
-    for (int j = -w - 1; j < g.height() + 1; j += 3)
-      for (int i = -w - 1; i < g.width() + 1; i += 3) {
+    for (int j = -w - 1; j < g.height() + 1; j += step)
+      for (int i = -w - 1; i < g.width() + 1; i += step) {
         float ref = 0.0f;
         for (int dj = 0; dj < w; ++dj)
           for (int di = 0; di < w; ++di) ref = std::max(ref, g.value(i + di, j + dj));
         ASSERT_EQ(g.maxValue(h, i, j), ref) << "h " << h << " cell " << i << " " << j;
       }
+  }
+}
+
+Points2 randomPoints(int n, double half_width, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-half_width, half_width);
+  Points2 pts;
+  for (int i = 0; i < n; ++i) pts.emplace_back(u(rng), u(rng));
+  return pts;
+}
+
+TEST(CorrelativeGrid, MaxGridsEqualBruteForceWindowMax) {
+  CorrelativeOptions o;
+  o.depth = 5;
+  o.connect_max_gap_m = 0.0;
+  const auto g = CorrelativeGrid::fromPoints(randomPoints(60, 2.0, 5), o);
+  ASSERT_EQ(g.depth(), 5);
+  expectMaxGridsAreWindowMaxima(g, 3);
+  // A grid narrower than the coarsest windows (a few cells, windows of 64).
+  o.depth = 7;
+  const auto narrow = CorrelativeGrid::fromPoints({Eigen::Vector2d(0.3, -0.2)}, o);
+  ASSERT_LT(narrow.width(), 32);
+  expectMaxGridsAreWindowMaxima(narrow, 1);
+}
+
+TEST(CorrelativeGrid, RebuiltInPlaceEqualsAFreshGrid) {
+  CorrelativeOptions o;
+  o.depth = 6;
+  CorrelativeGrid g = CorrelativeGrid::fromPoints(randomPoints(80, 4.0, 1), o);
+  // Smaller, then larger, then empty, then again: no value of an earlier build may survive.
+  for (const Points2& pts : {randomPoints(30, 1.0, 2), randomPoints(200, 6.0, 3), Points2{}, randomPoints(50, 2.0, 4)}) {
+    g.rebuild(pts, o);
+    const auto fresh = CorrelativeGrid::fromPoints(pts, o);
+    ASSERT_EQ(g.empty(), fresh.empty());
+    ASSERT_EQ(g.width(), fresh.width());
+    ASSERT_EQ(g.height(), fresh.height());
+    ASSERT_EQ(g.depth(), fresh.depth());
+    EXPECT_EQ(g.origin(), fresh.origin());
+    for (int h = 0; h < fresh.depth(); ++h)
+      for (int j = -(1 << h) - 1; j < fresh.height() + 1; ++j)
+        for (int i = -(1 << h) - 1; i < fresh.width() + 1; ++i)
+          ASSERT_EQ(g.maxValue(h, i, j), fresh.maxValue(h, i, j)) << "h " << h << " cell " << i << " " << j;
   }
 }
 

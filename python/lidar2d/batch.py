@@ -7,6 +7,10 @@ an existing Dask scheduler (`dask scheduler` on one machine, `dask worker ADDRES
 others; the logs and DIR must then be on a path every worker sees). --sequential runs the tasks one
 after the other in this process, without Dask (the reference for the parallel run's results).
 
+Under Dask every task runs on one thread (SLAM without its back-end thread, the pose graph on one
+Ceres thread): the workers fill the cores, and a task that used two would oversubscribe them. The
+results do not change (SLAM's estimates are identical either way); --sequential keeps the threads.
+
 Writes DIR/results.csv and DIR/results.json, one row per log: log, task, ok, error, seconds, and the
 task's figures; each log's outputs go to DIR/<log name>/. A log whose task fails gets ok=False and
 its error in the table; the other logs go on. Progress goes to stderr as tasks finish. Exit code 0
@@ -92,7 +96,7 @@ def _has_truth(log: str) -> bool:
     return False
 
 
-def _task_map(log: str, out_dir: str) -> dict:
+def _task_map(log: str, out_dir: str, single_thread: bool) -> dict:
     import lidar2d
 
     image = lidar2d.build_map(log)
@@ -101,10 +105,11 @@ def _task_map(log: str, out_dir: str) -> dict:
     return {"scans": scans, **_map_figures(image)}
 
 
-def _task_slam(log: str, out_dir: str) -> dict:
+def _task_slam(log: str, out_dir: str, single_thread: bool) -> dict:
     import lidar2d
 
-    result = lidar2d.run_slam(log, out_dir=out_dir)
+    threads = {"back_end_thread": False, "graph_threads": 1} if single_thread else {}
+    result = lidar2d.run_slam(log, out_dir=out_dir, **threads)
     stats = result["stats"]
     trajectory = result["trajectory"]
     figures = {
@@ -119,7 +124,7 @@ def _task_slam(log: str, out_dir: str) -> dict:
     return figures
 
 
-def _task_localize(log: str, out_dir: str) -> dict:
+def _task_localize(log: str, out_dir: str, single_thread: bool) -> dict:
     import lidar2d
 
     frames = list(lidar2d.read_log(log))
@@ -153,7 +158,7 @@ def _task_localize(log: str, out_dir: str) -> dict:
     }
 
 
-def _task_eval(log: str, out_dir: str) -> dict:
+def _task_eval(log: str, out_dir: str, single_thread: bool) -> dict:
     import lidar2d
 
     odometry, truth = [], []
@@ -170,14 +175,14 @@ def _task_eval(log: str, out_dir: str) -> dict:
 _RUNNERS = {"map": _task_map, "slam": _task_slam, "localize": _task_localize, "eval": _task_eval}
 
 
-def run_task(log: str, task: str, out_dir: str) -> dict:
-    """Runs `task` on one log, writing its outputs under out_dir; never raises: a failure is a row
-    with ok=False and the error's message."""
+def run_task(log: str, task: str, out_dir: str, single_thread: bool = False) -> dict:
+    """Runs `task` on one log, writing its outputs under out_dir, on one thread when single_thread;
+    never raises: a failure is a row with ok=False and the error's message."""
     start = time.perf_counter()
     row = {"log": log, "task": task, "ok": True, "error": ""}
     try:
         os.makedirs(out_dir, exist_ok=True)
-        row.update(_RUNNERS[task](log, out_dir))
+        row.update(_RUNNERS[task](log, out_dir, single_thread))
     except Exception as e:  # noqa: BLE001 - every failure becomes the log's row
         row["ok"] = False
         row["error"] = f"{type(e).__name__}: {e}" if str(e) else traceback.format_exc(limit=1).strip()
@@ -231,20 +236,27 @@ def run_batch(logs: list[str], out: str, task: str = "slam", scheduler: str | No
             rows[i] = run_task(log, task, d)
             _progress(i + 1, len(logs), rows[i], stream)
     else:
+        import dask
         from dask.distributed import Client, LocalCluster, as_completed
 
         cluster = None
         if scheduler:
             client = Client(scheduler)
         else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
+            # Dask's workers default to MALLOC_TRIM_THRESHOLD_=65536, which returns freed memory to the
+            # system eagerly; SLAM frees and reallocates scan-sized buffers all the time, and ran 45%
+            # slower with it (freiburg-079, single runs). The local workers keep glibc's default.
+            environ = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+                       if k != "MALLOC_TRIM_THRESHOLD_"}
+            with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None)
             client = Client(cluster)
         try:
             # Largest logs first (by bytes on disk, a proxy for their work): a long task started last
             # would leave the other workers idle at the end (longest-processing-time-first scheduling).
             order = sorted(range(len(logs)), key=lambda i: -_size(logs[i]))
-            futures = {client.submit(run_task, logs[i], task, dirs[i], pure=False, priority=len(logs) - rank,
+            futures = {client.submit(run_task, logs[i], task, dirs[i], True, pure=False, priority=len(logs) - rank,
                                      key=f"lidar2d-{task}-{i}-{os.getpid()}"): i
                        for rank, i in enumerate(order)}
             for done, future in enumerate(as_completed(futures), start=1):

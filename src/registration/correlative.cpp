@@ -177,21 +177,31 @@ CorrelativeResult finish(const CorrelativeGrid& g, const Discretised& d, const C
 }  // namespace
 
 struct CorrelativeGridBuilder {
-  static CorrelativeGrid build(const internal::Polyline& poly, const Points2& all, const CorrelativeOptions& o) {
-    CorrelativeGrid g;
-    Eigen::Vector2d lo, hi;
-    if (!internal::boundingBox(all, lo, hi)) return g;
+  /// Builds `g` in place (its vectors keep their capacity); `g` is empty when there are no points.
+  static void build(const internal::Polyline& poly, const Points2& all, const CorrelativeOptions& o, CorrelativeGrid& g) {
+    Eigen::Vector2d lo = Eigen::Vector2d::Zero(), hi = Eigen::Vector2d::Zero();
+    if (!internal::boundingBox(all, lo, hi)) {
+      g = CorrelativeGrid();
+      return;
+    }
     const double res = o.resolution_m, radius = 3.0 * o.blur_sigma_m;
     const double pad = radius + 2.0 * res;
-    g.resolution_ = res;
-    g.origin_ = ((lo.array() - pad) / res).floor() * res;
-    const double w = std::ceil((hi.x() + pad - g.origin_.x()) / res), h = std::ceil((hi.y() + pad - g.origin_.y()) / res);
+    const Eigen::Vector2d origin = ((lo.array() - pad) / res).floor() * res;
+    const double w = std::ceil((hi.x() + pad - origin.x()) / res), h = std::ceil((hi.y() + pad - origin.y()) / res);
     if (w * h > kMaxCells)
       throw invalidArgument(fmt::format("the grid would need {:.0f} x {:.0f} cells; use a coarser resolution", w, h),
                             ErrorLocation({}, 0, "resolution_m"));
+    g.resolution_ = res;
+    g.origin_ = origin;
     g.width_ = static_cast<int>(w);
     g.height_ = static_cast<int>(h);
-    std::vector<float> base(static_cast<std::size_t>(g.width_) * static_cast<std::size_t>(g.height_), 0.0f);
+    if (g.max_grids_.empty()) g.max_grids_.emplace_back();
+    CorrelativeGrid::MaxGrid& m0 = g.max_grids_[0];
+    m0.offset = 0;
+    m0.width = g.width_;
+    m0.height = g.height_;
+    m0.values.assign(static_cast<std::size_t>(g.width_) * static_cast<std::size_t>(g.height_), 0.0f);
+    std::vector<float>& base = m0.values;
     // Cell centres are the nodes of a grid shifted by half a cell.
     const internal::NodeGrid ng{g.origin_.array() + 0.5 * res, res, g.width_, g.height_};
     const double k = -0.5 / (o.blur_sigma_m * o.blur_sigma_m);
@@ -207,38 +217,60 @@ struct CorrelativeGridBuilder {
     for (const auto& p : poly.isolated)
       internal::forEachNodeInBox(ng, p.array() - radius, p.array() + radius,
                                  [&](int i, int j, const Eigen::Vector2d& q) { put(i, j, (q - p).norm()); });
-    g.buildMaxGrids(std::move(base), o.depth);
-    return g;
+    g.buildMaxGrids(o.depth);
   }
 };
 
-void CorrelativeGrid::buildMaxGrids(std::vector<float> base, int depth) {
-  max_grids_.clear();
-  MaxGrid m0;
-  m0.width = width_;
-  m0.height = height_;
-  m0.values = std::move(base);
-  max_grids_.push_back(std::move(m0));
+namespace {
+
+// out[x] = max(in[x - s], in[x]) for x in [0, n_in + s), where in[] is 0 outside [0, n_in): the
+// 1-D step of a max-grid level, as plain loops the compiler vectorises (no bounds check per cell).
+void shiftedMax(const float* in, int n_in, int s, float* out) {
+  const int n_out = n_in + s;
+  for (int x = 0; x < std::min(s, n_in); ++x) out[x] = in[x];
+  for (int x = n_in; x < s; ++x) out[x] = 0.0f;  // rows narrower than s
+  for (int x = s; x < n_in; ++x) out[x] = std::max(in[x - s], in[x]);
+  for (int x = std::max(n_in, s); x < n_out; ++x) out[x] = in[x - s];
+}
+
+}  // namespace
+
+void CorrelativeGrid::buildMaxGrids(int depth) {
+  max_grids_.resize(static_cast<std::size_t>(std::max(depth, 1)));
+  std::vector<float> rows;  // the row pass of one level
   for (int h = 1; h < depth; ++h) {
     // M_h(i, j) = max of M_{h-1} at (i, j), (i + s, j), (i, j + s), (i + s, j + s), s = 2^(h-1):
     // the window [i, i + 2^h) is the union of the two windows of half the size. Defined for
-    // i in [-(2^h - 1), width) so that every window touching the grid has a value.
+    // i in [-(2^h - 1), width) so that every window touching the grid has a value. Separable: a
+    // max along x with shift s, then along y. Level h's offset 2^h - 1 is level h-1's plus s, so
+    // index x of level h holds M_{h-1}'s indices x - s and x.
     const int s = 1 << (h - 1);
-    MaxGrid m;
+    const MaxGrid& p = max_grids_[static_cast<std::size_t>(h - 1)];
+    MaxGrid& m = max_grids_[static_cast<std::size_t>(h)];
     m.offset = (1 << h) - 1;
     m.width = width_ + m.offset;
     m.height = height_ + m.offset;
+    rows.resize(static_cast<std::size_t>(m.width) * static_cast<std::size_t>(p.height));
+    for (int y = 0; y < p.height; ++y)
+      shiftedMax(p.values.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(p.width), p.width, s,
+                 rows.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(m.width));
     m.values.resize(static_cast<std::size_t>(m.width) * static_cast<std::size_t>(m.height));
-    for (int jj = 0; jj < m.height; ++jj) {
-      const int j = jj - m.offset;
-      for (int ii = 0; ii < m.width; ++ii) {
-        const int i = ii - m.offset;
-        const float v = std::max(std::max(maxValue(h - 1, i, j), maxValue(h - 1, i + s, j)),
-                                 std::max(maxValue(h - 1, i, j + s), maxValue(h - 1, i + s, j + s)));
-        m.values[static_cast<std::size_t>(jj) * static_cast<std::size_t>(m.width) + static_cast<std::size_t>(ii)] = v;
-      }
+    // Along y, row by row (the inner loop runs along x, contiguous in memory).
+    const auto row = [&](std::vector<float>& v, int y, int width) {
+      return v.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(width);
+    };
+    for (int y = 0; y < m.height; ++y) {
+      float* out = row(m.values, y, m.width);
+      const bool lo_in = y - s >= 0 && y - s < p.height, hi_in = y < p.height;
+      const float* a = lo_in ? row(rows, y - s, m.width) : nullptr;
+      const float* b = hi_in ? row(rows, y, m.width) : nullptr;
+      if (a && b)
+        for (int x = 0; x < m.width; ++x) out[x] = std::max(a[x], b[x]);
+      else if (a || b)
+        std::copy_n(a ? a : b, m.width, out);
+      else
+        std::fill_n(out, m.width, 0.0f);
     }
-    max_grids_.push_back(std::move(m));
   }
 }
 
@@ -260,8 +292,14 @@ void CorrelativeOptions::validate() const {
 }
 
 CorrelativeGrid CorrelativeGrid::fromPoints(const Points2& target, const CorrelativeOptions& options) {
+  CorrelativeGrid g;
+  g.rebuild(target, options);
+  return g;
+}
+
+void CorrelativeGrid::rebuild(const Points2& target, const CorrelativeOptions& options) {
   options.validate();
-  return CorrelativeGridBuilder::build(internal::makePolyline(target, options.connect_max_gap_m), target, options);
+  CorrelativeGridBuilder::build(internal::makePolyline(target, options.connect_max_gap_m), target, options, *this);
 }
 
 CorrelativeGrid CorrelativeGrid::fromMap(const OccupancyImage& map, const CorrelativeOptions& options) {
@@ -270,7 +308,9 @@ CorrelativeGrid CorrelativeGrid::fromMap(const OccupancyImage& map, const Correl
   for (int row = 0; row < map.height(); ++row)
     for (int col = 0; col < map.width(); ++col)
       if (map.at(col, row) >= options.occupied_min) poly.isolated.push_back(map.cellCenter(col, row));
-  return CorrelativeGridBuilder::build(poly, poly.isolated, options);
+  CorrelativeGrid g;
+  CorrelativeGridBuilder::build(poly, poly.isolated, options, g);
+  return g;
 }
 
 namespace {

@@ -119,7 +119,7 @@ void FrontEnd::rebuildLocalMap() {
   if (opt.front_end_likelihood_field)
     local_field = std::make_unique<registration::LikelihoodField>(
         registration::LikelihoodField::fromPoints(local_points, local_lf));
-  local_grid.reset();
+  local_grid_built = false;
 }
 
 /// Front-end match of `pts` against the local map from `T_pred`, the prediction `p` after the
@@ -201,8 +201,10 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // confirmed a match yet.
   const bool wide = p.sigma_m > kIcpBasinM || p.sigma_rad > kIcpBasinRad;
   if (bestExplained() < opt.min_explained_fraction || (wide && bestExplained() < kConfirmExplained)) {
-    if (!local_grid)
-      local_grid = std::make_unique<CorrelativeGrid>(CorrelativeGrid::fromPoints(local_points, fallback));
+    if (!local_grid_built) {
+      local_grid.rebuild(local_points, fallback);
+      local_grid_built = true;
+    }
     registration::CorrelativeOptions window = fallback;
     window.linear_window_m =
         std::clamp(3.0 * p.sigma_m, opt.fallback_linear_window_m, std::max(opt.fallback_linear_window_m,
@@ -210,7 +212,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
     window.angular_window_rad =
         std::clamp(3.0 * p.sigma_rad, opt.fallback_angular_window_rad,
                    std::max(opt.fallback_angular_window_rad, opt.search_max_angular_window_rad));
-    const auto cr = registration::matchCorrelative(*local_grid, pts, T_pred, window);
+    const auto cr = registration::matchCorrelative(local_grid, pts, T_pred, window);
     out.used_fallback = true;
     if (cr.T_search.isFinite()) consider(tryFrom(cr.T_search));
   }

@@ -120,7 +120,8 @@ class FrontEnd {
   std::unique_ptr<registration::IcpTarget> local_target;
   std::unique_ptr<registration::LikelihoodField> local_field;  // front_end_likelihood_field
   Points2 local_points;
-  std::unique_ptr<registration::CorrelativeGrid> local_grid;
+  registration::CorrelativeGrid local_grid;  // of local_points when local_grid_built (memory reused)
+  bool local_grid_built = false;
 };
 
 }  // namespace lidar2d::slam::internal
