@@ -35,6 +35,7 @@ PoseGraphEdge edgeBetween(const std::vector<SE2>& truth, std::size_t a, std::siz
   e.T_from_to = truth[a].inverse() * truth[b];
   e.sqrt_information = Eigen::Vector3d(1 / sm, 1 / sm, 1 / sr).asDiagonal();
   e.huber_scale = huber;
+  e.scalable = huber > 0.0;  // a loop closure that may be wrong
   return e;
 }
 
@@ -107,6 +108,53 @@ TEST(PoseGraph, HuberLossLimitsAWrongLoopClosure) {
   EXPECT_LT(worst_robust, worst_plain / 2);
 }
 
+TEST(PoseGraph, DynamicCovarianceScalingFadesAWrongClosureAmongRightOnes) {
+  // Two laps of a square with drifting odometry (1 degree too much per step): right closures
+  // between the laps, far off before the first solve, and one wrong closure two metres off.
+  const auto lap = squareLoop(6);
+  std::vector<SE2> truth = lap;
+  for (const SE2& T : lap) truth.push_back(T);
+  std::vector<PoseGraphEdge> edges;
+  std::vector<SE2> poses{truth[0]};
+  for (std::size_t i = 0; i + 1 < truth.size(); ++i) {
+    PoseGraphEdge e = edgeBetween(truth, i, i + 1, 0.05, 0.02);
+    e.T_from_to = e.T_from_to * SE2(0, 0, kPi / 180);
+    edges.push_back(e);
+    poses.push_back(poses.back() * e.T_from_to);
+  }
+  const std::size_t n = lap.size();
+  for (std::size_t i : {2u, 8u, 14u, 20u}) edges.push_back(edgeBetween(truth, i, n + i, 0.05, 0.01, 1.0));
+  edges.push_back(edgeBetween(truth, n - 1, 0, 0.05, 0.01, 1.0));
+  edges.push_back(edgeBetween(truth, 2 * n - 1, 0, 0.05, 0.01, 1.0));
+  PoseGraphEdge wrong = edgeBetween(truth, 5, n + 11, 0.05, 0.01, 1.0);
+  wrong.T_from_to = wrong.T_from_to * SE2(2.0, -1.0, 0.3);
+  edges.push_back(wrong);
+  const std::size_t wrong_index = edges.size() - 1;
+
+  auto worstError = [&](const std::vector<SE2>& p) {
+    double worst = 0;
+    for (std::size_t i = 0; i < p.size(); ++i) worst = std::max(worst, (p[i].translation() - truth[i].translation()).norm());
+    return worst;
+  };
+  auto huber_only = poses;
+  const PoseGraphSummary h = optimizePoseGraph(huber_only, edges, 0);
+  ASSERT_TRUE(h.usable);
+  for (double scale : h.edge_scale) EXPECT_EQ(scale, 1.0);  // off by default
+
+  PoseGraphOptions o;
+  o.dcs_phi = 9.0;
+  auto dcs = poses;
+  const PoseGraphSummary d = optimizePoseGraph(dcs, edges, 0, o);
+  ASSERT_TRUE(d.usable);
+  ASSERT_EQ(d.edge_scale.size(), edges.size());
+  EXPECT_LT(d.edge_scale[wrong_index], 0.1);
+  for (std::size_t k = wrong_index - 6; k < wrong_index; ++k) EXPECT_GT(d.edge_scale[k], 0.9) << "right closure " << k;
+  for (std::size_t k = 0; k + 7 < edges.size(); ++k) EXPECT_EQ(d.edge_scale[k], 1.0);  // not robust: never scaled
+  // Huber alone keeps the wrong closure's pull linear: the laps bend by decimetres; faded, it is a centimetre.
+  EXPECT_GT(worstError(huber_only), 0.1);
+  EXPECT_LT(worstError(dcs), worstError(huber_only) / 5);
+}
+
 TEST(PoseGraph, UntouchedNodesKeepTheirPose) {
   std::vector<SE2> poses{SE2(), SE2(1, 0, 0), SE2(5, 5, 1)};
   const std::vector<PoseGraphEdge> edges{edgeBetween({SE2(), SE2(2, 0, 0)}, 0, 1, 0.1, 0.1)};
@@ -130,6 +178,12 @@ TEST(PoseGraph, BadInputThrows) {
   EXPECT_THROW(optimizePoseGraph(poses, {e}, 2), Error);  // fixed out of range
   PoseGraphOptions o;
   o.max_iterations = 0;
+  EXPECT_THROW(optimizePoseGraph(poses, {e}, 0, o), Error);
+  o = PoseGraphOptions();
+  o.dcs_phi = -1.0;
+  EXPECT_THROW(optimizePoseGraph(poses, {e}, 0, o), Error);
+  o.dcs_phi = 1.0;
+  o.dcs_rounds = 0;
   EXPECT_THROW(optimizePoseGraph(poses, {e}, 0, o), Error);
   std::vector<SE2> empty;
   EXPECT_TRUE(optimizePoseGraph(empty, {}, 0).usable);

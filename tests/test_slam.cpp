@@ -154,6 +154,7 @@ TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
   EXPECT_EQ(slam->stats().unmatched, 0u);
   EXPECT_EQ(slam->stats().fragments, 1u);
   EXPECT_EQ(slam->stats().odometry_wins, 0u);
+  EXPECT_EQ(slam->stats().loop_downweighted, 0u);  // right closures keep their weight under DCS
   // Every scan is attached to a node and nodes are a subset of the scans.
   const auto traj = slam->trajectory();
   std::size_t nodes = 0;

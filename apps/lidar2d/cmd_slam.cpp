@@ -186,6 +186,7 @@ void run(const SlamArgs& a) {
   j["loop_searches"] = s.loop_searches;
   j["loop_closures_accepted"] = s.loop_accepted;
   j["loop_closures_rejected"] = s.loop_rejected;
+  j["loop_closures_downweighted"] = s.loop_downweighted;
   j["descriptor_queries"] = s.descriptor_queries;
   j["descriptor_hypotheses"] = s.descriptor_hypotheses;
   j["descriptor_closures_accepted"] = s.descriptor_accepted;

@@ -155,9 +155,10 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
   row("scans matched / unmatched / correlative fallbacks",
       fmt::format("{} / {} / {}", j.value("matched", 0), j.value("unmatched", 0), j.value("correlative_fallbacks", 0)));
   row("degenerate scans", fmt::format("{} ({} nodes, orange on the map)", j.value("degenerate_scans", 0), degenerate));
-  row("loop closures", fmt::format("{} accepted, {} rejected; {} searched by branch and bound (drawn: {} accepted, {} rejected)",
+  row("loop closures", fmt::format("{} accepted, {} rejected; {} searched by branch and bound (drawn: {} accepted, {} rejected); "
+                                   "{} down-weighted by the pose graph (the rest of the graph contradicts them)",
                                    j.value("loop_closures_accepted", 0), j.value("loop_closures_rejected", 0),
-                                   j.value("loop_searches", 0), accepted, rejected));
+                                   j.value("loop_searches", 0), accepted, rejected, j.value("loop_closures_downweighted", 0)));
   row("loop closures by descriptors (large drift)",
       fmt::format("{} accepted; {} look-ups, {} hypotheses verified, {:.2f} s (purple on the map)",
                   j.value("descriptor_closures_accepted", 0), j.value("descriptor_queries", 0),

@@ -64,6 +64,7 @@ py::dict statsDict(const slam::SlamStats& s) {
   d["loop_searches"] = s.loop_searches;
   d["loop_accepted"] = s.loop_accepted;
   d["loop_rejected"] = s.loop_rejected;
+  d["loop_downweighted"] = s.loop_downweighted;
   d["descriptor_accepted"] = s.descriptor_accepted;
   d["optimizations"] = s.optimizations;
   d["total_seconds"] = s.total_seconds;

@@ -58,12 +58,27 @@ void optimize(SlamState& s, int iterations) {
   const PoseGraphSummary summary = optimizePoseGraph(poses, s.edges, 0, go);
   ++s.stats.optimizations;
   s.stats.optimization_seconds += summary.seconds;
-  if (summary.usable)
+  if (summary.usable) {
     for (std::size_t i = 0; i < s.nodes.size(); ++i) s.nodes[i].T_world_robot = poses[i];
+    s.edge_scale = summary.edge_scale;
+  }
   s.T_world_local = s.nodes.back().T_world_robot * s.nodes.back().T_local_robot.inverse();
   s.nodes_since_optimization = 0;
   s.loops_since_optimization = 0;
   s.searched_loop_pending = false;
+}
+
+void reportDownweighted(SlamState& s) {
+  s.stats.loop_downweighted = 0;
+  for (std::size_t k = 0; k < s.edge_scale.size() && k < s.edges.size(); ++k) {
+    if (!(s.edge_scale[k] < 0.5)) continue;
+    const PoseGraphEdge& e = s.edges[k];
+    ++s.stats.loop_downweighted;
+    s.events.push_back({s.scans[s.nodes[e.to].scan].frame_index, s.nodes[e.to].time,
+                        fmt::format("loop closure from node {} to {} down-weighted to {:.2f} by the pose graph: the "
+                                    "rest of the graph contradicts it",
+                                    e.from, e.to, s.edge_scale[k])});
+  }
 }
 
 void checkAtEnd(SlamState& s) {

@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -64,7 +65,10 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   if (options.threads < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "threads"});
   if (!(options.function_tolerance > 0.0))
     throw invalidArgument("must be > 0", {"PoseGraphOptions", 0, "function_tolerance"});
-  if (poses.empty()) return {.usable = true, .message = "empty graph"};
+  if (!(std::isfinite(options.dcs_phi) && options.dcs_phi >= 0.0))
+    throw invalidArgument("must be finite and >= 0", {"PoseGraphOptions", 0, "dcs_phi"});
+  if (options.dcs_rounds < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "dcs_rounds"});
+  if (poses.empty()) return {.usable = true, .message = "empty graph", .edge_scale = std::vector<double>(edges.size(), 1.0)};
   if (fixed >= poses.size())
     throw invalidArgument(fmt::format("fixed node {} of {} nodes", fixed, poses.size()), {"pose graph", 0, "fixed"});
   for (std::size_t i = 0; i < poses.size(); ++i)
@@ -76,6 +80,8 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   ceres::Problem::Options po;
   po.loss_function_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(po);
+  // The scalable edges' losses, wrapped so that the scaling rounds can replace them.
+  std::vector<ceres::LossFunctionWrapper*> robust(edges.size(), nullptr);
   for (std::size_t k = 0; k < edges.size(); ++k) {
     const PoseGraphEdge& e = edges[k];
     if (e.from >= poses.size() || e.to >= poses.size() || e.from == e.to)
@@ -86,6 +92,7 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
       throw invalidArgument(fmt::format("edge {} is not finite", k), {"pose graph", 0, "edges"});
     auto* cost = new ceres::AutoDiffCostFunction<EdgeCost, 3, 3, 3>(new EdgeCost(e.T_from_to, e.sqrt_information));
     ceres::LossFunction* loss = e.huber_scale > 0.0 ? new ceres::HuberLoss(e.huber_scale) : nullptr;
+    if (e.scalable) loss = robust[k] = new ceres::LossFunctionWrapper(loss, ceres::TAKE_OWNERSHIP);
     problem.AddResidualBlock(cost, loss, params[e.from].data(), params[e.to].data());
   }
   if (problem.HasParameterBlock(params[fixed].data())) problem.SetParameterBlockConstant(params[fixed].data());
@@ -100,12 +107,42 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   ceres::Solver::Summary summary;
   const auto t0 = std::chrono::steady_clock::now();
   ceres::Solve(so, &problem, &summary);
+  const double initial_cost = summary.initial_cost;
+  int iterations = static_cast<int>(summary.iterations.size());
+
+  std::vector<double> scale(edges.size(), 1.0);
+  const bool any_robust = std::any_of(robust.begin(), robust.end(), [](auto* w) { return w != nullptr; });
+  for (int round = 0; options.dcs_phi > 0.0 && any_robust && summary.IsSolutionUsable() && round < options.dcs_rounds;
+       ++round) {
+    double change = 0.0;
+    for (std::size_t k = 0; k < edges.size(); ++k) {
+      if (robust[k] == nullptr) continue;
+      Eigen::Vector3d r;
+      EdgeCost(edges[k].T_from_to, edges[k].sqrt_information)(params[edges[k].from].data(), params[edges[k].to].data(),
+                                                              r.data());
+      const double s = std::min(1.0, 2.0 * options.dcs_phi / (options.dcs_phi + r.squaredNorm()));
+      change = std::max(change, std::abs(s - scale[k]));
+      scale[k] = s;
+    }
+    if (change < 0.01) break;
+    // The residual scaled by s costs s^2 times as much: rho(s^2 chi2) ~ s^2 rho(chi2) within Huber's
+    // quadratic zone, and the same weight beyond it.
+    for (std::size_t k = 0; k < edges.size(); ++k)
+      if (robust[k] != nullptr)
+        robust[k]->Reset(new ceres::ScaledLoss(edges[k].huber_scale > 0.0 ? new ceres::HuberLoss(edges[k].huber_scale)
+                                                                           : nullptr,
+                                               scale[k] * scale[k], ceres::TAKE_OWNERSHIP),
+                         ceres::TAKE_OWNERSHIP);
+    ceres::Solve(so, &problem, &summary);
+    iterations += static_cast<int>(summary.iterations.size());
+  }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   PoseGraphSummary out;
-  out.initial_cost = summary.initial_cost;
+  out.initial_cost = initial_cost;
   out.final_cost = summary.final_cost;
-  out.iterations = static_cast<int>(summary.iterations.size());
+  out.iterations = iterations;
+  out.edge_scale = std::move(scale);
   out.usable = summary.IsSolutionUsable();
   out.seconds = seconds;
   out.message = summary.BriefReport();

@@ -314,6 +314,7 @@ void Slam::finish() {
   impl_->loops.expirePending();
   internal::optimize(s, s.opt.graph.max_iterations);
   internal::checkAtEnd(s);
+  internal::reportDownweighted(s);
   impl_->finished = true;
   s.stats.nodes = s.nodes.size();
   s.stats.submaps = s.submaps.size();

@@ -25,6 +25,9 @@ struct PoseGraphEdge {
   /// > 0: a Huber loss with this scale on the whitened residual's squared norm (a loop closure that
   /// may be wrong); 0: plain least squares (trusted edges).
   double huber_scale = 0.0;
+  /// May be faded by dynamic covariance scaling (PoseGraphOptions::dcs_phi): a measurement that may
+  /// be wrong (a loop closure), unlike the odometry chain the scaling measures it against.
+  bool scalable = false;
 };
 
 /// Solver settings.
@@ -32,16 +35,27 @@ struct PoseGraphOptions {
   int max_iterations = 50;      ///< Levenberg-Marquardt iterations, >= 1
   int threads = 2;              ///< Ceres threads for the Jacobian evaluation, >= 1
   double function_tolerance = 1e-7;  ///< relative cost change that ends the solve, > 0
+  /// > 0: dynamic covariance scaling (Agarwal et al., ICRA 2013) of the `scalable` edges: after the solve, each one's residual is scaled by
+  ///   s = min(1, 2 phi / (phi + chi2)),  chi2 = its whitened squared residual at the solution,
+  /// and the graph solved again, for up to `dcs_rounds` rounds (until the scales settle). An edge
+  /// the rest of the graph contradicts fades out instead of bending the graph; one that agrees
+  /// keeps s = 1. Scaled at the solution, not at the start: a right closure after a long drift is
+  /// far off before the first solve and agrees after it. 0: off.
+  double dcs_phi = 0.0;
+  int dcs_rounds = 3;  ///< >= 1
 };
 
 /// What a solve did.
 struct PoseGraphSummary {
   double initial_cost = 0.0;  ///< 0.5 * sum of robustified squared residuals before
-  double final_cost = 0.0;    ///< ... and after
+  double final_cost = 0.0;    ///< ... and after (with the final edge scales)
   int iterations = 0;
   bool usable = false;        ///< Ceres returned a usable solution (the poses were updated)
   double seconds = 0.0;       ///< wall time of the solve
   std::string message;        ///< Ceres' brief report
+  /// Per edge, the final dynamic covariance scale s in (0, 1] (1 for edges not `scalable`, and for
+  /// all when `dcs_phi` is 0).
+  std::vector<double> edge_scale;
 };
 
 /// Optimises `poses` in place given `edges`; node `fixed` is held constant (gauge freedom). Nodes

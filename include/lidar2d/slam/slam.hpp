@@ -83,6 +83,7 @@ struct SlamStats {
   std::size_t relocalizations = 0;   ///< lost tracks tied back to the earlier map by a verified closure
   std::size_t odometry_wins = 0;     ///< node links where odometry overruled an estimate without scan evidence
   std::size_t loop_searches = 0, loop_accepted = 0, loop_rejected = 0;
+  std::size_t loop_downweighted = 0;  ///< accepted closures the final graph scaled below half weight (DCS)
   std::size_t descriptor_queries = 0;      ///< descriptor look-ups
   std::size_t descriptor_hypotheses = 0;   ///< hypotheses verified by branch and bound
   std::size_t descriptor_accepted = 0;     ///< closures found through descriptors that entered the graph

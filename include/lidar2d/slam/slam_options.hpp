@@ -112,9 +112,10 @@ struct SlamOptions {
   int optimize_every_nodes = 30;
   int intermediate_iterations = 10;
   bool back_end_thread = true;
-  /// Solver of the final optimisation (`max_iterations`) and of every one (`threads`); its
-  /// `function_tolerance` is not a SLAM option.
-  PoseGraphOptions graph;
+  /// Solver of the final optimisation (`max_iterations`), of every one (`threads`) and the loop
+  /// closures' dynamic covariance scaling (`dcs_phi`: 9, the 97th percentile of a right closure's
+  /// chi2 with 3 degrees of freedom); its `function_tolerance` and `dcs_rounds` are not SLAM options.
+  PoseGraphOptions graph{.dcs_phi = 9.0};
 
   /// Throws `lidar2d::Error` (kInvalidArgument) naming the first field, in table order, that is
   /// outside its range in `kSlamOptionTable`.
@@ -342,6 +343,10 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "solver iterations of the optimisations during the run"},
     {LIDAR2D_SLAM_FIELD(graph.max_iterations), "pose graph", "iterations", OptionRange::atLeast(1),
      "solver iterations of the final optimisation (and after a descriptor closure)"},
+    {LIDAR2D_SLAM_FIELD(graph.dcs_phi), "pose graph", "chi2", OptionRange::atLeast(0),
+     "dynamic covariance scaling of the loop closures: a closure whose whitened squared "
+     "residual chi2 at the solution exceeds this is scaled by 2 phi / (phi + chi2) and the graph solved "
+     "again (0: off)"},
     {LIDAR2D_SLAM_FIELD(graph.threads), "pose graph", "threads", OptionRange::atLeast(1),
      "Ceres threads of every optimisation"},
     {LIDAR2D_SLAM_FIELD(back_end_thread), "pose graph", "flag", OptionRange::any(),

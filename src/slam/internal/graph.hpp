@@ -31,6 +31,10 @@ void optimize(SlamState& s, int iterations);
 ///   stats.odometry_wins.
 void checkAtEnd(SlamState& s);
 
+/// Records (stat loop_downweighted, one event each) the accepted closures the latest optimisation
+/// scaled below half weight (PoseGraphOptions::dcs_phi): closures the rest of the graph contradicts.
+void reportDownweighted(SlamState& s);
+
 /// Optimises when due after a new node: at once after a descriptor closure, optimize_every_nodes
 /// nodes after a searched closure, 10x as many after other closures.
 void optimizeIfDue(SlamState& s);

@@ -105,6 +105,7 @@ struct SlamState {
     std::size_t edge = 0, constraint = 0, node = 0;
   };
   std::optional<RestartOdometry> restart_odometry;
+  std::vector<double> edge_scale;  // of `edges` at the latest optimisation (PoseGraphSummary::edge_scale)
   std::size_t nodes_since_optimization = 0;
   std::size_t loops_since_optimization = 0;
   bool searched_loop_pending = false;     // a searched closure was accepted since the last optimisation
@@ -117,9 +118,10 @@ struct SlamState {
     return o;
   }
 
-  /// Records `c`; an accepted one also becomes a pose-graph edge with this weight and Huber scale.
+  /// Records `c`; an accepted one also becomes a pose-graph edge with this weight and Huber scale
+  /// (loop closures may be faded by the pose graph's dynamic covariance scaling).
   void addEdge(Constraint c, const Eigen::Matrix3d& sqrt_info, double huber) {
-    if (c.accepted) edges.push_back({c.from, c.to, c.T_from_to, sqrt_info, huber});
+    if (c.accepted) edges.push_back({c.from, c.to, c.T_from_to, sqrt_info, huber, c.kind == Constraint::Kind::kLoop});
     constraints.push_back(std::move(c));
   }
 };
