@@ -264,6 +264,25 @@ TEST(PerturbCli, KeepOdometryOnARealBagWithAGapDuringATurn) {
 
 // ---- bad input ----
 
+TEST(PerturbCli, KidnapIsAGapTheOdometryDoesNotSee) {
+  TempDir tmp;
+  const std::string clean = simulatedLog(tmp);
+  const std::string out = (tmp / "k.log").string();
+  const CliResult r = runCli({"perturb", clean, "--kidnap", "5@20", "--odom-noise", "0,0,0", "-o", out});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("kidnapping 20.0-25.0 s"), std::string::npos) << r.out;
+  const auto got = readAll(out);
+  std::size_t jumps = 0;
+  for (std::size_t k = 1; k < got.size(); ++k) {
+    if (got[k].time - got[k - 1].time < 1.0) continue;  // the file's scans are numbered anew: the gap is in time
+    ++jumps;
+    // The text log holds the poses to its printed precision.
+    EXPECT_TRUE(test::IsNearPose(*got[k - 1].T_odom_robot, *got[k].T_odom_robot, 1e-5, 1e-5));
+    EXPECT_GT((got[k].T_world_robot->translation() - got[k - 1].T_world_robot->translation()).norm(), 0.5);
+  }
+  EXPECT_EQ(jumps, 1u);
+}
+
 TEST(PerturbCli, UsageErrorsExit2WithoutOutput) {
   TempDir tmp;
   const std::string clean = simulatedLog(tmp);
@@ -281,6 +300,8 @@ TEST(PerturbCli, UsageErrorsExit2WithoutOutput) {
       {"--gap", "5@"},
       {"--gap", "inf"},
       {"--gap", "5@corner"},
+      {"--kidnap", "0"},
+      {"--kidnap", "5@x"},
       {"--time-jitter", "-0.1"},
       {"--time-jitter", "nan"},
       {"--time-bursts", "0"},

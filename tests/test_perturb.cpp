@@ -299,6 +299,38 @@ TEST(LogPerturber, FirstScanAfterAGapGetsTheWholeMotionAcrossIt) {
   EXPECT_EQ(jumps, 1u);
 }
 
+TEST(LogPerturber, AcrossACarriedGapTheOdometryReadsNoMotion) {
+  // A kidnapping: the truth jumps across the window, the odometry stays put; elsewhere every step
+  // is the truth's (noise-free model) or the log's own (kKeepLog).
+  const auto in = simulatedLog("office");
+  GapRequest kidnap{10.0, GapPlacement::kMiddle, 0.0};
+  kidnap.carried = true;
+  for (const OdometrySource source : {OdometrySource::kNoisyFromTruth, OdometrySource::kKeepLog}) {
+    LogPerturbationOptions o;
+    o.odometry = OdometryNoise::none();
+    o.odometry_source = source;
+    PerturbationStats st;
+    const auto out = perturbLog(in, o, {kidnap}, &st);
+    ASSERT_GT(st.dropped_by_gaps, 50u);
+    std::size_t jumps = 0;
+    for (std::size_t k = 1; k < out.size(); ++k) {
+      const SE2 truth_step = out[k - 1].T_world_robot->inverse() * *out[k].T_world_robot;
+      const SE2 odom_step = out[k - 1].T_odom_robot->inverse() * *out[k].T_odom_robot;
+      if (out[k].index != out[k - 1].index + 1) {
+        ++jumps;
+        EXPECT_GT(truth_step.translation().norm(), 1.0);  // carried metres away ...
+        EXPECT_TRUE(IsNearPose(SE2(), odom_step, 1e-9, 1e-9)) << k;  // ... and the wheels did not turn
+      } else if (source == OdometrySource::kKeepLog) {
+        const SE2 log_step = in[out[k - 1].index].T_odom_robot->inverse() * *in[out[k].index].T_odom_robot;
+        EXPECT_TRUE(IsNearPose(log_step, odom_step, 1e-9, 1e-9)) << k;
+      } else {
+        EXPECT_TRUE(IsNearPose(truth_step, odom_step, 1e-9, 1e-7)) << k;
+      }
+    }
+    EXPECT_EQ(jumps, 1u);
+  }
+}
+
 TEST(LogPerturber, AGapAtTheStartKeepsOdometryAnchoredAtTheFirstTruth) {
   const auto in = simulatedLog("office");
   LogPerturbationOptions o;

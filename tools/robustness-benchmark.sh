@@ -14,8 +14,10 @@
 #   raw        the three raw bags as they are, with a 10 s gap at their largest turn (perturb
 #              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), and with
 #              slam --no-odometry. Error: Kuemmerle relations (mean +- std).
-#   sim        the simulator's worlds (office, corridor, symmetric, open) as simulated (seed 1), and
-#              with realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3. Error: ATE.
+#   sim        the simulator's worlds (office, corridor, symmetric, open) as simulated (seed 1), with
+#              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, and kidnapped (perturb
+#              --keep-odometry --kidnap 15: the robot carried for the 15 s in the middle of the log,
+#              its odometry unaware). Error: ATE.
 # --quick uses seed 1 only; --logs keeps only the logs / worlds named (e.g. --logs intel,orebro).
 #
 # Columns: the SLAM trajectory's error, the log's own odometry's error beside it (`lidar2d eval LOG
@@ -168,5 +170,7 @@ if want_part sim; then
       perturb "$s" --odom-model realistic --keyframes 1,30 --seed "$seed" -o "$p" || continue
       run "sim $w kf s$seed" "$p" "$p" "$p"
     done
+    k=$OUT/logs/sim-$w-kidnapped.log
+    perturb "$s" --keep-odometry --kidnap 15 -o "$k" && run "sim $w kidnapped" "$k" "$k" "$k"
   done
 fi

@@ -11,7 +11,9 @@
 // window in which the truth heading turns most (sum of |heading change| between consecutive scans
 // both inside), placed after the fixed windows, disjoint from every window placed before it. Gaps are
 // placed from a first pass over the log (times and poses only: the log is read twice). A gap must
-// end at or before the last scan's time.
+// end at or before the last scan's time. --kidnap DURATION_S[@START_S|@turn] is a gap across which
+// the robot is carried: the odometry of the first scan after it reads no motion while the truth
+// jumps (with --keep-odometry the log's odometry continues from where it stopped).
 //
 // Keyframes. --keyframes D,K keeps a scan outside the gaps when it is the first kept, or when its
 // truth pose moved at least D metres or turned at least K degrees (net heading change) from the last
@@ -131,6 +133,11 @@ std::optional<sim::GapRequest> parseGap(const std::string& s) {
   return r;
 }
 
+std::string gapError(const std::string& v) {
+  return parseGap(v) ? std::string()
+                     : fmt::format("expected DURATION_S[@START_S|@turn], DURATION_S > 0 and START_S >= 0, got '{}'", v);
+}
+
 CLI::Validator check(const std::string& name, std::function<std::string(const std::string&)> error) {
   return CLI::Validator([error](std::string& v) { return error(v); }, name);
 }
@@ -151,6 +158,7 @@ struct PerturbArgs {
   bool keep_odometry = false;
   std::string keyframes;
   std::vector<std::string> gaps;
+  std::vector<std::string> kidnaps;
   double time_jitter_s = 0.0;
   std::size_t time_bursts = 1;
   double synthesize_hz = 0.0;
@@ -159,7 +167,7 @@ struct PerturbArgs {
        drift_given = false, bursts_given = false, jitter_given = false, synth_given = false;
   bool legacy() const {
     return odom_model == "constant" && !trans_given && !rot_rad_given && !rot_m_given && !scale_given && !drift_given &&
-           !keep_odometry && keyframes.empty() && gaps.empty() && !jitter_given && !bursts_given && !synth_given;
+           !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && !jitter_given && !bursts_given && !synth_given;
   }
 };
 
@@ -262,6 +270,10 @@ void run(const PerturbArgs& a) {
   o.time.burst_size = a.time_bursts;
   std::vector<sim::GapRequest> requests;
   for (const std::string& g : a.gaps) requests.push_back(*parseGap(g));  // validated by the option's check
+  for (const std::string& g : a.kidnaps) {
+    requests.push_back(*parseGap(g));
+    requests.back().carried = true;
+  }
 
   // First pass: place the gaps on the log's times and poses.
   double t_first = 0.0;
@@ -285,7 +297,8 @@ void run(const PerturbArgs& a) {
   auto source = io::openLog(a.log, a.reader);
   io::CarmenWriter writer(a.output);
   std::string gaps_desc;
-  for (const sim::GapWindow& g : o.gaps) gaps_desc += fmt::format(" [{:.3f},{:.3f})", g.begin_s, g.end_s);
+  for (const sim::GapWindow& g : o.gaps)
+    gaps_desc += fmt::format(" {}[{:.3f},{:.3f})", g.request.carried ? "kidnap" : "", g.begin_s, g.end_s);
   writer.comment(fmt::format(
       "lidar2d perturb: source={} seed={} odometry={} keyframes={} gaps={} synthesize_hz={} time_jitter_s={} "
       "time_bursts={} (model: docs/perturb.md)",
@@ -311,7 +324,8 @@ void run(const PerturbArgs& a) {
   for (std::size_t k = 0; k < o.gaps.size(); ++k) {
     const sim::GapWindow& g = o.gaps[k];
     gaps_summary += fmt::format(
-        "{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ", g.begin_s - t_first, g.end_s - t_first,
+        "{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ", g.request.carried ? "kidnapping " : "",
+        g.begin_s - t_first, g.end_s - t_first,
         std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg), st.dropped_per_gap[k]);
   }
   if (!gaps_summary.empty()) gaps_summary += ")";
@@ -397,11 +411,12 @@ void addPerturbCommand(CLI::App& app) {
                   "first scan's time); without @, a window centred on the log; @turn, the window in which the truth "
                   "heading turns most. Repeatable; the gap must end by the last scan")
       ->allow_extra_args(false)  // one value per --gap, so that a following LOG is not taken as a gap
-      ->check(check("DURATION_S[@START_S|@turn]", [](const std::string& v) -> std::string {
-        return parseGap(v)
-                   ? std::string()
-                   : fmt::format("expected DURATION_S[@START_S|@turn], DURATION_S > 0 and START_S >= 0, got '{}'", v);
-      }));
+      ->check(check("DURATION_S[@START_S|@turn]", gapError));
+  sub->add_option("--kidnap", a->kidnaps,
+                  "DURATION_S[@START_S|@turn]: a gap (as --gap) across which the robot is carried: the odometry "
+                  "reads no motion across it while the truth jumps. Repeatable")
+      ->allow_extra_args(false)
+      ->check(check("DURATION_S[@START_S|@turn]", gapError));
   sub->add_option("--time-jitter", a->time_jitter_s,
                   "SIGMA_S: add Gaussian noise of this std to every kept scan's stamp [s] (seeded)")
       ->check(nonNegativeNumber())

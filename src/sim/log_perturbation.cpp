@@ -302,6 +302,7 @@ std::vector<Frame> LogPerturber::push(Frame f) {
     if (options_.gaps[k].contains(t)) {
       ++stats_.dropped_per_gap[k];
       in_gap = true;
+      if (options_.gaps[k].request.carried && stats_.scans_kept > 0) carried_ = true;
     }
   if (in_gap) {
     ++stats_.dropped_by_gaps;
@@ -326,11 +327,17 @@ std::vector<Frame> LogPerturber::push(Frame f) {
 
   if (from_truth) {
     const SE2 truth = *f.T_world_robot;
-    // One noisy step from the last integration point: across dropped frames, the whole motion.
-    if (i > 0) odom_ = odom_ * noisyOdometryStep(prev_truth_.inverse() * truth, options_.odometry, odom_rng_);
+    // One noisy step from the last integration point: across dropped frames, the whole motion;
+    // across a carried gap, none.
+    const SE2 step = carried_ ? SE2() : prev_truth_.inverse() * truth;
+    if (i > 0) odom_ = odom_ * noisyOdometryStep(step, options_.odometry, odom_rng_);
     prev_truth_ = truth;
     f.T_odom_robot = odom_;
+  } else if (f.T_odom_robot) {
+    if (carried_ && stats_.last_T_odom_robot) log_odom_shift_ = *stats_.last_T_odom_robot * f.T_odom_robot->inverse();
+    if (log_odom_shift_) f.T_odom_robot = *log_odom_shift_ * *f.T_odom_robot;
   }
+  carried_ = false;
   f.time = t;
   if (options_.time.jitter_sigma_s > 0) f.time += jitter_rng_.gaussian(options_.time.jitter_sigma_s);
   ++stats_.scans_kept;

@@ -21,7 +21,9 @@
 ///       odom_k = odom_j * noisyOdometryStep(truth_j^-1 * truth_k)
 ///     with j the previously kept frame (or frame 0 while none was kept): the noise model applies to
 ///     the step between kept frames, and the first frame after a gap gets one step for the whole
-///     motion across the gap (the wheels kept turning). `kKeepLog` leaves the log's odometry as it is.
+///     motion across the gap (the wheels kept turning); after a carried gap (a kidnapping), one
+///     step of no motion. `kKeepLog` leaves the log's odometry as it is, but for the carried gaps'
+///     jumps, which it removes (the odometry continues from where it was before the gap).
 ///  5. Stamps of the kept frames: t_i + N(0, jitter_sigma^2); then, with bursts of N, each group of N
 ///     consecutive kept frames (the last group may be shorter) carries the stamp of its last frame.
 /// Scans, truth and laser mounting are never changed; odometry and truth stay with their scan.
@@ -76,6 +78,11 @@ struct GapRequest {
   double duration_s = 0.0;  ///< length of the window [s], finite and > 0
   GapPlacement placement = GapPlacement::kAtOffset;
   double offset_s = 0.0;  ///< kAtOffset: start after the first frame's time [s], finite and >= 0
+  /// A kidnapping: the robot is carried across the window with its wheels still, so the odometry
+  /// of the first kept frame after it reads no motion (plus the model's noise for a zero step;
+  /// with `kKeepLog`, the log's odometry from there on is shifted to continue where it stopped)
+  /// while the truth jumps. Otherwise the odometry carries the whole motion across the gap.
+  bool carried = false;
 
   /// Throws `lidar2d::Error` (kInvalidArgument) for a duration <= 0 or a negative or non-finite value.
   void validate() const;
@@ -220,6 +227,8 @@ class LogPerturber {
   std::optional<SE2> last_kept_reference_;
   SE2 prev_truth_;  // truth where the odometry was last integrated
   SE2 odom_;
+  bool carried_ = false;   // a carried gap dropped frames since the last kept one
+  std::optional<SE2> log_odom_shift_;  // kKeepLog after a carried gap: output odometry = shift * the log's
   std::vector<Frame> burst_;
 };
 
