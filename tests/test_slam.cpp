@@ -61,12 +61,14 @@ std::vector<SE2> runSlam(const std::vector<Frame>& frames, const SlamOptions& o,
 }
 
 /// Frames [0, cut) of `a`, then the robot carried to where it was at frame `from` (its odometry
-/// does not know it: it goes on from frame cut - 1's) driving frames [from, to) again; time goes on.
-std::vector<Frame> carried(const std::vector<Frame>& a, std::size_t cut, std::size_t from, std::size_t to) {
+/// does not know it: it goes on from frame cut - 1's) driving frames [from, to) again; time goes on,
+/// after `gap_s` seconds without a scan.
+std::vector<Frame> carried(const std::vector<Frame>& a, std::size_t cut, std::size_t from, std::size_t to,
+                           double gap_s = 0.0) {
   EXPECT_LE(to, a.size());
   std::vector<Frame> frames(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(cut));
   const SE2 T_odom_carried = *frames.back().T_odom_robot * (*a[from].T_odom_robot).inverse();
-  const double dt = std::max(0.0, frames.back().time + 0.1 - a[from].time);
+  const double dt = std::max(0.0, frames.back().time + 0.1 + gap_s - a[from].time);
   for (std::size_t i = from; i < to; ++i) {
     Frame f = a[i];
     f.index = frames.size();
@@ -312,6 +314,30 @@ TEST(Slam, KidnappedIntoTheMappedAreaIsRelocalizedIntoOneMap) {
   // Every pose is where it was, but for the scans between the kidnapping and the lost track (the
   // front end predicted them from odometry that did not know): the fragment after it is placed by
   // the map, and the odometry across the kidnapping, wrong, does not bend the map before it.
+  std::vector<SE2> kept;
+  std::vector<Frame> kept_frames;
+  for (std::size_t i = 0; i < est.size(); ++i)
+    if (i < 600 || i >= 610) {
+      kept.push_back(est[i]);
+      kept_frames.push_back(frames[i]);
+    }
+  const Errors e = poseErrors(kept, kept_frames);
+  EXPECT_LT(e.rms, 0.05);
+  EXPECT_LT(e.max, 0.15);
+}
+
+TEST(Slam, CarriedDuringAGapIsRelocalizedNotMatchedToALookAlike) {
+  // As above, but nothing is logged for 15 s while the robot is carried (its odometry reads no
+  // motion): the motion prior widens with the time, and the first scans after the gap must not be
+  // taken where they partly match the old place. The track is lost and the fragment relocalized.
+  const auto frames = carried(simulateWorld("office", 5), 600, 250, 550, 15.0);
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  const std::string all = eventText(*slam);
+  EXPECT_NE(all.find("gap of"), std::string::npos) << all;
+  EXPECT_NE(all.find("relocalized"), std::string::npos) << all;
+  EXPECT_EQ(slam->stats().fragments, 1u) << all;
   std::vector<SE2> kept;
   std::vector<Frame> kept_frames;
   for (std::size_t i = 0; i < est.size(); ++i)
