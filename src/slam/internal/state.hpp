@@ -19,6 +19,7 @@
 #include "lidar2d/registration/icp.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
 #include "lidar2d/slam/slam.hpp"
+#include "lidar2d/slam/state_file.hpp"
 
 namespace lidar2d::slam::internal {
 
@@ -31,6 +32,7 @@ struct ScanRecord {
   std::size_t frame_index = 0;
   double time = 0.0;
   std::size_t node = 0;
+  std::size_t session = 0;  // index into SlamState::sessions
   SE2 T_node_scan;
   bool is_node = false;
   bool matched = false;
@@ -74,6 +76,7 @@ struct SlamState {
   const SlamOptions opt;
   const MatcherSettings match;
 
+  std::vector<State::Session> sessions;  // the logs mapped so far, in order (the last one is being added)
   std::vector<ScanRecord> scans;
   std::vector<Node> nodes;
   std::vector<Points2> node_points;                         // robot frame, voxel-filtered
