@@ -26,7 +26,6 @@ static_assert(std::endian::native == std::endian::little, "the state file format
 
 namespace {
 
-constexpr char kMagic[8] = {'L', '2', 'D', 'S', 'L', 'A', 'M', 'S'};
 // A state file of a very long run holds a few hundred MB: beyond this a length field is corrupt.
 constexpr std::uint64_t kMaxBytes = std::uint64_t{8} << 30;
 
@@ -469,7 +468,7 @@ std::string encodeState(const State& state) {
     throw Error(ErrorKind::kIo, "cannot compress the SLAM state");
   packed.resize(bound);
   Writer w;
-  w.buf.append(kMagic, sizeof(kMagic));
+  w.buf.append(kStateMagic);
   w.put(kStateFormatVersion);
   w.str(LIDAR2D_VERSION);
   w.put(static_cast<std::uint64_t>(payload.size()));
@@ -482,9 +481,9 @@ std::string encodeState(const State& state) {
 
 State decodeState(std::string_view bytes, const std::string& source) {
   constexpr const char* kWhat = "SLAM state file";
-  if (bytes.size() < sizeof(kMagic) || std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0)
+  if (!bytes.starts_with(kStateMagic))
     throw badInput("not a lidar2d SLAM state file (bad magic)", ErrorLocation(source, 0, "magic"));
-  Reader h(bytes.substr(sizeof(kMagic)), source, kWhat);
+  Reader h(bytes.substr(kStateMagic.size()), source, kWhat);
   const auto version = h.get<std::uint32_t>("version");
   if (version != kStateFormatVersion)
     throw Error(ErrorKind::kUnsupported,
@@ -496,7 +495,7 @@ State decodeState(std::string_view bytes, const std::string& source) {
   const auto payload_size = h.get<std::uint64_t>("payload_length");
   const auto crc = h.get<std::uint32_t>("checksum");
   const auto packed_size = h.get<std::uint64_t>("compressed_length");
-  const std::string_view packed = bytes.substr(sizeof(kMagic) + h.pos());
+  const std::string_view packed = bytes.substr(kStateMagic.size() + h.pos());
   if (packed.size() < packed_size)
     throw badInput(fmt::format("truncated SLAM state file: {} of its {} payload bytes", packed.size(), packed_size),
                    ErrorLocation(source, 0, "payload"));

@@ -26,6 +26,8 @@
 
 namespace lidar2d::slam {
 
+/// The first 8 bytes of a state file.
+inline constexpr std::string_view kStateMagic = "L2DSLAMS";
 /// Current version of the state file format; files of any other version are refused.
 inline constexpr std::uint32_t kStateFormatVersion = 1;
 
