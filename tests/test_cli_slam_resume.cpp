@@ -64,6 +64,11 @@ TEST_F(CliSlamResume, BothSessionsAreOneMapInTheSavedFrame) {
   EXPECT_LT(ate(second() / "trajectory.txt"), 0.05);
   for (const char* f : {"map.pgm", "map.yaml", "graph.txt", "state.l2d", "report.html"})
     EXPECT_TRUE(fs::is_regular_file(second() / f)) << f;
+  // The report draws each session's trajectory on its own and lists the sessions.
+  const std::string html = readFile(second() / "report.html");
+  EXPECT_NE(html.find("id=\"trajectory\""), std::string::npos);
+  EXPECT_NE(html.find("id=\"trajectory-session2\""), std::string::npos);
+  EXPECT_NE(html.find("<th>sessions</th>"), std::string::npos);
 }
 
 TEST_F(CliSlamResume, ResumesChainAndTheOptionsAreTheSaved) {

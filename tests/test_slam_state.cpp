@@ -140,6 +140,14 @@ TEST(SlamState, ASessionInAnUnmappedPlaceStaysAReportedFragment) {
   EXPECT_EQ(slam->stats().fragments, 2u) << all;
   EXPECT_NE(all.find("fragment from node"), std::string::npos) << all;
   for (const auto& e : slam->trajectory()) EXPECT_TRUE(e.T_world_robot.isFinite());
+  // Resumed again: a third session over that room joins the second one's fragment (still not the
+  // first's); each fragment beyond the first is reported once, not once per run that saw it.
+  auto third = run(std::make_unique<Slam>(slam->state(), "third"), secondLog(1000, 1300, office()[1249].time + 30.0));
+  const std::string again = eventText(*third);
+  std::size_t reported = 0;
+  for (const auto& ev : third->events()) reported += ev.what.starts_with("fragment from node") ? 1 : 0;
+  EXPECT_EQ(reported + 1, third->stats().fragments) << again;
+  EXPECT_EQ(third->stats().fragments, 2u) << again;
 }
 
 TEST(SlamState, TheSavedMapIsTheNodeScansAtTheirPoses) {

@@ -434,6 +434,9 @@ void Slam::finish() {
                    [](const Event& a, const Event& b) { return a.frame_index < b.frame_index; });
   impl_->loops.expirePending();
   internal::optimize(s, s.opt.graph.max_iterations);
+  // A resumed map carries the fragment verdicts of the run that saved it; the new session may have
+  // tied those fragments: checkAtEnd states them again for the whole graph.
+  std::erase_if(s.events, [](const Event& e) { return e.what.starts_with(internal::kFragmentEvent); });
   internal::checkAtEnd(s);
   impl_->finished = true;
   s.stats.nodes = s.nodes.size();

@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <string_view>
 
 #include "src/slam/internal/state.hpp"
 
@@ -30,6 +31,8 @@ void optimize(SlamState& s, int iterations);
 ///   fragment beyond the first is reported as an event. Sets stats.fragments and
 ///   stats.odometry_wins.
 void checkAtEnd(SlamState& s);
+/// How checkAtEnd's event of a fragment no closure tied begins.
+inline constexpr std::string_view kFragmentEvent = "fragment from node ";
 
 /// Optimises when due after a new node: at once after a descriptor closure, optimize_every_nodes
 /// nodes after a searched closure, 10x as many after other closures.
