@@ -232,9 +232,7 @@ struct Slam::Impl {
     std::size_t session = 0;
     for (std::size_t i = 0; i < saved.scans.size(); ++i) {
       while (session + 1 < s.sessions.size() && s.sessions[session + 1].first_scan <= i) ++session;
-      const State::Scan& x = saved.scans[i];
-      s.scans.push_back({x.frame_index, x.time, x.node, session, x.T_node_scan, x.is_node, x.matched, x.degenerate,
-                         x.seconds});
+      s.scans.push_back({saved.scans[i], session});
     }
     for (State::NodeData& d : saved.nodes) {
       Frame f;
@@ -262,9 +260,7 @@ struct Slam::Impl {
     T_world_local_seen = s.T_world_local;
     s.last_loop_node = saved.last_loop_node;
     s.untied_since = saved.untied_since;
-    if (saved.restart_odometry)
-      s.restart_odometry = {saved.restart_odometry->edge, saved.restart_odometry->constraint,
-                            saved.restart_odometry->node};
+    s.restart_odometry = saved.restart_odometry;
     s.nodes_since_optimization = saved.nodes_since_optimization;
     s.loops_since_optimization = saved.loops_since_optimization;
     s.stats = saved.stats;  // last: rebuilding counted descriptor time
@@ -277,8 +273,7 @@ struct Slam::Impl {
     out.options = s.opt;
     out.sessions = s.sessions;
     out.scans.reserve(s.scans.size());
-    for (const internal::ScanRecord& r : s.scans)
-      out.scans.push_back({r.frame_index, r.time, r.node, r.T_node_scan, r.is_node, r.matched, r.degenerate, r.seconds});
+    for (const internal::ScanRecord& r : s.scans) out.scans.push_back(r);
     out.nodes.reserve(s.nodes.size());
     for (std::size_t n = 0; n < s.nodes.size(); ++n)
       out.nodes.push_back({s.nodes[n], s.node_scans[n].first, s.node_scans[n].second, s.node_odometry[n],
@@ -295,9 +290,7 @@ struct Slam::Impl {
     out.T_world_local = s.T_world_local;
     out.last_loop_node = s.last_loop_node;
     out.untied_since = s.untied_since;
-    if (s.restart_odometry)
-      out.restart_odometry = State::RestartOdometry{s.restart_odometry->edge, s.restart_odometry->constraint,
-                                                    s.restart_odometry->node};
+    out.restart_odometry = s.restart_odometry;
     out.nodes_since_optimization = s.nodes_since_optimization;
     out.loops_since_optimization = s.loops_since_optimization;
     return out;

@@ -27,17 +27,10 @@ using Clock = std::chrono::steady_clock;
 
 inline double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-/// One scan's record: the node it hangs off and its pose relative to that node.
-struct ScanRecord {
-  std::size_t frame_index = 0;
-  double time = 0.0;
-  std::size_t node = 0;
+/// One scan's record (what the state file keeps: the node it hangs off and its pose relative to
+/// that node), and its session.
+struct ScanRecord : State::Scan {
   std::size_t session = 0;  // index into SlamState::sessions
-  SE2 T_node_scan;
-  bool is_node = false;
-  bool matched = false;
-  bool degenerate = false;
-  double seconds = 0.0;
 };
 
 /// A submap: consecutive nodes, their points in the frame of the first (anchor) node.
@@ -104,9 +97,7 @@ struct SlamState {
   std::optional<std::size_t> untied_since;
   // The odometry constraint across the latest lost track (indices into edges and constraints, and
   // its `to` node), while the fragment is untied: the relocalization checks it.
-  struct RestartOdometry {
-    std::size_t edge = 0, constraint = 0, node = 0;
-  };
+  using RestartOdometry = State::RestartOdometry;
   std::optional<RestartOdometry> restart_odometry;
   std::size_t nodes_since_optimization = 0;
   std::size_t loops_since_optimization = 0;
