@@ -196,6 +196,9 @@ void addTrackCommand(CLI::App& app) {
                   "--resolution")
       ->required();
   addBareMapOptions(sub, a->bare, "MAP");
+  sub->get_option(a->bare.resolution_flag)
+      ->description("MAP as a bare PGM/PNG image (no YAML): its cell size [m] (required then; a YAML states its own); "
+                    "MAP as a SLAM state: the cell size of the grid its scans are drawn into (default 0.05)");
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->output, "output file, one line per scan")->required();
   sub->add_option("--db", a->db, "database from 'lidar2d localize-index' (default: built in memory)");
