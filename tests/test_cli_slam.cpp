@@ -43,7 +43,8 @@ TempDir* CliSlam::dir_ = nullptr;
 std::string* CliSlam::slam_out_ = nullptr;
 
 TEST_F(CliSlam, WritesEveryOutput) {
-  for (const char* f : {"trajectory.txt", "map.pgm", "map.yaml", "map.png", "graph.txt", "report.html", "summary.json"}) {
+  for (const char* f : {"trajectory.txt", "map.pgm", "map.yaml", "map.png", "graph.txt", "state.l2d", "report.html",
+                        "summary.json"}) {
     EXPECT_TRUE(fs::is_regular_file(run() / f)) << f;
     EXPECT_NE(slam_out_->find(f), std::string::npos) << "stdout lists " << f;
   }

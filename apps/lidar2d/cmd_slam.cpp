@@ -1,5 +1,7 @@
-// lidar2d slam LOG -o DIR: full 2D SLAM; writes DIR/trajectory.txt, DIR/map.{pgm,yaml,png},
-// DIR/graph.txt, DIR/summary.json and DIR/report.html.
+// lidar2d slam LOG -o DIR [--resume STATE]: full 2D SLAM; writes DIR/trajectory.txt,
+// DIR/map.{pgm,yaml,png}, DIR/graph.txt, DIR/state.l2d, DIR/summary.json and DIR/report.html. With
+// --resume, LOG is a new session of the saved map: the earlier sessions' trajectories go to
+// DIR/trajectory_session<k>.txt, and the map and state hold every session.
 
 #include <fmt/format.h>
 
@@ -9,7 +11,9 @@
 #include <functional>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "commands.hpp"
 #include "lidar2d/core/error.hpp"
@@ -21,6 +25,7 @@
 #include "lidar2d/mapping/map_builder.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/slam/slam.hpp"
+#include "lidar2d/slam/state_file.hpp"
 #include "map_output.hpp"
 #include "progress.hpp"
 #include "slam_config.hpp"
@@ -29,6 +34,35 @@
 namespace lidar2d::cli {
 namespace {
 
+/// The frames of a log within `--from`/`--to` (seconds after its first scan's time, by file order):
+/// the others are skipped, in the SLAM pass and in the map's second reading alike.
+class TimeWindow {
+ public:
+  TimeWindow(std::optional<double> from_s, std::optional<double> to_s) : from_(from_s), to_(to_s) {}
+  bool active() const { return from_ || to_; }
+  /// The next frame of `next` within the window (the first frame of the log sets its start).
+  template <class Next>
+  auto pull(Next&& next) {
+    while (true) {
+      auto f = next();
+      if (!f) return f;
+      if (!started_) {
+        t0_ = f->time;
+        started_ = true;
+      }
+      const double t = f->time - t0_;
+      if (from_ && t < *from_) continue;
+      if (to_ && t >= *to_) continue;
+      return f;
+    }
+  }
+
+ private:
+  std::optional<double> from_, to_;
+  bool started_ = false;
+  double t0_ = 0.0;
+};
+
 using Json = nlohmann::ordered_json;
 using Clock = std::chrono::steady_clock;
 
@@ -36,6 +70,8 @@ struct SlamArgs {
   std::string log;
   std::string dir;
   std::string config;
+  std::string resume;
+  std::optional<double> from_s, to_s;  // the time window, relative to the log's first scan
   bool no_odometry = false;
   bool laser_frame = false;
   bool quiet = false;
@@ -94,12 +130,26 @@ void writeGraph(const std::string& path, const slam::Slam& slam) {
 
 void run(const SlamArgs& a) {
   const auto t_start = Clock::now();
-  slam::SlamOptions options = readSlamConfig(a.config);
+  // A resumed map goes on with the options it was made with: another --config would make its
+  // sessions disagree (submap sizes, thresholds), so the two are refused together.
+  if (!a.resume.empty() && !a.config.empty())
+    throw CLI::ValidationError("--config", "cannot be combined with --resume: the saved map's options are used");
+  std::optional<slam::State> saved;
+  double state_load_s = 0.0;
+  if (!a.resume.empty()) {
+    const auto t_load = Clock::now();
+    saved = slam::readStateFile(a.resume);
+    state_load_s = secondsSince(t_load);
+  }
+  slam::SlamOptions options = saved ? saved->options : readSlamConfig(a.config);
+  // --no-odometry is about the new log: it applies to a resumed run too.
   if (a.no_odometry) options.use_odometry = false;
   if (a.dump_config) {
     std::cout << (a.markdown ? slamOptionsMarkdown(options) : slamConfigYaml(options));
     return;
   }
+  if (a.from_s && a.to_s && !(*a.from_s < *a.to_s))
+    throw CLI::ValidationError("--from/--to", "--from must be before --to");
   if (!(a.resolution > 0.0) || a.resolution > 10.0)
     throw badInput("must be in (0, 10] m", ErrorLocation("command line", 0, "--resolution"));
   namespace fs = std::filesystem;
@@ -113,22 +163,38 @@ void run(const SlamArgs& a) {
   // the final map reads the log again.
   std::vector<SE2> T_robot_laser;
   auto source = io::prefetch(io::openLog(a.log, a.reader));
-  slam::Slam slam(options);
+  const std::size_t earlier_sessions = saved ? saved->sessions.size() : 0;
+  std::unique_ptr<slam::Slam> slam_ptr;
+  if (saved) {
+    saved->options = options;
+    slam_ptr = std::make_unique<slam::Slam>(std::move(*saved), a.log);
+    saved.reset();
+  } else {
+    slam_ptr = std::make_unique<slam::Slam>(options, a.log);
+  }
+  slam::Slam& slam = *slam_ptr;
   SlamProgress bar(a.quiet, source->sizeHint());
   const auto t_slam = Clock::now();
-  while (auto f = source->next()) {
+  TimeWindow window(a.from_s, a.to_s);
+  while (auto f = window.pull([&] { return source->next(); })) {
     T_robot_laser.push_back(f->T_robot_laser);
     slam.add(*f);
     bar.update(T_robot_laser.size(), slam);
   }
   source.reset();
   const std::size_t num_scans = T_robot_laser.size();
-  if (num_scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
+  if (num_scans == 0)
+    throw badInput(window.active() ? "log has no scans in the --from/--to window" : "log has no scans",
+                   ErrorLocation(a.log));
   slam.finish();
   bar.update(num_scans, slam, true);
   bar.done();
   const double slam_seconds = secondsSince(t_slam);
-  const auto trajectory = slam.trajectory();
+  const auto all_scans = slam.trajectory();
+  const slam::State state = slam.state();
+  // This log's scans: the last session's.
+  const std::vector<slam::ScanEstimate> trajectory(all_scans.end() - static_cast<std::ptrdiff_t>(num_scans),
+                                                   all_scans.end());
 
   // Map from every scan of the log, read again, at its optimised pose (the pose with the scan's
   // index and exactly its time).
@@ -137,6 +203,8 @@ void run(const SlamArgs& a) {
   mo.resolution_m = a.resolution;
   mo.insert.max_range_m = options.max_range_m;
   auto map = mapping::makeMap(a.model, mo);
+  // The earlier sessions' logs are not read again: their node scans (kept in the state) stand for them.
+  slam::insertNodeScans(state, *map, earlier_sessions);
   {
     Trajectory optimised;
     optimised.reserve(trajectory.size());
@@ -144,7 +212,8 @@ void run(const SlamArgs& a) {
     mapping::MapBuilder builder(*map, mapping::FramePoses::fromTrajectory(std::move(optimised), 0.0, a.log),
                                 {.source_name = a.log});
     auto again = io::openLog(a.log, a.reader);
-    if (builder.insert([&] { return again->next(); }) != num_scans)
+    TimeWindow window_again(a.from_s, a.to_s);
+    if (builder.insert([&] { return window_again.pull([&] { return again->next(); }); }) != num_scans)
       throw ioError("the log changed while it was being read", ErrorLocation(a.log));
   }
   const OccupancyImage image = mapping::toOccupancyImage(*map);
@@ -161,9 +230,25 @@ void run(const SlamArgs& a) {
   }
   io::writeTrajectory(dir + "/trajectory.txt", traj);
   std::vector<std::string> written{dir + "/trajectory.txt"};
+  for (std::size_t k = 0; k < earlier_sessions; ++k) {
+    const std::size_t end = state.sessions[k + 1].first_scan;
+    Trajectory earlier;
+    for (std::size_t i = state.sessions[k].first_scan; i < end; ++i) {
+      const auto& e = all_scans[i];
+      earlier.push_back({e.time, a.laser_frame ? e.T_world_robot * state.nodes[e.node].T_robot_laser : e.T_world_robot});
+    }
+    const std::string path = fmt::format("{}/trajectory_session{}.txt", dir, k + 1);
+    io::writeTrajectory(path, earlier);
+    written.push_back(path);
+  }
   for (const auto& w : writeMapFiles(dir + "/map", image)) written.push_back(w);
   writeGraph(dir + "/graph.txt", slam);
   written.push_back(dir + "/graph.txt");
+  const auto t_save = Clock::now();
+  const std::string state_bytes = slam::encodeState(state);
+  io::writeFileAtomically(dir + "/state.l2d", state_bytes);
+  const double state_save_s = secondsSince(t_save);
+  written.push_back(dir + "/state.l2d");
 
   const slam::SlamStats& s = slam.stats();
   std::vector<double> per_scan;
@@ -171,6 +256,16 @@ void run(const SlamArgs& a) {
   for (const auto& e : trajectory) per_scan.push_back(e.seconds * 1e3);
   Json j;
   j["log"] = a.log;
+  Json sessions = Json::array();
+  for (std::size_t k = 0; k < state.sessions.size(); ++k) {
+    const std::size_t end = k + 1 < state.sessions.size() ? state.sessions[k + 1].first_scan : state.scans.size();
+    sessions.push_back({{"log", state.sessions[k].name},
+                        {"scans", end - state.sessions[k].first_scan},
+                        {"trajectory", k + 1 == state.sessions.size() ? std::string("trajectory.txt")
+                                                                       : fmt::format("trajectory_session{}.txt", k + 1)}});
+  }
+  j["sessions"] = sessions;
+  if (!a.resume.empty()) j["resumed_from"] = a.resume;
   j["scans"] = s.scans;
   j["nodes"] = s.nodes;
   j["submaps"] = s.submaps;
@@ -195,6 +290,9 @@ void run(const SlamArgs& a) {
   j["optimization_s"] = s.optimization_seconds;
   j["slam_s"] = slam_seconds;
   j["map_s"] = map_seconds;
+  j["state_bytes"] = state_bytes.size();
+  j["state_save_s"] = state_save_s;
+  if (!a.resume.empty()) j["state_load_s"] = state_load_s;
   j["ms_per_scan_mean"] = slam_seconds * 1e3 / static_cast<double>(num_scans);
   j["ms_per_scan_median"] = eval::percentile(per_scan, 0.5);
   j["ms_per_scan_p95"] = eval::percentile(per_scan, 0.95);
@@ -207,7 +305,7 @@ void run(const SlamArgs& a) {
   for (const auto& e : slam.events()) ev.push_back({{"scan", e.frame_index}, {"time", e.time}, {"what", e.what}});
   j["events"] = ev;
 
-  ReportInput report{a.log, slam, trajectory, image, j};
+  ReportInput report{a.log, slam, all_scans, image, j};
   {
     io::AtomicFile f(dir + "/report.html");
     f.stream() << slamReportHtml(report);
@@ -239,6 +337,9 @@ void addSlamCommand(CLI::App& app) {
   auto* log = sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   auto* dir = sub->add_option("-o,--output", a->dir, "output folder (created if missing)")->required();
   sub->add_option("--config", a->config, "YAML file of SLAM options overriding the defaults (--dump-config lists them)");
+  sub->add_option("--resume", a->resume,
+                  "continue the map of a state.l2d (written by an earlier 'slam') with LOG as a new session, placed by "
+                  "global localization; its options are used (no --config)");
   // Triggered as soon as it is parsed, before CLI11 checks that LOG and -o are given.
   auto* dump = sub->add_flag_callback(
                       "--dump-config",
@@ -253,6 +354,12 @@ void addSlamCommand(CLI::App& app) {
   sub->add_flag("--markdown", a->markdown, "with --dump-config: print the options as the Markdown table of docs/slam.md")
       ->needs(dump);
   sub->add_flag("--no-odometry", a->no_odometry, "ignore the log's odometry (scan matching only)");
+  sub->add_option("--from", a->from_s,
+                  "map only the scans logged at least this long after the log's first scan [s] (e.g. the second half "
+                  "of a log, to --resume the first)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--to", a->to_s, "map only the scans logged less than this long after the log's first scan [s]")
+      ->check(CLI::PositiveNumber);
   addChoice<bool>(sub, "--pose-frame", a->laser_frame, {{"robot", false}, {"laser", true}},
                   "frame of the poses in trajectory.txt: robot (base_link) or laser (the robot pose times the laser "
                   "mounting; what the Radish relation files measure)")

@@ -1,5 +1,7 @@
 // lidar2d track MAP LOG -o FILE [--db DB] [--json FILE] [--eval] [--no-odometry]: localization in a
-// known map without an initial pose (localization::Tracker). Output: one line per scan,
+// known map without an initial pose (localization::Tracker). MAP is a map_server YAML, a bare image,
+// or a SLAM state (state.l2d), whose node scans are rendered into an occupancy grid at their
+// optimised poses (the mapping code of `slam`'s map.pgm). Output: one line per scan,
 // `t x y theta status score`, status `global` (placed by global localization), `tracking` (matched
 // from the odometry or constant-velocity prior, checked against the map) or `lost` (pose `nan`).
 // --json writes a summary: share of each status, time to the first fix, relocalizations, timings,
@@ -8,6 +10,7 @@
 #include <fmt/format.h>
 
 #include <chrono>
+#include <fstream>
 #include <cmath>
 #include <iostream>
 #include <memory>
@@ -26,6 +29,9 @@
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/io/map_file.hpp"
 #include "lidar2d/localization/tracker.hpp"
+#include "lidar2d/mapping/export.hpp"
+#include "lidar2d/mapping/occupancy_map.hpp"
+#include "lidar2d/slam/state_file.hpp"
 
 namespace lidar2d::cli {
 namespace {
@@ -55,17 +61,41 @@ nlohmann::json timing(const std::vector<double>& ms) {
           {"max", eval::percentile(ms, 1.0)}};
 }
 
+/// Whether the file at `path` starts like a SLAM state file (otherwise it is read as a map).
+bool isStateFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string head(slam::kStateMagic.size(), '\0');
+  return in.read(head.data(), static_cast<std::streamsize>(head.size())) && head == slam::kStateMagic;
+}
+
+/// The map of MAP: a state.l2d's node scans inserted at their optimised poses into a log-odds grid
+/// of `--resolution` (default 0.05 m; no --origin), or the map_server YAML or bare image.
+OccupancyImage readTrackMap(const TrackArgs& a) {
+  if (!isStateFile(a.map)) return readMapChecked(a.map, a.bare).map;
+  if (a.bare.origin)
+    throw CLI::ValidationError(a.bare.origin_flag, "applies to a bare image MAP, not to a SLAM state");
+  const slam::State state = slam::readStateFile(a.map);
+  mapping::MapOptions mo;
+  mo.resolution_m = a.bare.resolution.value_or(0.05);
+  if (!(mo.resolution_m > 0.0) || mo.resolution_m > 10.0)
+    throw badInput("must be in (0, 10] m", ErrorLocation("command line", 0, a.bare.resolution_flag));
+  mo.insert.max_range_m = state.options.max_range_m;
+  const auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
+  slam::insertNodeScans(state, *map);
+  return mapping::toOccupancyImage(*map);
+}
+
 void runTrack(const TrackArgs& a) {
   const CreatedFolders out_folders = prepareOutputFile(a.output);
   std::optional<CreatedFolders> json_folders;
   if (!a.json.empty()) json_folders.emplace(prepareOutputFile(a.json));
   const auto t0 = Clock::now();
-  const io::MapFile map = readMapChecked(a.map, a.bare);
+  const OccupancyImage map = readTrackMap(a);
   std::optional<localization::Database> db;
   if (!a.db.empty()) db = io::readLocalizationDatabase(a.db);
   std::unique_ptr<localization::Tracker> tracker;
   try {
-    tracker = std::make_unique<localization::Tracker>(map.map, std::move(db), a.options);
+    tracker = std::make_unique<localization::Tracker>(map, std::move(db), a.options);
   } catch (const Error& e) {
     throw Error(e.kind(), e.message(), ErrorLocation(a.db.empty() ? a.map : a.db, 0, e.where().field));
   }
@@ -161,8 +191,14 @@ void addTrackCommand(CLI::App& app) {
       "track",
       "Localization in a known map without an initial pose: global localization, then tracking from odometry, "
       "recovering by itself; writes 't x y theta status score' per scan (status global|tracking|lost)");
-  sub->add_option("MAP", a->map, "map: a map_server YAML, or a bare PGM/PNG image with --resolution")->required();
+  sub->add_option("MAP", a->map,
+                  "map: a SLAM state (state.l2d, from 'lidar2d slam'), a map_server YAML, or a bare PGM/PNG image with "
+                  "--resolution")
+      ->required();
   addBareMapOptions(sub, a->bare, "MAP");
+  sub->get_option(a->bare.resolution_flag)
+      ->description("MAP as a bare PGM/PNG image (no YAML): its cell size [m] (required then; a YAML states its own); "
+                    "MAP as a SLAM state: the cell size of the grid its scans are drawn into (default 0.05)");
   sub->add_option("LOG", a->log, "log file (any format lidar2d reads)")->required();
   sub->add_option("-o,--output", a->output, "output file, one line per scan")->required();
   sub->add_option("--db", a->db, "database from 'lidar2d localize-index' (default: built in memory)");

@@ -76,13 +76,16 @@ std::string slamReportHtml(const ReportInput& in) {
 
   std::ostringstream svg;
   svg << fmt::format(R"(<svg class="overlay" viewBox="0 0 {} {}" preserveAspectRatio="none" xmlns="http://www.w3.org/2000/svg">)", W, H);
-  // Trajectory of every scan.
-  svg << fmt::format(R"(<polyline id="trajectory" fill="none" stroke="#1f77b4" stroke-width="{:.2f}" points=")", stroke);
-  for (const auto& e : in.trajectory) {
-    const auto p = px(e.T_world_robot.translation());
+  // Trajectory of every scan, one line per session (a resumed map's sessions are not joined).
+  for (std::size_t i = 0; i < in.trajectory.size(); ++i) {
+    const std::size_t session = in.trajectory[i].session;
+    if (i == 0 || session != in.trajectory[i - 1].session)
+      svg << fmt::format(R"(<polyline id="{}" fill="none" stroke="#1f77b4" stroke-width="{:.2f}" points=")",
+                         i == 0 ? std::string("trajectory") : fmt::format("trajectory-session{}", session + 1), stroke);
+    const auto p = px(in.trajectory[i].T_world_robot.translation());
     svg << fmt::format("{:.1f},{:.1f} ", p.x(), p.y());
+    if (i + 1 == in.trajectory.size() || in.trajectory[i + 1].session != session) svg << "\"/>\n";
   }
-  svg << "\"/>\n";
   const auto& nodes = in.slam.nodes();
   // Loop closures: accepted green, rejected red (dashed).
   std::size_t accepted = 0, rejected = 0;
@@ -150,6 +153,12 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
   html << "<table id=\"summary\">\n";
   auto row = [&](const std::string& k, const std::string& v) { html << "<tr><th>" << k << "</th><td>" << v << "</td></tr>\n"; };
   row("scans", fmt::format("{}", j.value("scans", 0)));
+  if (j.contains("sessions") && j["sessions"].size() > 1) {
+    std::string logs;
+    for (const auto& x : j["sessions"])
+      logs += fmt::format("{}{} ({} scans)", logs.empty() ? "" : "; ", escape(x.value("log", "")), x.value("scans", 0));
+    row("sessions", fmt::format("{}, resumed from a saved state: {}", j["sessions"].size(), logs));
+  }
   row("nodes / submaps", fmt::format("{} / {}", j.value("nodes", 0), j.value("submaps", 0)));
   row("odometry", j.value("used_odometry", false) ? "used as the prediction" : "not used (scan matching only)");
   row("scans matched / unmatched / correlative fallbacks",

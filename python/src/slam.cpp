@@ -7,6 +7,7 @@
 #include "bindings.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/core/frame.hpp"
+#include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/frame_source.hpp"
 #include "lidar2d/io/map_file.hpp"
 #include "lidar2d/io/prefetch.hpp"
@@ -16,6 +17,7 @@
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/slam/slam.hpp"
 #include "lidar2d/slam/slam_options.hpp"
+#include "lidar2d/slam/state_file.hpp"
 
 namespace lidar2d::python {
 
@@ -113,6 +115,20 @@ void bindSlam(py::module_& m) {
             }
             return fromTrajectory(trajectoryOf(s));
           }, py::arg("path"), "Offline: adds every frame of a log, finishes, returns the trajectory (N, 4).")
+      .def("save_state", [](const slam::Slam& s, const py::object& path) {
+            const std::string p = py::str(path).cast<std::string>();
+            py::gil_scoped_release release;
+            io::writeFileAtomically(p, slam::encodeState(s.state()));
+          }, py::arg("path"),
+           "Writes the SLAM state (state.l2d, as `lidar2d slam` does; after finish() it is complete), which\n"
+           "Slam.resume and `lidar2d slam --resume` continue and `lidar2d track` localizes in.")
+      .def_static("resume", [](const py::object& path, const std::string& session) {
+            const std::string p = py::str(path).cast<std::string>();
+            py::gil_scoped_release release;
+            return std::make_unique<slam::Slam>(slam::readStateFile(p), session);
+          }, py::arg("path"), py::arg("session") = "",
+           "A Slam continuing a saved state with a new session (its first pose unknown: placed by global\n"
+           "localization in the saved submaps), with the saved options; as `lidar2d slam --resume`.")
       .def("trajectory", [](const slam::Slam& s) { return fromTrajectory(trajectoryOf(s)); },
            "Every scan's current estimate as an (N, 4) array t, x, y, theta (T_world_robot).")
       .def("stats", [](const slam::Slam& s) { return statsDict(s.stats()); }, "counters and timings as a dict")

@@ -138,9 +138,9 @@ void checkAtEnd(SlamState& s) {
     if (find(i) == find(0)) continue;
     const std::size_t a = first_node[i];
     s.events.push_back({s.scans[s.nodes[a].scan].frame_index, s.nodes[a].time,
-                        fmt::format("fragment from node {} (after lost tracking) is tied to the first one only by "
+                        fmt::format("{}{} (after lost tracking or a new session) is tied to the first one only by "
                                     "the prediction: no loop closure verified its place",
-                                    a)});
+                                    kFragmentEvent, a)});
   }
   s.stats.fragments = fragments;
 }

@@ -1,16 +1,20 @@
 #include "lidar2d/slam/slam.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <condition_variable>
 #include <exception>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <stop_token>
 #include <thread>
 #include <utility>
 
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/slam/state_file.hpp"
 #include "src/slam/internal/descriptor_loops.hpp"
 #include "src/slam/internal/front_end.hpp"
 #include "src/slam/internal/graph.hpp"
@@ -156,13 +160,23 @@ class Worker {
 /// a node joins the local map and a submap, gets its sequential constraints, is searched for loop
 /// closures (by proximity, then by descriptors), and the graph is optimised when due.
 struct Slam::Impl {
-  explicit Impl(const SlamOptions& o) : state(o), front_end(state), loops(state), descriptors(state, loops) {}
+  Impl(const SlamOptions& o, std::string session)
+      : state(o), front_end(state), loops(state), descriptors(state, loops) {
+    state.sessions.push_back({std::move(session), 0});
+  }
+  Impl(State saved, std::string session) : Impl(saved.options, {}) {
+    restore(std::move(saved));
+    resumed_session = std::move(session);
+  }
 
   internal::SlamState state;
   internal::FrontEnd front_end;
   internal::LoopClosure loops;
   internal::DescriptorLoops descriptors;
   bool finished = false;
+  // The name of the session a restored state continues with, until its first scan opens it (a state
+  // saved again before that is the saved one, byte for byte).
+  std::optional<std::string> resumed_session;
   // state.T_world_local when the back end was last waited for: the caller's thread reads this one
   // (Slam::latest) while the back end may be changing the other.
   SE2 T_world_local_seen;
@@ -185,29 +199,133 @@ struct Slam::Impl {
   /// records events in back_end_events, so it may run while the next scans are tracked; the next
   /// node waits for it, so the run is the same as with no thread.
   void backEnd(std::size_t n, bool finish) {
-    if (finish) {
-      internal::Submap& sm = state.submaps[state.nodes[n].submap];
-      loops.finishSubmap(sm);
-      if (state.opt.descriptor_loops) descriptors.indexSubmap(sm);
-    }
+    if (finish) finishSubmap(state.submaps[state.nodes[n].submap]);
     ++state.nodes_since_optimization;
     if (const auto covered = loops.searchNear(n)) descriptors.search(n, *covered);
     internal::optimizeIfDue(state);
+  }
+
+  /// Freezes the submap `sm` and indexes its descriptors: during a run when it is full (or the
+  /// track is lost), and on restoring a saved state.
+  void finishSubmap(internal::Submap& sm) {
+    loops.finishSubmap(sm);
+    if (state.opt.descriptor_loops) descriptors.indexSubmap(sm);
+  }
+
+  /// What the pipeline keeps of the newest node's scan `f`: its points `pts` (robot frame,
+  /// voxel-filtered), the scan itself, its trusted `odometry`, its path length and the lines of
+  /// `raw` (its points in scan order). During a run and on restoring a saved state.
+  void appendNodeData(const Frame& f, Points2 pts, const Points2& raw, std::optional<SE2> odometry, double path_m) {
+    state.node_points.push_back(std::move(pts));
+    state.node_scans.emplace_back(f.scan, f.T_robot_laser);
+    state.node_odometry.push_back(odometry);
+    state.node_frame_index.push_back(f.index);
+    state.node_path_m.push_back(path_m);
+    descriptors.describeNode(raw);
+  }
+
+  /// Loads `saved` into the (empty) state: the saved records as they are; node points and lines,
+  /// finished submaps' points, ICP targets and descriptor indexes rebuilt by the code that built them.
+  void restore(State saved) {
+    internal::SlamState& s = state;
+    s.sessions = std::move(saved.sessions);
+    std::size_t session = 0;
+    for (std::size_t i = 0; i < saved.scans.size(); ++i) {
+      while (session + 1 < s.sessions.size() && s.sessions[session + 1].first_scan <= i) ++session;
+      s.scans.push_back({saved.scans[i], session});
+    }
+    for (State::NodeData& d : saved.nodes) {
+      Frame f;
+      f.index = d.frame_index;
+      f.time = d.node.time;
+      f.scan = std::move(d.scan);
+      f.T_robot_laser = d.T_robot_laser;
+      const Points2 raw = internal::scanPoints(f, s.opt.max_range_m);
+      s.nodes.push_back(d.node);
+      appendNodeData(f, internal::voxelFilter(raw, s.opt.scan_voxel_m), raw, d.T_odom_robot, d.path_m);
+    }
+    for (const State::Submap& x : saved.submaps) {
+      internal::Submap& sm = s.submaps.emplace_back();
+      sm.anchor = x.anchor;
+      sm.nodes = x.nodes;
+      sm.last_link_node = x.last_link_node;
+      sm.last_link_T_anchor_node = x.last_link_T_anchor_node;
+      if (x.finished) finishSubmap(sm);
+    }
+    s.constraints = std::move(saved.constraints);
+    s.edges = std::move(saved.edges);
+    s.restarts = std::move(saved.restarts);
+    s.events = std::move(saved.events);
+    s.T_world_local = saved.T_world_local;
+    T_world_local_seen = s.T_world_local;
+    s.last_loop_node = saved.last_loop_node;
+    s.untied_since = saved.untied_since;
+    s.restart_odometry = saved.restart_odometry;
+    s.nodes_since_optimization = saved.nodes_since_optimization;
+    s.loops_since_optimization = saved.loops_since_optimization;
+    s.stats = saved.stats;  // last: rebuilding counted descriptor time
+  }
+
+  /// The state's records (State), without what restore rebuilds.
+  State save() const {
+    const internal::SlamState& s = state;
+    State out;
+    out.options = s.opt;
+    out.sessions = s.sessions;
+    out.scans.reserve(s.scans.size());
+    for (const internal::ScanRecord& r : s.scans) out.scans.push_back(r);
+    out.nodes.reserve(s.nodes.size());
+    for (std::size_t n = 0; n < s.nodes.size(); ++n)
+      out.nodes.push_back({s.nodes[n], s.node_scans[n].first, s.node_scans[n].second, s.node_odometry[n],
+                           s.node_frame_index[n], s.node_path_m[n]});
+    for (const internal::Submap& sm : s.submaps)
+      out.submaps.push_back({sm.anchor, sm.nodes, sm.finished, sm.last_link_node, sm.last_link_T_anchor_node});
+    out.constraints = s.constraints;
+    out.edges = s.edges;
+    out.restarts = s.restarts;
+    out.events = s.events;
+    out.stats = s.stats;
+    out.stats.nodes = s.nodes.size();
+    out.stats.submaps = s.submaps.size();
+    out.T_world_local = s.T_world_local;
+    out.last_loop_node = s.last_loop_node;
+    out.untied_since = s.untied_since;
+    out.restart_odometry = s.restart_odometry;
+    out.nodes_since_optimization = s.nodes_since_optimization;
+    out.loops_since_optimization = s.loops_since_optimization;
+    return out;
   }
 
   void add(const Frame& f) {
     const auto t0 = Clock::now();
     if (finished) throw invalidArgument("add() after finish()", {"Slam", 0, "add"});
     const SlamOptions& opt = state.opt;
+    if (resumed_session) state.sessions.push_back({*std::exchange(resumed_session, std::nullopt), state.scans.size()});
     const Points2 raw = internal::scanPoints(f, opt.max_range_m);
     Points2 pts = internal::voxelFilter(raw, opt.scan_voxel_m);
     internal::ScanRecord rec;
     rec.frame_index = f.index;
     rec.time = f.time;
+    rec.session = state.sessions.size() - 1;
     const std::size_t scan_index = state.scans.size();
     const internal::FrontEnd::Prediction prediction = front_end.predict(f);
 
-    if (!front_end.started()) {
+    if (!front_end.started() && !state.nodes.empty()) {
+      // The first scan of a session resuming a saved map: where it is is unknown. It starts like a
+      // lost track with no odometry link (the odometry of two logs shares no frame): a new fragment,
+      // predicted where the saved run ended (the front end's local frame continues the saved one),
+      // tied to the map by the relocalization of lost tracks.
+      const SE2 T0 = state.nodes.back().T_local_robot;
+      rec.node = state.nodes.size();
+      rec.is_node = true;
+      state.scans.push_back(rec);
+      state.restart_odometry.reset();
+      state.event(f, fmt::format("session {} ('{}') starts at node {}: its place in the saved map is unknown until "
+                                 "a verified loop closure ties it",
+                                 state.sessions.size(), state.sessions.back().name, rec.node));
+      addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), true, false);
+      front_end.remember(f, T0, true, prediction.time_ok);
+    } else if (!front_end.started()) {
       // The first scan anchors everything.
       const SE2 T0 = front_end.firstPose(f);
       state.T_world_local = SE2();
@@ -264,8 +382,7 @@ struct Slam::Impl {
     }
     if (restart && !state.submaps.empty() && !state.submaps.back().finished) {
       // The nodes before a lost track and after it do not share a frame: one submap cannot hold both.
-      loops.finishSubmap(state.submaps.back());
-      if (opt.descriptor_loops) descriptors.indexSubmap(state.submaps.back());
+      finishSubmap(state.submaps.back());
     }
     if (state.submaps.empty() || state.submaps.back().finished) {
       state.submaps.emplace_back();
@@ -274,15 +391,10 @@ struct Slam::Impl {
     node.submap = state.submaps.size() - 1;
     state.submaps.back().nodes.push_back(n);
     state.nodes.push_back(node);
-    state.node_points.push_back(std::move(pts));
-    state.node_scans.emplace_back(f.scan, f.T_robot_laser);
-    state.node_odometry.push_back(f.T_odom_robot && odom_trusted ? f.T_odom_robot : std::nullopt);
-    state.node_frame_index.push_back(f.index);
-    state.node_path_m.push_back(
-        n == 0 ? 0.0
-               : state.node_path_m[n - 1] +
-                     (state.nodes[n - 1].T_local_robot.translation() - T_local.translation()).norm());
-    descriptors.describeNode(raw);
+    appendNodeData(f, std::move(pts), raw, f.T_odom_robot && odom_trusted ? f.T_odom_robot : std::nullopt,
+                   n == 0 ? 0.0
+                          : state.node_path_m[n - 1] +
+                                (state.nodes[n - 1].T_local_robot.translation() - T_local.translation()).norm());
     if (restart) {
       state.restarts.push_back(n);
       state.untied_since = n;
@@ -298,7 +410,9 @@ struct Slam::Impl {
   }
 };
 
-Slam::Slam(const SlamOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+Slam::Slam(const SlamOptions& options, std::string session)
+    : impl_(std::make_unique<Impl>(options, std::move(session))) {}
+Slam::Slam(State saved, std::string session) : impl_(std::make_unique<Impl>(std::move(saved), std::move(session))) {}
 Slam::~Slam() = default;
 
 void Slam::add(const Frame& frame) { impl_->add(frame); }
@@ -313,6 +427,9 @@ void Slam::finish() {
                    [](const Event& a, const Event& b) { return a.frame_index < b.frame_index; });
   impl_->loops.expirePending();
   internal::optimize(s, s.opt.graph.max_iterations);
+  // A resumed map carries the fragment verdicts of the run that saved it; the new session may have
+  // tied those fragments: checkAtEnd states them again for the whole graph.
+  std::erase_if(s.events, [](const Event& e) { return e.what.starts_with(internal::kFragmentEvent); });
   internal::checkAtEnd(s);
   internal::reportDownweighted(s);
   impl_->finished = true;
@@ -328,6 +445,7 @@ ScanEstimate estimateOf(const internal::ScanRecord& r, const SE2& T_world_robot)
   e.frame_index = r.frame_index;
   e.time = r.time;
   e.node = r.node;
+  e.session = r.session;
   e.is_node = r.is_node;
   e.matched = r.matched;
   e.degenerate = r.degenerate;
@@ -376,5 +494,10 @@ const SlamStats& Slam::stats() const {
   return s.stats;
 }
 const SlamOptions& Slam::options() const { return impl_->state.opt; }
+
+State Slam::state() const {
+  impl_->sync();
+  return impl_->save();
+}
 
 }  // namespace lidar2d::slam

@@ -34,6 +34,7 @@ struct ScanEstimate {
   double time = 0.0;            ///< Frame::time
   SE2 T_world_robot;            ///< final (or current) estimate
   std::size_t node = 0;         ///< the node it is attached to
+  std::size_t session = 0;      ///< the session (0: the first log mapped; see Slam(State, ...))
   bool is_node = false;         ///< the scan is that node
   bool matched = false;         ///< the front end matched it (else its pose is the prediction)
   bool degenerate = false;      ///< its match was degenerate (translation along `degenerate_dir` predicted)
@@ -93,10 +94,22 @@ struct SlamStats {
   double total_seconds = 0.0;
 };
 
+struct State;
+
 /// Incremental SLAM: feed frames in log order with `add`, then `finish`.
 class Slam {
  public:
-  explicit Slam(const SlamOptions& options = {});
+  /// A new map; `session` names the first session (State::Session::name).
+  explicit Slam(const SlamOptions& options = {}, std::string session = {});
+  /// Continues the map of `saved` (readStateFile) with a new session named `session`, with
+  /// `saved.options` (validated: throws `lidar2d::Error` (kInvalidArgument) when out of range). The
+  /// new session's first pose is unknown: it starts like a lost track with no odometry link (a new
+  /// fragment, predicted where the saved run ended), and the relocalization of lost tracks (descriptor
+  /// look-ups of its first nodes in every saved submap, proximity searches while it is untied, each
+  /// closure confirmed by a second one) ties it to the saved map; until then it is a separate
+  /// fragment (SlamStats::fragments, an event at `finish`). Node points, lines, submap grids and
+  /// descriptor indexes are rebuilt from the saved scans by the code that builds them during a run.
+  explicit Slam(State saved, std::string session = {});
   ~Slam();
   Slam(const Slam&) = delete;
   Slam& operator=(const Slam&) = delete;
@@ -122,6 +135,9 @@ class Slam {
   const std::vector<Event>& events() const;
   const SlamStats& stats() const;
   const SlamOptions& options() const;
+  /// What a later run needs to continue this map (Slam(State, ...)) or to localize in it; after
+  /// `finish` it is the complete, final state (before, closures awaiting confirmation are left out).
+  State state() const;
 
  private:
   struct Impl;

@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <string_view>
 
 #include "src/slam/internal/state.hpp"
 
@@ -30,6 +31,8 @@ void optimize(SlamState& s, int iterations);
 ///   fragment beyond the first is reported as an event. Sets stats.fragments and
 ///   stats.odometry_wins.
 void checkAtEnd(SlamState& s);
+/// How checkAtEnd's event of a fragment no closure tied begins.
+inline constexpr std::string_view kFragmentEvent = "fragment from node ";
 
 /// Records (stat loop_downweighted, one event each) the accepted closures the latest optimisation
 /// scaled below half weight (PoseGraphOptions::dcs_phi): closures the rest of the graph contradicts.

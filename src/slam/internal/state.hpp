@@ -19,6 +19,7 @@
 #include "lidar2d/registration/icp.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
 #include "lidar2d/slam/slam.hpp"
+#include "lidar2d/slam/state_file.hpp"
 
 namespace lidar2d::slam::internal {
 
@@ -26,16 +27,10 @@ using Clock = std::chrono::steady_clock;
 
 inline double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-/// One scan's record: the node it hangs off and its pose relative to that node.
-struct ScanRecord {
-  std::size_t frame_index = 0;
-  double time = 0.0;
-  std::size_t node = 0;
-  SE2 T_node_scan;
-  bool is_node = false;
-  bool matched = false;
-  bool degenerate = false;
-  double seconds = 0.0;
+/// One scan's record (what the state file keeps: the node it hangs off and its pose relative to
+/// that node), and its session.
+struct ScanRecord : State::Scan {
+  std::size_t session = 0;  // index into SlamState::sessions
 };
 
 /// A submap: consecutive nodes, their points in the frame of the first (anchor) node.
@@ -74,6 +69,7 @@ struct SlamState {
   const SlamOptions opt;
   const MatcherSettings match;
 
+  std::vector<State::Session> sessions;  // the logs mapped so far, in order (the last one is being added)
   std::vector<ScanRecord> scans;
   std::vector<Node> nodes;
   std::vector<Points2> node_points;                         // robot frame, voxel-filtered
@@ -101,9 +97,7 @@ struct SlamState {
   std::optional<std::size_t> untied_since;
   // The odometry constraint across the latest lost track (indices into edges and constraints, and
   // its `to` node), while the fragment is untied: the relocalization checks it.
-  struct RestartOdometry {
-    std::size_t edge = 0, constraint = 0, node = 0;
-  };
+  using RestartOdometry = State::RestartOdometry;
   std::optional<RestartOdometry> restart_odometry;
   std::vector<double> edge_scale;  // of `edges` at the latest optimisation (PoseGraphSummary::edge_scale)
   std::size_t nodes_since_optimization = 0;
