@@ -266,7 +266,7 @@ Constraint getConstraint(Reader& r, std::size_t nodes) {
 void putStats(Writer& w, const SlamStats& s) {
   for (std::size_t v : {s.scans, s.nodes, s.submaps, s.matched, s.correlative_fallbacks, s.unmatched, s.degenerate,
                         s.prior_overridden, s.prior_kept, s.fragments, s.relocalizations, s.odometry_wins,
-                        s.loop_searches, s.loop_accepted, s.loop_rejected, s.descriptor_queries,
+                        s.loop_searches, s.loop_accepted, s.loop_rejected, s.loop_downweighted, s.descriptor_queries,
                         s.descriptor_hypotheses, s.descriptor_accepted, s.optimizations})
     w.size(v);
   for (double v : {s.descriptor_seconds, s.optimization_seconds, s.total_seconds}) w.put(v);
@@ -277,7 +277,7 @@ SlamStats getStats(Reader& r) {
   for (std::size_t* v : {&s.scans, &s.nodes, &s.submaps, &s.matched, &s.correlative_fallbacks, &s.unmatched,
                          &s.degenerate, &s.prior_overridden, &s.prior_kept, &s.fragments, &s.relocalizations,
                          &s.odometry_wins, &s.loop_searches, &s.loop_accepted, &s.loop_rejected,
-                         &s.descriptor_queries, &s.descriptor_hypotheses, &s.descriptor_accepted, &s.optimizations})
+                         &s.loop_downweighted, &s.descriptor_queries, &s.descriptor_hypotheses, &s.descriptor_accepted, &s.optimizations})
     *v = r.size("stats");
   for (double* v : {&s.descriptor_seconds, &s.optimization_seconds, &s.total_seconds}) *v = r.get<double>("stats");
   return s;
@@ -337,6 +337,7 @@ std::string encodePayload(const State& s) {
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) w.put(e.sqrt_information(i, j));
     w.put(e.huber_scale);
+    w.flag(e.scalable);
   }
   w.size(s.restarts.size());
   for (std::size_t n : s.restarts) w.size(n);
@@ -419,6 +420,7 @@ State decodePayload(Reader& r) {
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) e.sqrt_information(i, j) = r.real("edge.sqrt_information");
     e.huber_scale = r.real("edge.huber_scale");
+    e.scalable = r.flag("edge.scalable");
   }
   s.restarts.resize(r.count("restarts", 8));
   for (std::size_t& n : s.restarts) n = r.index("restart", N);
