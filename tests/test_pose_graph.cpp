@@ -39,6 +39,19 @@ PoseGraphEdge edgeBetween(const std::vector<SE2>& truth, std::size_t a, std::siz
   return e;
 }
 
+/// Odometry edges along `truth` that over-estimate each rotation by 1 degree (appended to `edges`);
+/// returns the poses they chain to from truth[0].
+std::vector<SE2> driftingChain(const std::vector<SE2>& truth, std::vector<PoseGraphEdge>& edges) {
+  std::vector<SE2> poses{truth[0]};
+  for (std::size_t i = 0; i + 1 < truth.size(); ++i) {
+    PoseGraphEdge e = edgeBetween(truth, i, i + 1, 0.05, 0.02);
+    e.T_from_to = e.T_from_to * SE2(0, 0, kPi / 180);
+    edges.push_back(e);
+    poses.push_back(poses.back() * e.T_from_to);
+  }
+  return poses;
+}
+
 TEST(PoseGraph, ResidualIsZeroAtTheMeasurement) {
   const std::vector<SE2> truth{SE2(1, 2, 0.3), SE2(2.5, 1, -2.9)};
   const auto e = edgeBetween(truth, 0, 1, 0.1, 0.01);
@@ -68,14 +81,7 @@ TEST(PoseGraph, RecoversTheTruthFromAPerturbedStart) {
 TEST(PoseGraph, DistributesTheLoopErrorOfDriftingOdometry) {
   const auto truth = squareLoop(6);
   std::vector<PoseGraphEdge> edges;
-  // Odometry that over-estimates each rotation by 1 degree: the open chain ends far off.
-  std::vector<SE2> poses{truth[0]};
-  for (std::size_t i = 0; i + 1 < truth.size(); ++i) {
-    PoseGraphEdge e = edgeBetween(truth, i, i + 1, 0.05, 0.02);
-    e.T_from_to = e.T_from_to * SE2(0, 0, kPi / 180);
-    edges.push_back(e);
-    poses.push_back(poses.back() * e.T_from_to);
-  }
+  std::vector<SE2> poses = driftingChain(truth, edges);  // the open chain ends far off
   const double open_end_error = (poses.back().translation() - truth.back().translation()).norm();
   edges.push_back(edgeBetween(truth, truth.size() - 1, 0, 0.01, 0.002));  // an accurate loop closure
   const PoseGraphSummary s = optimizePoseGraph(poses, edges, 0);
@@ -115,13 +121,7 @@ TEST(PoseGraph, DynamicCovarianceScalingFadesAWrongClosureAmongRightOnes) {
   std::vector<SE2> truth = lap;
   for (const SE2& T : lap) truth.push_back(T);
   std::vector<PoseGraphEdge> edges;
-  std::vector<SE2> poses{truth[0]};
-  for (std::size_t i = 0; i + 1 < truth.size(); ++i) {
-    PoseGraphEdge e = edgeBetween(truth, i, i + 1, 0.05, 0.02);
-    e.T_from_to = e.T_from_to * SE2(0, 0, kPi / 180);
-    edges.push_back(e);
-    poses.push_back(poses.back() * e.T_from_to);
-  }
+  const std::vector<SE2> poses = driftingChain(truth, edges);
   const std::size_t n = lap.size();
   for (std::size_t i : {2u, 8u, 14u, 20u}) edges.push_back(edgeBetween(truth, i, n + i, 0.05, 0.01, 1.0));
   edges.push_back(edgeBetween(truth, n - 1, 0, 0.05, 0.01, 1.0));

@@ -79,6 +79,19 @@ std::vector<Frame> carried(const std::vector<Frame>& a, std::size_t cut, std::si
   return frames;
 }
 
+/// poseErrors over every scan but [begin, end).
+Errors poseErrorsBesides(const std::vector<SE2>& est, const std::vector<Frame>& frames, std::size_t begin,
+                         std::size_t end) {
+  std::vector<SE2> kept;
+  std::vector<Frame> kept_frames;
+  for (std::size_t i = 0; i < est.size(); ++i)
+    if (i < begin || i >= end) {
+      kept.push_back(est[i]);
+      kept_frames.push_back(frames[i]);
+    }
+  return poseErrors(kept, kept_frames);
+}
+
 /// Every event of a run, one per line.
 std::string eventText(const Slam& slam) {
   std::string all;
@@ -314,14 +327,7 @@ TEST(Slam, KidnappedIntoTheMappedAreaIsRelocalizedIntoOneMap) {
   // Every pose is where it was, but for the scans between the kidnapping and the lost track (the
   // front end predicted them from odometry that did not know): the fragment after it is placed by
   // the map, and the odometry across the kidnapping, wrong, does not bend the map before it.
-  std::vector<SE2> kept;
-  std::vector<Frame> kept_frames;
-  for (std::size_t i = 0; i < est.size(); ++i)
-    if (i < 600 || i >= 610) {
-      kept.push_back(est[i]);
-      kept_frames.push_back(frames[i]);
-    }
-  const Errors e = poseErrors(kept, kept_frames);
+  const Errors e = poseErrorsBesides(est, frames, 600, 610);
   EXPECT_LT(e.rms, 0.05);
   EXPECT_LT(e.max, 0.15);
 }
@@ -338,14 +344,7 @@ TEST(Slam, CarriedDuringAGapIsRelocalizedNotMatchedToALookAlike) {
   EXPECT_NE(all.find("gap of"), std::string::npos) << all;
   EXPECT_NE(all.find("relocalized"), std::string::npos) << all;
   EXPECT_EQ(slam->stats().fragments, 1u) << all;
-  std::vector<SE2> kept;
-  std::vector<Frame> kept_frames;
-  for (std::size_t i = 0; i < est.size(); ++i)
-    if (i < 600 || i >= 610) {
-      kept.push_back(est[i]);
-      kept_frames.push_back(frames[i]);
-    }
-  const Errors e = poseErrors(kept, kept_frames);
+  const Errors e = poseErrorsBesides(est, frames, 600, 610);
   EXPECT_LT(e.rms, 0.05);
   EXPECT_LT(e.max, 0.15);
 }
