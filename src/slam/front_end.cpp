@@ -48,7 +48,18 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
   // it: on freiburg-079 the 80-90% band tried ICP thousands of times and never won, while on
   // Intel 0.7 to 0.8 held the result under changes of other parameters (0.5 did not).
   const double earlier_below = p.source == PriorSource::kOdometry ? kEarlierWithOdometry : kConfirmExplained;
-  const MatchOutcome m = frontEndMatch(pts, p, T_pred, alternatives, earlier, earlier_below);
+  MatchOutcome m = frontEndMatch(pts, p, T_pred, alternatives, earlier, earlier_below);
+  // From a gap until a scan matches, the prediction itself is in doubt (the robot may have been
+  // carried while nothing was logged): a match against the prior is then a place found again, held
+  // to a loop closure's bar, not a step the scan corrects.
+  if (!p.time_ok) since_gap_unmatched = true;
+  if (since_gap_unmatched && m.T && m.overrode_prior && m.explained < opt.loop_min_explained_fraction) {
+    s_.event(f, fmt::format("after the gap a match against the prior explains only {:.0f}% of the scan: not trusted",
+                            100.0 * m.explained));
+    m.T.reset();
+    m.overrode_prior = false;
+  }
+  if (m.T) since_gap_unmatched = false;
   if (m.used_fallback) ++s_.stats.correlative_fallbacks;
   out.T_local_robot = T_pred;
   out.degenerate = m.degenerate;

@@ -116,6 +116,7 @@ class FrontEnd {
   std::optional<SE2> last_step;  // the front end's last step (robot frame) when time went forward
   std::deque<SE2> recent_poses;  // the front end's poses of the last kEarlierBack.back() scans, oldest first
   int consecutive_failures = 0;
+  bool since_gap_unmatched = false;  // no scan matched since the last gap: where the robot is is in doubt
   std::deque<std::size_t> local_nodes;
   std::unique_ptr<registration::IcpTarget> local_target;
   std::unique_ptr<registration::LikelihoodField> local_field;  // front_end_likelihood_field
