@@ -375,6 +375,25 @@ TEST(Slam, CarriedDuringAGapIsNoticedNotMerged) {
   EXPECT_LT(before.max, 0.15);
 }
 
+TEST(Slam, CarriedIntoNewGroundIsRelocalizedWhenItComesBack) {
+  // Carried for 15 s from 30 s on, into a part of the office not mapped yet: the fragment after the
+  // lost track is placed only when the robot drives back into the map, many nodes later.
+  const sim::Scenario sc = sim::builtinScenario("office");
+  const auto clean = sim::simulate(sc.world, sim::samplePath(sc.waypoints, sim::PathOptions{}, 0), {});
+  sim::LogPerturbationOptions po;
+  po.odometry_source = sim::OdometrySource::kKeepLog;
+  const auto frames = sim::perturbLog(clean, po, {{15.0, sim::GapPlacement::kAtOffset, 30.0, true}});
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  const std::string all = eventText(*slam);
+  EXPECT_NE(all.find("relocalized"), std::string::npos) << all;
+  EXPECT_EQ(slam->stats().fragments, 1u) << all;
+  // The end of the run is in the map's frame.
+  const Errors last = poseErrorsBesides(est, frames, 0, frames.size() - 100);
+  EXPECT_LT(last.max, 0.15);
+}
+
 TEST(Slam, TheBackEndThreadChangesNothingButWhereTheWorkRuns) {
   // Loop closures by search and by link, optimisations and a lost track: the same run with the
   // back end on its own thread and inline gives the same poses, constraints and events, and the

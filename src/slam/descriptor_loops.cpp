@@ -73,15 +73,15 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
   }
   const bool quiet =
       !s_.last_loop_node || n - *s_.last_loop_node > static_cast<std::size_t>(opt.descriptor_quiet_nodes);
-  // A fragment after a lost track, not yet tied to the map before it: every one of its first
-  // kRelocalizeEveryNode nodes is looked up in the submaps before it (no age limit: they lie in
-  // another frame), then one in descriptor_every_nodes as usual.
+  // A fragment after a lost track, not yet tied to the map before it: every one of its nodes is
+  // looked up in the submaps before it (no age limit: they lie in another frame) until a closure
+  // ties it; a robot carried into new ground may come back to the map only much later.
   const std::optional<std::size_t> untied = s_.untied_since;
   const bool relocalizing = untied && n >= *untied;
   // Submaps before the fragment being relocalized lie in another frame: no age or drift limits.
   const auto before_fragment = [&](const Submap& sm) { return relocalizing && sm.nodes.back() < *untied; };
   const bool due = n % static_cast<std::size_t>(opt.descriptor_every_nodes) == 0;
-  if (!confirming && !(relocalizing && (n - *untied < kRelocalizeEveryNode || due)) && !(quiet && due)) return;
+  if (!confirming && !relocalizing && !(quiet && due)) return;
   std::vector<std::size_t> targets;
   for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
     const Submap& sm = s_.submaps[s];

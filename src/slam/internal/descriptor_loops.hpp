@@ -34,9 +34,6 @@ class DescriptorLoops {
   void search(std::size_t n, const std::vector<char>& covered);
 
  private:
-  // After a lost track, the fragment's first nodes are each looked up (search).
-  static constexpr std::size_t kRelocalizeEveryNode = 10;
-
   static double seeThroughFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T);
 
   SlamState& s_;
