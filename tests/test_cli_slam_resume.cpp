@@ -58,8 +58,8 @@ TEST_F(CliSlamResume, BothSessionsAreOneMapInTheSavedFrame) {
   EXPECT_EQ(j["fragments"], 1);
   EXPECT_GE(j["relocalizations"].get<int>(), 1);
   EXPECT_EQ(j["resumed_from"], (first() / "state.l2d").string());
-  // The simulator's odometry starts at the truth, so the first session's frame is the truth's; the
-  // second session, placed in it, is as accurate as the first (its own odometry alone is not).
+  // The simulator's odometry starts at the truth, so the saved recording's frame is the truth's; the
+  // resumed recording, placed in it, is as accurate as the saved one (its own odometry alone is not).
   EXPECT_LT(ate(second() / "trajectory_session1.txt"), 0.05);
   EXPECT_LT(ate(second() / "trajectory.txt"), 0.05);
   for (const char* f : {"map.pgm", "map.yaml", "graph.txt", "state.l2d", "report.html"})

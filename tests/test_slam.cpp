@@ -80,6 +80,16 @@ std::vector<Frame> carried(const std::vector<Frame>& a, std::size_t cut, std::si
   return frames;
 }
 
+/// The office route as `lidar2d simulate` makes it (default laser and noise), with `kidnap` (a
+/// carried gap, as `perturb --keep-odometry --kidnap`) applied.
+std::vector<Frame> carriedOffice(const sim::GapRequest& kidnap) {
+  const sim::Scenario sc = sim::builtinScenario("office");
+  const auto clean = sim::simulate(sc.world, sim::samplePath(sc.waypoints, sim::PathOptions{}, 0), {});
+  sim::LogPerturbationOptions po;
+  po.odometry_source = sim::OdometrySource::kKeepLog;
+  return sim::perturbLog(clean, po, {kidnap});
+}
+
 /// poseErrors over every scan but [begin, end).
 Errors poseErrorsBesides(const std::vector<SE2>& est, const std::vector<Frame>& frames, std::size_t begin,
                          std::size_t end) {
@@ -356,11 +366,7 @@ TEST(Slam, CarriedDuringAGapIsNoticedNotMerged) {
   // part (about 55%). Taking such a match against the prior would tie the new stretch to the wrong
   // place and bend the map before the gap; the track must be lost instead (relocalized or left a
   // reported fragment), and the map before the gap stay right.
-  const sim::Scenario sc = sim::builtinScenario("office");
-  const auto clean = sim::simulate(sc.world, sim::samplePath(sc.waypoints, sim::PathOptions{}, 0), {});
-  sim::LogPerturbationOptions po;
-  po.odometry_source = sim::OdometrySource::kKeepLog;
-  const auto frames = sim::perturbLog(clean, po, {{15.0, sim::GapPlacement::kMiddle, 0.0, true}});
+  const auto frames = carriedOffice({15.0, sim::GapPlacement::kMiddle, 0.0, true});
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
   ASSERT_EQ(est.size(), frames.size());
@@ -378,11 +384,7 @@ TEST(Slam, CarriedDuringAGapIsNoticedNotMerged) {
 TEST(Slam, CarriedIntoNewGroundIsRelocalizedWhenItComesBack) {
   // Carried for 15 s from 30 s on, into a part of the office not mapped yet: the fragment after the
   // lost track is placed only when the robot drives back into the map, many nodes later.
-  const sim::Scenario sc = sim::builtinScenario("office");
-  const auto clean = sim::simulate(sc.world, sim::samplePath(sc.waypoints, sim::PathOptions{}, 0), {});
-  sim::LogPerturbationOptions po;
-  po.odometry_source = sim::OdometrySource::kKeepLog;
-  const auto frames = sim::perturbLog(clean, po, {{15.0, sim::GapPlacement::kAtOffset, 30.0, true}});
+  const auto frames = carriedOffice({15.0, sim::GapPlacement::kAtOffset, 30.0, true});
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
   ASSERT_EQ(est.size(), frames.size());

@@ -192,7 +192,7 @@ void run(const SlamArgs& a) {
   const double slam_seconds = secondsSince(t_slam);
   const auto all_scans = slam.trajectory();
   const slam::State state = slam.state();
-  // This log's scans: the last session's.
+  // This log's scans: the newest recording's (State::sessions.back()).
   const std::vector<slam::ScanEstimate> trajectory(all_scans.end() - static_cast<std::ptrdiff_t>(num_scans),
                                                    all_scans.end());
 

@@ -49,6 +49,11 @@ struct EdgeCost {
   Eigen::Matrix3d sqrt_info_;
 };
 
+/// The edge's Huber loss, or nullptr (plain least squares); the caller owns it.
+ceres::LossFunction* huberOf(const PoseGraphEdge& e) {
+  return e.huber_scale > 0.0 ? new ceres::HuberLoss(e.huber_scale) : nullptr;
+}
+
 }  // namespace
 
 Eigen::Vector3d edgeResidual(const SE2& T_world_from, const SE2& T_world_to, const PoseGraphEdge& edge) {
@@ -68,7 +73,8 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   if (!(std::isfinite(options.dcs_phi) && options.dcs_phi >= 0.0))
     throw invalidArgument("must be finite and >= 0", {"PoseGraphOptions", 0, "dcs_phi"});
   if (options.dcs_rounds < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "dcs_rounds"});
-  if (poses.empty()) return {.usable = true, .message = "empty graph", .edge_scale = std::vector<double>(edges.size(), 1.0)};
+  if (poses.empty())
+    return {.usable = true, .message = "empty graph", .edge_scale = std::vector<double>(edges.size(), 1.0)};
   if (fixed >= poses.size())
     throw invalidArgument(fmt::format("fixed node {} of {} nodes", fixed, poses.size()), {"pose graph", 0, "fixed"});
   for (std::size_t i = 0; i < poses.size(); ++i)
@@ -81,7 +87,7 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   po.loss_function_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(po);
   // The scalable edges' losses, wrapped so that the scaling rounds can replace them.
-  std::vector<ceres::LossFunctionWrapper*> robust(edges.size(), nullptr);
+  std::vector<ceres::LossFunctionWrapper*> scalable(edges.size(), nullptr);
   for (std::size_t k = 0; k < edges.size(); ++k) {
     const PoseGraphEdge& e = edges[k];
     if (e.from >= poses.size() || e.to >= poses.size() || e.from == e.to)
@@ -91,8 +97,8 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
         e.huber_scale < 0.0)
       throw invalidArgument(fmt::format("edge {} is not finite", k), {"pose graph", 0, "edges"});
     auto* cost = new ceres::AutoDiffCostFunction<EdgeCost, 3, 3, 3>(new EdgeCost(e.T_from_to, e.sqrt_information));
-    ceres::LossFunction* loss = e.huber_scale > 0.0 ? new ceres::HuberLoss(e.huber_scale) : nullptr;
-    if (e.scalable) loss = robust[k] = new ceres::LossFunctionWrapper(loss, ceres::TAKE_OWNERSHIP);
+    ceres::LossFunction* loss = huberOf(e);
+    if (e.scalable) loss = scalable[k] = new ceres::LossFunctionWrapper(loss, ceres::TAKE_OWNERSHIP);
     problem.AddResidualBlock(cost, loss, params[e.from].data(), params[e.to].data());
   }
   if (problem.HasParameterBlock(params[fixed].data())) problem.SetParameterBlockConstant(params[fixed].data());
@@ -111,12 +117,12 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   int iterations = static_cast<int>(summary.iterations.size());
 
   std::vector<double> scale(edges.size(), 1.0);
-  const bool any_robust = std::any_of(robust.begin(), robust.end(), [](auto* w) { return w != nullptr; });
-  for (int round = 0; options.dcs_phi > 0.0 && any_robust && summary.IsSolutionUsable() && round < options.dcs_rounds;
+  const bool any_scalable = std::any_of(scalable.begin(), scalable.end(), [](auto* w) { return w != nullptr; });
+  for (int round = 0; options.dcs_phi > 0.0 && any_scalable && summary.IsSolutionUsable() && round < options.dcs_rounds;
        ++round) {
     double change = 0.0;
     for (std::size_t k = 0; k < edges.size(); ++k) {
-      if (robust[k] == nullptr) continue;
+      if (scalable[k] == nullptr) continue;
       Eigen::Vector3d r;
       EdgeCost(edges[k].T_from_to, edges[k].sqrt_information)(params[edges[k].from].data(), params[edges[k].to].data(),
                                                               r.data());
@@ -128,11 +134,9 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
     // The residual scaled by s costs s^2 times as much: rho(s^2 chi2) ~ s^2 rho(chi2) within Huber's
     // quadratic zone, and the same weight beyond it.
     for (std::size_t k = 0; k < edges.size(); ++k)
-      if (robust[k] != nullptr)
-        robust[k]->Reset(new ceres::ScaledLoss(edges[k].huber_scale > 0.0 ? new ceres::HuberLoss(edges[k].huber_scale)
-                                                                           : nullptr,
-                                               scale[k] * scale[k], ceres::TAKE_OWNERSHIP),
-                         ceres::TAKE_OWNERSHIP);
+      if (scalable[k] != nullptr)
+        scalable[k]->Reset(new ceres::ScaledLoss(huberOf(edges[k]), scale[k] * scale[k], ceres::TAKE_OWNERSHIP),
+                           ceres::TAKE_OWNERSHIP);
     ceres::Solve(so, &problem, &summary);
     iterations += static_cast<int>(summary.iterations.size());
   }

@@ -19,7 +19,7 @@ def test_save_state_and_resume(tmp_path, office_frames, office_log):
     assert traj.shape == (80 + len(office_frames), 4)
     assert resumed.stats()["fragments"] == 1
     first = slam.trajectory()
-    # The second session's poses agree with the first session's where they overlap.
+    # The resumed recording's poses agree with the saved one's where they overlap.
     second = traj[80:160]
     assert np.max(np.hypot(second[:, 1] - first[:, 1], second[:, 2] - first[:, 2])) < 0.1
     resumed.save_state(tmp_path / "both.l2d")

@@ -35,7 +35,8 @@ struct PoseGraphOptions {
   int max_iterations = 50;      ///< Levenberg-Marquardt iterations, >= 1
   int threads = 2;              ///< Ceres threads for the Jacobian evaluation, >= 1
   double function_tolerance = 1e-7;  ///< relative cost change that ends the solve, > 0
-  /// > 0: dynamic covariance scaling (Agarwal et al., ICRA 2013) of the `scalable` edges: after the solve, each one's residual is scaled by
+  /// > 0: dynamic covariance scaling (Agarwal et al., ICRA 2013) of the `scalable` edges: after
+  /// the solve, each one's residual is scaled by
   ///   s = min(1, 2 phi / (phi + chi2)),  chi2 = its whitened squared residual at the solution,
   /// and the graph solved again, for up to `dcs_rounds` rounds (until the scales settle). An edge
   /// the rest of the graph contradicts fades out instead of bending the graph; one that agrees

@@ -99,13 +99,13 @@ struct State;
 /// Incremental SLAM: feed frames in log order with `add`, then `finish`.
 class Slam {
  public:
-  /// A new map; `session` names the first session (State::Session::name).
+  /// A new map; `session` names the recording it starts with (State::Session::name).
   explicit Slam(const SlamOptions& options = {}, std::string session = {});
   /// Continues the map of `saved` (readStateFile) with a new session named `session`, with
   /// `saved.options` (validated: throws `lidar2d::Error` (kInvalidArgument) when out of range). The
   /// new session's first pose is unknown: it starts like a lost track with no odometry link (a new
   /// fragment, predicted where the saved run ended), and the relocalization of lost tracks (descriptor
-  /// look-ups of its first nodes in every saved submap, proximity searches while it is untied, each
+  /// look-ups of each of its nodes in every saved submap, proximity searches while it is untied, each
   /// closure confirmed by a second one) ties it to the saved map; until then it is a separate
   /// fragment (SlamStats::fragments, an event at `finish`). Node points, lines, submap grids and
   /// descriptor indexes are rebuilt from the saved scans by the code that builds them during a run.
