@@ -93,7 +93,8 @@ TEST(CorrelativeGrid, RebuiltInPlaceEqualsAFreshGrid) {
   o.depth = 6;
   CorrelativeGrid g = CorrelativeGrid::fromPoints(randomPoints(80, 4.0, 1), o);
   // Smaller, then larger, then empty, then again: no value of an earlier build may survive.
-  for (const Points2& pts : {randomPoints(30, 1.0, 2), randomPoints(200, 6.0, 3), Points2{}, randomPoints(50, 2.0, 4)}) {
+  for (const Points2& pts :
+       {randomPoints(30, 1.0, 2), randomPoints(200, 6.0, 3), Points2{}, randomPoints(50, 2.0, 4)}) {
     g.rebuild(pts, o);
     const auto fresh = CorrelativeGrid::fromPoints(pts, o);
     ASSERT_EQ(g.empty(), fresh.empty());

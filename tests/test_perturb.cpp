@@ -318,7 +318,7 @@ TEST(LogPerturber, AcrossACarriedGapTheOdometryReadsNoMotion) {
       const SE2 odom_step = out[k - 1].T_odom_robot->inverse() * *out[k].T_odom_robot;
       if (out[k].index != out[k - 1].index + 1) {
         ++jumps;
-        EXPECT_GT(truth_step.translation().norm(), 1.0);  // carried metres away ...
+        EXPECT_GT(truth_step.translation().norm(), 1.0);             // carried metres away ...
         EXPECT_TRUE(IsNearPose(SE2(), odom_step, 1e-9, 1e-9)) << k;  // ... and the wheels did not turn
       } else if (source == OdometrySource::kKeepLog) {
         const SE2 log_step = in[out[k - 1].index].T_odom_robot->inverse() * *in[out[k].index].T_odom_robot;

@@ -133,7 +133,8 @@ TEST(PoseGraph, DynamicCovarianceScalingFadesAWrongClosureAmongRightOnes) {
 
   auto worstError = [&](const std::vector<SE2>& p) {
     double worst = 0;
-    for (std::size_t i = 0; i < p.size(); ++i) worst = std::max(worst, (p[i].translation() - truth[i].translation()).norm());
+    for (std::size_t i = 0; i < p.size(); ++i)
+      worst = std::max(worst, (p[i].translation() - truth[i].translation()).norm());
     return worst;
   };
   auto huber_only = poses;

@@ -167,7 +167,8 @@ struct PerturbArgs {
        drift_given = false, bursts_given = false, jitter_given = false, synth_given = false;
   bool legacy() const {
     return odom_model == "constant" && !trans_given && !rot_rad_given && !rot_m_given && !scale_given && !drift_given &&
-           !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && !jitter_given && !bursts_given && !synth_given;
+           !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && !jitter_given && !bursts_given &&
+           !synth_given;
   }
 };
 
@@ -323,10 +324,10 @@ void run(const PerturbArgs& a) {
   std::string gaps_summary;
   for (std::size_t k = 0; k < o.gaps.size(); ++k) {
     const sim::GapWindow& g = o.gaps[k];
-    gaps_summary += fmt::format(
-        "{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ", g.request.carried ? "kidnapping " : "",
-        g.begin_s - t_first, g.end_s - t_first,
-        std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg), st.dropped_per_gap[k]);
+    gaps_summary += fmt::format("{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ",
+                                g.request.carried ? "kidnapping " : "", g.begin_s - t_first, g.end_s - t_first,
+                                std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg),
+                                st.dropped_per_gap[k]);
   }
   if (!gaps_summary.empty()) gaps_summary += ")";
   std::string odometry = "odometry kept from the log";

@@ -178,7 +178,8 @@ CorrelativeResult finish(const CorrelativeGrid& g, const Discretised& d, const C
 
 struct CorrelativeGridBuilder {
   /// Builds `g` in place (its vectors keep their capacity); `g` is empty when there are no points.
-  static void build(const internal::Polyline& poly, const Points2& all, const CorrelativeOptions& o, CorrelativeGrid& g) {
+  static void build(const internal::Polyline& poly, const Points2& all, const CorrelativeOptions& o,
+                    CorrelativeGrid& g) {
     Eigen::Vector2d lo = Eigen::Vector2d::Zero(), hi = Eigen::Vector2d::Zero();
     if (!internal::boundingBox(all, lo, hi)) {
       g = CorrelativeGrid();

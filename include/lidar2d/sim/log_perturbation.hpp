@@ -227,7 +227,7 @@ class LogPerturber {
   std::optional<SE2> last_kept_reference_;
   SE2 prev_truth_;  // truth where the odometry was last integrated
   SE2 odom_;
-  bool carried_ = false;   // a carried gap dropped frames since the last kept one
+  bool carried_ = false;               // a carried gap dropped frames since the last kept one
   std::optional<SE2> log_odom_shift_;  // kKeepLog after a carried gap: output odometry = shift * the log's
   std::vector<Frame> burst_;
 };
