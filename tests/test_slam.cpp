@@ -437,6 +437,41 @@ TEST(Slam, TheBackEndThreadChangesNothingButWhereTheWorkRuns) {
     EXPECT_EQ(threaded.events()[i].what, inline_run.events()[i].what);
 }
 
+TEST(Slam, TheBackEndMayFallBehindWithoutChangingTheRun) {
+  // Nothing waits for the back end during the run (only latest() and statsSoFar(), which do not):
+  // it may work several nodes behind the front end, and the run is still the inline one.
+  auto frames = simulateWorld("office", 3, 500);
+  SlamOptions inline_options;
+  inline_options.back_end_thread = false;
+  Slam threaded{SlamOptions{}}, inline_run{inline_options};
+  std::size_t nodes_so_far = 0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    threaded.add(frames[i]);
+    inline_run.add(frames[i]);
+    const SlamStats s = threaded.statsSoFar();
+    EXPECT_EQ(s.scans, i + 1);
+    EXPECT_GE(s.nodes, nodes_so_far);
+    nodes_so_far = s.nodes;
+    EXPECT_TRUE(threaded.latest().T_world_robot.isFinite()) << i;
+  }
+  threaded.finish();
+  inline_run.finish();
+  EXPECT_EQ(nodes_so_far, threaded.stats().nodes);
+  ASSERT_GT(threaded.stats().loop_accepted, 0u);
+  const auto a = threaded.trajectory(), b = inline_run.trajectory();
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].T_world_robot.x(), b[i].T_world_robot.x()) << i;
+    EXPECT_EQ(a[i].T_world_robot.y(), b[i].T_world_robot.y()) << i;
+    EXPECT_EQ(a[i].T_world_robot.theta(), b[i].T_world_robot.theta()) << i;
+  }
+  EXPECT_EQ(threaded.stats().loop_accepted, inline_run.stats().loop_accepted);
+  EXPECT_EQ(threaded.stats().optimizations, inline_run.stats().optimizations);
+  ASSERT_EQ(threaded.events().size(), inline_run.events().size());
+  for (std::size_t i = 0; i < threaded.events().size(); ++i)
+    EXPECT_EQ(threaded.events()[i].what, inline_run.events()[i].what);
+}
+
 TEST(Slam, FramesWithFewPointsArePredicted) {
   auto frames = simulateWorld("office", 6, 100);
   // Scans 40..44 see nothing valid.

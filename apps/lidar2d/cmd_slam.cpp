@@ -89,11 +89,11 @@ double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>
 class SlamProgress {
  public:
   SlamProgress(bool quiet, std::optional<std::size_t> total) : line_(quiet), total_(total) {}
-  /// `slam`'s counters are read only when the line is redrawn: reading them waits for its back end.
+  /// `slam`'s counters as its back end last published them (reading them does not wait for it).
   void update(std::size_t done, const slam::Slam& slam, bool force = false) {
     line_.update(
         [&] {
-          const slam::SlamStats& s = slam.stats();
+          const slam::SlamStats s = slam.statsSoFar();
           return fmt::format("slam {}{} scans, {} nodes, {} loop closures, {:.1f} s ",
                              total_ && *total_ > 0 ? progressBar(done, *total_) + " " : "", done, s.nodes,
                              s.loop_accepted, secondsSince(start_));

@@ -102,9 +102,9 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
   return out;
 }
 
-void FrontEnd::addNode(std::size_t n, bool restart) {
+void FrontEnd::addNode(const SE2& T_local, const Points2& pts, bool restart) {
   if (restart) local_nodes.clear();
-  local_nodes.push_back(n);
+  local_nodes.emplace_back(T_local, pts);
   while (static_cast<int>(local_nodes.size()) > opt.local_map_nodes) local_nodes.pop_front();
   rebuildLocalMap();
 }
@@ -123,8 +123,8 @@ void FrontEnd::remember(const Frame& f, const SE2& T_local, bool first, bool tim
 
 void FrontEnd::rebuildLocalMap() {
   local_points.clear();
-  for (std::size_t n : local_nodes)
-    for (const auto& p : s_.node_points[n]) local_points.push_back(s_.nodes[n].T_local_robot * p);
+  for (const auto& [T, pts] : local_nodes)
+    for (const auto& p : pts) local_points.push_back(T * p);
   local_points = voxelFilter(local_points, opt.map_voxel_m);
   local_target = std::make_unique<IcpTarget>(local_points, icp);
   if (opt.front_end_likelihood_field)

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <condition_variable>
+#include <deque>
 #include <exception>
 #include <functional>
 #include <mutex>
@@ -94,33 +95,41 @@ const char* toString(Constraint::Kind k) {
 
 namespace {
 
-/// One long-lived worker thread running one task at a time: the SLAM back end's. A thread per
+/// One long-lived worker thread running queued tasks in order: the SLAM back end's. A thread per
 /// task (std::async) gave each node a new thread, and glibc a new malloc arena per thread: 50%
-/// more peak memory on the Intel bag. (The standard library has no thread pool, and one thread
-/// is all this needs.)
+/// more peak memory on the Intel bag. (The standard library has no thread pool or task queue, and
+/// one thread is all this needs.)
 class Worker {
  public:
-  Worker() : thread_([this](std::stop_token stop) { run(stop); }) {}
+  /// At most `max_queued` tasks wait: a caller faster than the back end for long then waits too,
+  /// so the queue's memory stays bounded.
+  explicit Worker(std::size_t max_queued)
+      : max_queued_(max_queued), thread_([this](std::stop_token stop) { run(stop); }) {}
+  /// Drops the tasks not started (their results would go unread) and joins after the running one.
   ~Worker() {
+    {
+      std::lock_guard lock(mutex_);
+      queue_.clear();
+    }
     thread_.request_stop();
     cv_.notify_all();
   }
   Worker(const Worker&) = delete;
   Worker& operator=(const Worker&) = delete;
 
-  /// Starts `task`; the previous one must have been waited for.
+  /// Queues `task` after the others; rethrows what an earlier task threw (the tasks after it were
+  /// dropped).
   void start(std::function<void()> task) {
-    {
-      std::lock_guard lock(mutex_);
-      task_ = std::move(task);
-      busy_ = true;
-    }
+    std::unique_lock lock(mutex_);
+    cv_.wait(lock, [&] { return queue_.size() < max_queued_ || error_; });
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+    queue_.push_back(std::move(task));
     cv_.notify_all();
   }
-  /// Waits for the current task (if any); rethrows what it threw.
+  /// Waits until every queued task has run; rethrows what one threw.
   void wait() {
     std::unique_lock lock(mutex_);
-    cv_.wait(lock, [&] { return !busy_; });
+    cv_.wait(lock, [&] { return queue_.empty() && !busy_; });
     if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
   }
 
@@ -128,10 +137,11 @@ class Worker {
   void run(std::stop_token stop) {
     std::unique_lock lock(mutex_);
     while (true) {
-      cv_.wait(lock, [&] { return stop.stop_requested() || task_; });
-      if (!task_) return;  // stopped, nothing left to do
-      std::function<void()> task = std::move(task_);
-      task_ = nullptr;
+      cv_.wait(lock, [&] { return stop.stop_requested() || !queue_.empty(); });
+      if (queue_.empty()) return;  // stopped, nothing left to do
+      std::function<void()> task = std::move(queue_.front());
+      queue_.pop_front();
+      busy_ = true;
       lock.unlock();
       std::exception_ptr error;
       try {
@@ -140,15 +150,19 @@ class Worker {
         error = std::current_exception();
       }
       lock.lock();
-      error_ = error;
       busy_ = false;
+      if (error) {
+        error_ = error;
+        queue_.clear();  // they would build on a state the failed task left half done
+      }
       cv_.notify_all();
     }
   }
 
+  const std::size_t max_queued_;
   std::mutex mutex_;
   std::condition_variable cv_;
-  std::function<void()> task_;
+  std::deque<std::function<void()>> queue_;
   bool busy_ = false;
   std::exception_ptr error_;
   std::jthread thread_;  // last: started once the members it uses exist, joined first
@@ -160,6 +174,10 @@ class Worker {
 /// a node joins the local map and a submap, gets its sequential constraints, is searched for loop
 /// closures (by proximity, then by descriptors), and the graph is optimised when due.
 struct Slam::Impl {
+  // Nodes the back end may be behind by before `add` waits for it (a bound on the queue's memory;
+  // each holds a scan and its points).
+  static constexpr std::size_t kMaxQueuedNodes = 64;
+
   Impl(const SlamOptions& o, std::string session)
       : state(o), front_end(state), loops(state), descriptors(state, loops) {
     state.sessions.push_back({std::move(session), 0});
@@ -177,20 +195,52 @@ struct Slam::Impl {
   // The name of the session a restored state continues with, until its first scan opens it (a state
   // saved again before that is the saved one, byte for byte).
   std::optional<std::string> resumed_session;
-  // state.T_world_local when the back end was last waited for: the caller's thread reads this one
-  // (Slam::latest) while the back end may be changing the other.
-  SE2 T_world_local_seen;
-  // Runs the newest node's back-end work (backEnd) with back_end_thread. Declared last: destroyed
+  // The front end's own record of the nodes (their count, the last one's time and pose: the motion
+  // filter's reference) and of the newest scan's pose: while the back end runs, the graph is its own.
+  std::size_t nodes_added = 0;
+  double last_node_time = 0.0;
+  SE2 last_node_T_local;
+  SE2 last_T_local;
+  // What the back end last published for the caller's thread (Slam::latest, Slam::statsSoFar):
+  // state.T_world_local and the counters after its latest finished node.
+  mutable std::mutex published_mutex;
+  SE2 published_T_world_local;
+  SlamStats published_stats;
+  // Runs the nodes' graph work (graphNode) in order with back_end_thread. Declared last: destroyed
   // (joined) before the state it works on.
-  std::unique_ptr<Worker> back_end = state.opt.back_end_thread ? std::make_unique<Worker>() : nullptr;
+  std::unique_ptr<Worker> back_end =
+      state.opt.back_end_thread ? std::make_unique<Worker>(kMaxQueuedNodes) : nullptr;
 
-  /// Waits for the newest node's back-end work and merges its events. Everything the back end
-  /// touches (nodes' world poses, submaps, constraints, its counters) is the caller's afterwards.
+  /// Waits until the back end has worked through every node added and merges its events.
+  /// Everything it touches (nodes, submaps, constraints, its counters) is the caller's afterwards.
   void sync() {
     if (back_end) back_end->wait();
-    T_world_local_seen = state.T_world_local;
     for (Event& e : state.back_end_events) state.events.push_back(std::move(e));
     state.back_end_events.clear();
+  }
+
+  /// Makes state.T_world_local and the back end's counters visible to the caller's thread (field by
+  /// field: the front end's counters in the same struct are being written meanwhile).
+  void publish() {
+    const SlamStats& s = state.stats;
+    std::lock_guard lock(published_mutex);
+    published_T_world_local = state.T_world_local;
+    SlamStats& p = published_stats;
+    p.nodes = state.nodes.size();
+    p.submaps = state.submaps.size();
+    p.fragments = s.fragments;
+    p.relocalizations = s.relocalizations;
+    p.odometry_wins = s.odometry_wins;
+    p.loop_searches = s.loop_searches;
+    p.loop_accepted = s.loop_accepted;
+    p.loop_rejected = s.loop_rejected;
+    p.loop_downweighted = s.loop_downweighted;
+    p.descriptor_queries = s.descriptor_queries;
+    p.descriptor_hypotheses = s.descriptor_hypotheses;
+    p.descriptor_accepted = s.descriptor_accepted;
+    p.descriptor_seconds = s.descriptor_seconds;
+    p.optimizations = s.optimizations;
+    p.optimization_seconds = s.optimization_seconds;
   }
 
   /// The back end's work for the new node `n`: finishes and indexes the submap when `finish`,
@@ -257,13 +307,18 @@ struct Slam::Impl {
     s.restarts = std::move(saved.restarts);
     s.events = std::move(saved.events);
     s.T_world_local = saved.T_world_local;
-    T_world_local_seen = s.T_world_local;
     s.last_loop_node = saved.last_loop_node;
     s.untied_since = saved.untied_since;
     s.restart_odometry = saved.restart_odometry;
     s.nodes_since_optimization = saved.nodes_since_optimization;
     s.loops_since_optimization = saved.loops_since_optimization;
     s.stats = saved.stats;  // last: rebuilding counted descriptor time
+    nodes_added = s.nodes.size();
+    if (!s.nodes.empty()) {
+      last_node_time = s.nodes.back().time;
+      last_node_T_local = s.nodes.back().T_local_robot;
+    }
+    publish();
   }
 
   /// The state's records (State), without what restore rebuilds.
@@ -315,8 +370,8 @@ struct Slam::Impl {
       // lost track with no odometry link (the odometry of two logs shares no frame): a new fragment,
       // predicted where the saved run ended (the front end's local frame continues the saved one),
       // tied to the map by the relocalization of lost tracks.
-      const SE2 T0 = state.nodes.back().T_local_robot;
-      rec.node = state.nodes.size();
+      const SE2 T0 = last_node_T_local;
+      rec.node = nodes_added;
       rec.is_node = true;
       state.scans.push_back(rec);
       state.restart_odometry.reset();
@@ -325,6 +380,7 @@ struct Slam::Impl {
                                  state.sessions.size(), state.sessions.back().name, rec.node));
       addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), true, false);
       front_end.remember(f, T0, true, prediction.time_ok);
+      last_T_local = T0;
     } else if (!front_end.started()) {
       // The first scan anchors everything.
       const SE2 T0 = front_end.firstPose(f);
@@ -335,39 +391,61 @@ struct Slam::Impl {
       state.scans.push_back(rec);
       addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), false, true);
       front_end.remember(f, T0, true, prediction.time_ok);
+      last_T_local = T0;
     } else {
       const internal::FrontEnd::Tracked t = front_end.track(f, pts, prediction);
       rec.matched = t.matched;
       rec.degenerate = t.degenerate;
       // Motion filter: a scan that moved or turned enough since the last node, or after long
       // enough, becomes a node; the others hang off the last node.
-      const Node& last = state.nodes.back();
-      const SE2 rel = last.T_local_robot.inverse() * t.T_local_robot;
+      const SE2 rel = last_node_T_local.inverse() * t.T_local_robot;
       const bool moved = rel.translation().norm() >= opt.node_min_translation_m ||
                          std::abs(rel.theta()) >= opt.node_min_rotation_rad ||
-                         f.time - last.time >= opt.node_max_interval_s;
+                         f.time - last_node_time >= opt.node_max_interval_s;
       if (t.restart || (rec.matched && moved && pts.size() >= opt.min_points)) {
-        rec.node = state.nodes.size();
+        rec.node = nodes_added;
         rec.is_node = true;
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
                 prediction.source == internal::PriorSource::kOdometry);
       } else {
-        rec.node = state.nodes.size() - 1;
+        rec.node = nodes_added - 1;
         rec.T_node_scan = rel;
         state.scans.push_back(rec);
       }
       front_end.remember(f, t.T_local_robot, false, prediction.time_ok);
+      last_T_local = t.T_local_robot;
     }
     ++state.stats.scans;
     state.scans.back().seconds = secondsSince(t0);
     state.stats.total_seconds += state.scans.back().seconds;
   }
 
-  /// Scan `scan_index` (frame `f`, at `T_local`, with its points `pts` and `raw`) becomes a node.
+  /// Scan `scan_index` (frame `f`, at `T_local`, with its points `pts` and `raw`) becomes a node:
+  /// the front end's local map takes it at once, the graph work (graphNode) is queued for the back
+  /// end. The front end never reads what the back end computes, so the back end may be several
+  /// nodes behind and the run is the same as without its thread.
   void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
-    sync();  // the world frame, the submaps and the graph as the previous node's back end left them
+    ++nodes_added;
+    last_node_time = f.time;
+    last_node_T_local = T_local;
+    front_end.addNode(T_local, pts, restart);
+    auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart,
+                 odom_trusted]() mutable {
+      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odom_trusted);
+      publish();
+    };
+    if (back_end)
+      back_end->start(std::move(work));
+    else
+      work();
+  }
+
+  /// The graph's part of a new node: the node, its submap, its data, its sequential constraints,
+  /// then the back end's searches and optimisation (backEnd).
+  void graphNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
+                 bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
     const SlamOptions& opt = state.opt;
     const std::size_t n = state.nodes.size();
     Node node;
@@ -400,13 +478,7 @@ struct Slam::Impl {
       state.untied_since = n;
     }
     if (n > 0) internal::addSequentialConstraints(state, n, restart, degenerate, dir_local);
-
-    front_end.addNode(n, restart);
-    const bool finish = static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes;
-    if (back_end)
-      back_end->start([this, n, finish] { backEnd(n, finish); });
-    else
-      backEnd(n, finish);
+    backEnd(n, static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes);
   }
 };
 
@@ -470,8 +542,8 @@ ScanEstimate Slam::latest() const {
   // Without waiting for the back end: the front-end pose of the scan (never changed once set) in
   // the world frame as of the back end's last finished work (the newest node's world pose is
   // derived the same way).
-  const internal::ScanRecord& r = s.scans.back();
-  return estimateOf(r, impl_->T_world_local_seen * s.nodes[r.node].T_local_robot * r.T_node_scan);
+  std::lock_guard lock(impl_->published_mutex);
+  return estimateOf(s.scans.back(), impl_->published_T_world_local * impl_->last_T_local);
 }
 
 const std::vector<Node>& Slam::nodes() const {
@@ -493,6 +565,23 @@ const SlamStats& Slam::stats() const {
   s.stats.submaps = s.submaps.size();
   return s.stats;
 }
+SlamStats Slam::statsSoFar() const {
+  const internal::SlamState& s = impl_->state;
+  std::lock_guard lock(impl_->published_mutex);
+  SlamStats out = impl_->published_stats;
+  // The front end's counters are the caller's own; the back end's as it last published them.
+  out.scans = s.stats.scans;
+  out.matched = s.stats.matched;
+  out.unmatched = s.stats.unmatched;
+  out.degenerate = s.stats.degenerate;
+  out.correlative_fallbacks = s.stats.correlative_fallbacks;
+  out.prior_overridden = s.stats.prior_overridden;
+  out.prior_kept = s.stats.prior_kept;
+  out.total_seconds = s.stats.total_seconds;
+  out.nodes = std::max(out.nodes, impl_->nodes_added);
+  return out;
+}
+
 const SlamOptions& Slam::options() const { return impl_->state.opt; }
 
 State Slam::state() const {

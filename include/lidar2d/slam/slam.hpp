@@ -133,7 +133,12 @@ class Slam {
   /// Sequential, odometry and loop constraints (accepted and rejected).
   const std::vector<Constraint>& constraints() const;
   const std::vector<Event>& events() const;
+  /// Waits for the back-end thread to work through every node added, then the counters.
   const SlamStats& stats() const;
+  /// The counters without waiting for the back-end thread (a progress display): the front end's
+  /// as of the last `add`, the back end's (loops, optimisations, nodes in the graph: at least the
+  /// nodes added) as of its last finished node.
+  SlamStats statsSoFar() const;
   const SlamOptions& options() const;
   /// What a later run needs to continue this map (Slam(State, ...)) or to localize in it; after
   /// `finish` it is the complete, final state (before, closures awaiting confirmation are left out).

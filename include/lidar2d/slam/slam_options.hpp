@@ -350,8 +350,8 @@ inline constexpr SlamOption kSlamOptionTable[] = {
     {LIDAR2D_SLAM_FIELD(graph.threads), "pose graph", "threads", OptionRange::atLeast(1),
      "Ceres threads of every optimisation"},
     {LIDAR2D_SLAM_FIELD(back_end_thread), "pose graph", "flag", OptionRange::any(),
-     "a new node's loop search and the optimisations run on a second thread while the next scans are "
-     "tracked (the results are the same as without it: the next node waits for them)"},
+     "the nodes' graph work (constraints, loop searches, optimisations) runs on a second thread, in "
+     "order, while the next scans are tracked (the results are the same as without it)"},
 };
 
 #undef LIDAR2D_SLAM_FIELD

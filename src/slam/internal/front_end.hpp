@@ -10,6 +10,7 @@
 #include <deque>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "src/slam/internal/motion_prior.hpp"
@@ -53,9 +54,10 @@ class FrontEnd {
   /// Matches `pts` (robot frame, voxel-filtered) of `f`, a scan after the first; counts matched,
   /// unmatched, degenerate scans and correlative fallbacks, and records failures as events.
   Tracked track(const Frame& f, const Points2& pts, const Prediction& p);
-  /// Node `n` was added (`restart`: the local map starts again from it): rebuilds the local map
-  /// from the last local_map_nodes nodes.
-  void addNode(std::size_t n, bool restart);
+  /// A node at `T_local` with its points `pts` (robot frame) was added (`restart`: the local map
+  /// starts again from it): rebuilds the local map from the last local_map_nodes nodes. The front
+  /// end keeps its own copy, so it never reads the graph the back end may be extending.
+  void addNode(const SE2& T_local, const Points2& pts, bool restart);
   /// Remembers scan `f` at `T_local` for the next prediction; `first`: the first scan (no step),
   /// `time_ok` as predicted.
   void remember(const Frame& f, const SE2& T_local, bool first, bool time_ok);
@@ -117,7 +119,7 @@ class FrontEnd {
   std::deque<SE2> recent_poses;  // the front end's poses of the last kEarlierBack.back() scans, oldest first
   int consecutive_failures = 0;
   bool since_gap_unmatched = false;  // no scan matched since the last gap: where the robot is is in doubt
-  std::deque<std::size_t> local_nodes;
+  std::deque<std::pair<SE2, Points2>> local_nodes;  // the local map's nodes: pose, points (robot frame)
   std::unique_ptr<registration::IcpTarget> local_target;
   std::unique_ptr<registration::LikelihoodField> local_field;  // front_end_likelihood_field
   Points2 local_points;
