@@ -331,7 +331,9 @@ CorrelativeResult searchDiscretised(const CorrelativeGrid& grid, const Discretis
         top.push_back({k, ix, iy, scoreAt(grid, d, k, ix, iy, H)});
         ++scored;
       }
-  Candidate best{0, 0, 0, -1.0};
+  // Starting from min_score prunes every branch that cannot reach it (the answer is the same: a
+  // best below it fails anyway), which is most of a search in ground the target does not hold.
+  Candidate best{0, 0, 0, std::max(-1.0, options.min_score - 1e-12)};
   branchAndBound(grid, d, top, H, best, scored);
   return finish(grid, d, best, src, options, refine_field, init, scored);
 }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <numbers>
 #include <utility>
 
 #include "lidar2d/mapping/export.hpp"
@@ -27,6 +28,12 @@ void LoopClosure::finishSubmap(Submap& sm) {
     for (const auto& p : s_.node_points[n]) sm.points_anchor.push_back(T * p);
   }
   sm.center_anchor = center / static_cast<double>(sm.nodes.size());
+  sm.nodes_min_anchor = sm.nodes_max_anchor = (T_anchor_local * s_.nodes[sm.nodes.front()].T_local_robot).translation();
+  for (std::size_t n : sm.nodes) {
+    const Eigen::Vector2d p = (T_anchor_local * s_.nodes[n].T_local_robot).translation();
+    sm.nodes_min_anchor = sm.nodes_min_anchor.cwiseMin(p);
+    sm.nodes_max_anchor = sm.nodes_max_anchor.cwiseMax(p);
+  }
   sm.points_anchor = voxelFilter(sm.points_anchor, opt.map_voxel_m);
   sm.icp = std::make_unique<IcpTarget>(sm.points_anchor, loop_icp);
   sm.finished = true;
@@ -100,6 +107,68 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   return covered;
 }
 
+void LoopClosure::searchUntied(std::size_t n) {
+  if (!s_.untied_since || n < *s_.untied_since) return;
+  const std::size_t first = *s_.untied_since;
+  // Every kUntiedEveryNodes nodes at first, then less and less often (the interval a quarter of
+  // the fragment's length): a fragment that never comes back to the map costs a few searches per
+  // doubling of its length.
+  const std::size_t age = n - first;
+  const std::size_t interval = std::max(kUntiedEveryNodes, age / 4);
+  if (age % interval != 0) return;
+  const Points2& pts = s_.node_points[n];
+  if (pts.size() < opt.min_points) return;
+  std::vector<std::size_t> before;  // finished submaps of the map before the fragment
+  for (std::size_t s = 0; s < s_.submaps.size(); ++s)
+    if (s_.submaps[s].finished && s_.submaps[s].nodes.back() < first) before.push_back(s);
+  if (before.empty()) return;
+  const Points2 sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
+  struct Best {
+    double score = 0.0;
+    std::size_t submap = 0;
+    SE2 T;
+  } best;
+  // A submap holding a closure of this fragment awaiting confirmation first, then the others in turn.
+  std::vector<std::size_t> tries;
+  for (std::size_t s : before)
+    if (s_.submaps[s].untied_pending && s_.submaps[s].untied_pending->to >= first) tries.push_back(s);
+  for (std::size_t k = 0; k < std::min(kUntiedSubmapsPerSearch, before.size()); ++k) {
+    const std::size_t s = before[untied_cursor++ % before.size()];
+    if (std::find(tries.begin(), tries.end(), s) == tries.end()) tries.push_back(s);
+  }
+  for (const std::size_t s : tries) {
+    const Submap& sm = s_.submaps[s];
+    // Anywhere the robot was while mapping the submap (a margin around its nodes), any heading.
+    registration::CorrelativeOptions window = untied_search;
+    const Eigen::Vector2d half = 0.5 * (sm.nodes_max_anchor - sm.nodes_min_anchor);
+    window.linear_window_m = std::min(half.maxCoeff() + kUntiedMarginM, kUntiedMaxWindowM);
+    window.angular_window_rad = std::numbers::pi;
+    window.angular_step_rad = kUntiedAngularStepRad;
+    // Branch and bound prunes every branch that cannot reach a closure's score: in ground the
+    // submap does not hold (most searches of a fragment), little is left to score.
+    window.min_score = std::max(opt.loop_min_score, best.score);
+    const Eigen::Vector2d mid = 0.5 * (sm.nodes_max_anchor + sm.nodes_min_anchor);
+    const auto cr = registration::matchCorrelative(coarseGridOf(s), sparse, SE2(mid.x(), mid.y(), 0.0), window);
+    ++s_.stats.loop_searches;
+    if (cr.T_search.isFinite() && cr.score > best.score) best = {cr.score, s, cr.T_search};
+  }
+  if (best.score < opt.loop_min_score) return;
+  Submap& sm = s_.submaps[best.submap];
+  Constraint c;
+  c.kind = Constraint::Kind::kLoop;
+  c.from = sm.anchor;
+  c.to = n;
+  c.searched = true;
+  c.score = best.score;
+  refine(c, sm, pts, best.T);
+  if (!c.accepted) {
+    ++s_.stats.loop_rejected;
+    s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+    return;
+  }
+  submitSearched(std::move(c), sm, sm.untied_pending);
+}
+
 void LoopClosure::refine(Constraint& c, const Submap& sm, const Points2& pts, const SE2& init) const {
   const registration::Result res = alignIcp(*sm.icp, pts, init, loop_icp);
   c.T_from_to = res.T_target_source;
@@ -123,10 +192,12 @@ void LoopClosure::refine(Constraint& c, const Submap& sm, const Points2& pts, co
   }
 }
 
-void LoopClosure::submitSearched(Constraint c, Submap& sm) {
+void LoopClosure::submitSearched(Constraint c, Submap& sm) { submitSearched(std::move(c), sm, sm.pending); }
+
+void LoopClosure::submitSearched(Constraint c, Submap& sm, std::optional<Constraint>& pending) {
   std::optional<Constraint> confirmed;
-  if (sm.pending) {
-    const Constraint& p = *sm.pending;
+  if (pending) {
+    const Constraint& p = *pending;
     const SE2 predicted = p.T_from_to * (s_.nodes[p.to].T_local_robot.inverse() * s_.nodes[c.to].T_local_robot);
     const SE2 diff = predicted.inverse() * c.T_from_to;
     const bool recent = c.to - p.to <= static_cast<std::size_t>(opt.loop_confirm_window_nodes);
@@ -140,10 +211,10 @@ void LoopClosure::submitSearched(Constraint c, Submap& sm) {
       ++s_.stats.loop_rejected;
       s_.addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
     }
-    sm.pending.reset();
+    pending.reset();
   }
   if (!confirmed) {
-    sm.pending = std::move(c);
+    pending = std::move(c);
     return;
   }
   acceptLoop(*confirmed, sm);
@@ -213,14 +284,15 @@ void LoopClosure::dropCarriedOdometry(const Constraint& c) {
 
 void LoopClosure::expirePending() {
   for (Submap& sm : s_.submaps)
-    if (sm.pending) {
-      Constraint old = *sm.pending;
-      old.accepted = false;
-      old.reason = "not confirmed by a later search";
-      ++s_.stats.loop_rejected;
-      s_.addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
-      sm.pending.reset();
-    }
+    for (std::optional<Constraint>* pending : {&sm.pending, &sm.untied_pending})
+      if (*pending) {
+        Constraint old = **pending;
+        old.accepted = false;
+        old.reason = "not confirmed by a later search";
+        ++s_.stats.loop_rejected;
+        s_.addEdge(std::move(old), Eigen::Matrix3d::Zero(), 0.0);
+        pending->reset();
+      }
 }
 
 // A grid with its max-grids takes megabytes, and a long run would otherwise hold one per submap.
@@ -228,7 +300,7 @@ const registration::CorrelativeGrid& LoopClosure::gridOf(std::size_t s) {
   Submap& sm = s_.submaps[s];
   grid_lru.erase(std::remove(grid_lru.begin(), grid_lru.end(), s), grid_lru.end());
   grid_lru.push_back(s);
-  if (!sm.grid) sm.grid = std::make_unique<registration::CorrelativeGrid>(submapGrid(sm));
+  if (!sm.grid) sm.grid = std::make_unique<registration::CorrelativeGrid>(submapGrid(sm, loop_search));
   while (grid_lru.size() > kMaxGrids) {
     s_.submaps[grid_lru.front()].grid.reset();
     grid_lru.erase(grid_lru.begin());
@@ -236,21 +308,34 @@ const registration::CorrelativeGrid& LoopClosure::gridOf(std::size_t s) {
   return *sm.grid;
 }
 
+const registration::CorrelativeGrid& LoopClosure::coarseGridOf(std::size_t s) {
+  Submap& sm = s_.submaps[s];
+  coarse_lru.erase(std::remove(coarse_lru.begin(), coarse_lru.end(), s), coarse_lru.end());
+  coarse_lru.push_back(s);
+  if (!sm.coarse_grid) sm.coarse_grid = std::make_unique<registration::CorrelativeGrid>(submapGrid(sm, untied_search));
+  while (coarse_lru.size() > kMaxCoarseGrids) {
+    s_.submaps[coarse_lru.front()].coarse_grid.reset();
+    coarse_lru.erase(coarse_lru.begin());
+  }
+  return *sm.coarse_grid;
+}
+
 /// The score grid of a finished submap for the branch-and-bound searches, from its occupancy grid
 /// built with the mapping module: every node's scan inserted (log-odds, ray traced) at its pose in
 /// the anchor's frame. A finished submap is frozen (the front end's relative poses of its nodes
 /// no longer change), so the grid can be dropped and rebuilt alike.
-registration::CorrelativeGrid LoopClosure::submapGrid(const Submap& sm) const {
+registration::CorrelativeGrid LoopClosure::submapGrid(const Submap& sm,
+                                                     const registration::CorrelativeOptions& grid_options) const {
   mapping::MapOptions mo;
-  mo.resolution_m = loop_search.resolution_m;
+  mo.resolution_m = grid_options.resolution_m;
   mo.insert.max_range_m = opt.max_range_m;
   const auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
   const SE2 T_anchor_local = s_.nodes[sm.anchor].T_local_robot.inverse();
   for (const std::size_t n : sm.nodes)
     map->insert(s_.node_scans[n].first, T_anchor_local * s_.nodes[n].T_local_robot * s_.node_scans[n].second);
   const OccupancyImage image = mapping::toOccupancyImage(*map);
-  if (image.width() == 0) return registration::CorrelativeGrid::fromPoints(sm.points_anchor, loop_search);
-  return registration::CorrelativeGrid::fromMap(image, loop_search);
+  if (image.width() == 0) return registration::CorrelativeGrid::fromPoints(sm.points_anchor, grid_options);
+  return registration::CorrelativeGrid::fromMap(image, grid_options);
 }
 
 }  // namespace lidar2d::slam::internal

@@ -252,6 +252,7 @@ struct Slam::Impl {
     if (finish) finishSubmap(state.submaps[state.nodes[n].submap]);
     ++state.nodes_since_optimization;
     if (const auto covered = loops.searchNear(n)) descriptors.search(n, *covered);
+    loops.searchUntied(n);
     internal::optimizeIfDue(state);
   }
 

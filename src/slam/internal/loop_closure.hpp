@@ -3,7 +3,9 @@
 // ICP from a recent link or by branch-and-bound search + ICP, and a searched closure is accepted only
 // once a later search confirms it. Also the submaps' score grids (built on demand, a few kept).
 
+#include <algorithm>
 #include <cstddef>
+#include <numbers>
 #include <optional>
 #include <vector>
 
@@ -15,7 +17,8 @@ class LoopClosure {
  public:
   /// Reads and extends `s` (submaps, constraints, counters, the back end's flags).
   explicit LoopClosure(SlamState& s)
-      : s_(s), opt(s.opt), loop_icp(s.match.loop_icp), loop_search(s.match.loop_search) {}
+      : s_(s), opt(s.opt), loop_icp(s.match.loop_icp), loop_search(s.match.loop_search),
+        untied_search(untiedSearch(s.match.loop_search)) {}
   LoopClosure(const LoopClosure&) = delete;
   LoopClosure& operator=(const LoopClosure&) = delete;
 
@@ -29,6 +32,16 @@ class LoopClosure {
   /// through the front end's relative poses (a wrong match in a self-similar place rarely repeats
   /// consistently), then both are accepted; a pending one that disagrees is rejected.
   void submitSearched(Constraint c, Submap& sm);
+  /// ... awaiting confirmation in `pending` (one of `sm`'s: searchUntied keeps its own, so that its
+  /// candidates and the other searches' do not contradict each other away).
+  void submitSearched(Constraint c, Submap& sm, std::optional<Constraint>& pending);
+  /// Relocalization of a fragment not yet tied to the map before it (after a lost track or a
+  /// kidnapping, where its estimate says nothing about where it is): one node in
+  /// kUntiedEveryNodes is searched by branch and bound in whole finished submaps from before the
+  /// fragment, over every heading and the box the robot mapped each from, a few submaps per node in
+  /// turn; the best match is refined and tested as a searched closure (submitSearched: confirmed by
+  /// a later one before it is accepted).
+  void searchUntied(std::size_t n);
   /// Pending closures never confirmed are listed as rejected (at the end of the run).
   void expirePending();
   /// The correlative grid of submap `s`, built on demand; only the most recently used few are kept.
@@ -42,8 +55,24 @@ class LoopClosure {
 
  private:
   static constexpr std::size_t kMaxGrids = 8;
+  static constexpr std::size_t kMaxCoarseGrids = 32;
+  // searchUntied's grid: a whole submap at every heading costs (window / cell)^2 x headings, about
+  // a second at the loop search's 5 cm; at 20 cm a few tens of ms, and ICP refines from there.
+  static constexpr double kUntiedResolutionM = 0.2;
+  static constexpr double kUntiedAngularStepRad = 0.5 * std::numbers::pi / 180.0;
+  static registration::CorrelativeOptions untiedSearch(registration::CorrelativeOptions o) {
+    o.resolution_m = std::max(o.resolution_m, kUntiedResolutionM);
+    o.blur_sigma_m = std::max(o.blur_sigma_m, 0.5 * kUntiedResolutionM);
+    return o;
+  }
+  static constexpr std::size_t kUntiedEveryNodes = 3;
+  static constexpr std::size_t kUntiedSubmapsPerSearch = 4;
+  static constexpr double kUntiedMarginM = 2.0;     // beyond the box of a submap's nodes
+  static constexpr double kUntiedMaxWindowM = 15.0;  // the largest half-window of that search
 
-  registration::CorrelativeGrid submapGrid(const Submap& sm) const;
+  /// The score grid of submap `s` at searchUntied's coarse resolution, built on demand (a few kept).
+  const registration::CorrelativeGrid& coarseGridOf(std::size_t s);
+  registration::CorrelativeGrid submapGrid(const Submap& sm, const registration::CorrelativeOptions& grid_options) const;
   void acceptLoop(Constraint c, Submap& sm);
   /// `c` ties the untied fragment to the map before it: when it contradicts the odometry across
   /// the lost track beyond prior_gate_sigmas, that odometry is wrong (a kidnapped robot) and its
@@ -54,7 +83,10 @@ class LoopClosure {
   const SlamOptions& opt;
   const registration::IcpOptions& loop_icp;
   const registration::CorrelativeOptions& loop_search;
+  const registration::CorrelativeOptions untied_search;
   std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
+  std::size_t untied_cursor = 0;      // the next submap searchUntied tries, in turn
+  std::vector<std::size_t> coarse_lru;  // submaps holding a coarse grid, least recently used first
 };
 
 }  // namespace lidar2d::slam::internal

@@ -40,11 +40,15 @@ struct Submap {
   bool finished = false;
   Points2 points_anchor;
   Eigen::Vector2d center_anchor = Eigen::Vector2d::Zero();
+  Eigen::Vector2d nodes_min_anchor = Eigen::Vector2d::Zero();  // the box its nodes were in (anchor frame)
+  Eigen::Vector2d nodes_max_anchor = Eigen::Vector2d::Zero();
   std::unique_ptr<registration::IcpTarget> icp;
   std::unique_ptr<registration::CorrelativeGrid> grid;  // built at the first branch-and-bound search
+  std::unique_ptr<registration::CorrelativeGrid> coarse_grid;  // ... of the relocalization by search
   std::optional<std::size_t> last_link_node;
   SE2 last_link_T_anchor_node;
   std::optional<Constraint> pending;           // searched closure awaiting confirmation
+  std::optional<Constraint> untied_pending;    // ... found by the relocalization search (searchUntied)
   std::unique_ptr<localization::Database> db;  // line-pair descriptors of its nodes (anchor frame)
 };
 
