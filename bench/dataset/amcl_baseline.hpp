@@ -62,8 +62,8 @@ struct AmclOptions {
   double alpha_slow = 0.001;       ///< [recovery_alpha_slow], in [0, 1]; 0 with alpha_fast 0: no random particles
   double alpha_fast = 0.1;         ///< [recovery_alpha_fast], in [0, 1]
   double converged_weight = 0.5;  ///< weight share of the heaviest cluster for convergence, in (0, 1]
-  double converged_std_m = 0.25;   ///< position std under which the cloud is converged [m], > 0
-  double converged_std_rad = 5.0 * std::numbers::pi / 180.0;  ///< heading std for that [rad], > 0
+  double converged_std_m = 0.5;    ///< position std under which the cluster is converged [m], > 0
+  double converged_std_rad = 15.0 * std::numbers::pi / 180.0;  ///< heading std for that [rad], > 0
   std::uint64_t seed = 1;
   void validate() const;
 };

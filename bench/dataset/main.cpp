@@ -129,6 +129,7 @@ int main(int argc, char** argv) {
   track->add_option("--amcl-particles", track_options.amcl_options.global_particles, "AMCL: particles of the uniform start")->capture_default_str();
   track->add_option("--amcl-tracking-particles", track_options.amcl_options.tracking_particles, "AMCL: particles once converged")->capture_default_str();
   track->add_option("--amcl-beams", track_options.amcl_options.beams, "AMCL: scan points per update")->capture_default_str();
+  track->add_option("--amcl-sigma-hit", track_options.amcl_options.sigma_hit_m, "AMCL: likelihood field sigma [m]")->capture_default_str();
   track->add_flag("-v,--verbose", track_options.verbose, "print the AMCL filter's state after every scan (stderr)");
   track->callback([&] { lidar2d::bench::runTrackBenchmark(data, track_options); });
   try {
