@@ -99,15 +99,14 @@ void AmclFilter::motion(const SE2& step) {
   double rot1 = trans < 0.01 ? 0.0 : std::atan2(dy, dx);
   const double rot2_full = dtheta(step.theta(), rot1);
   const double rot1_noise = std::min(std::abs(wrapAngle(rot1)), std::abs(wrapAngle(rot1 - std::numbers::pi)));
-  const double rot2_noise =
-      std::min(std::abs(wrapAngle(rot2_full)), std::abs(wrapAngle(rot2_full - std::numbers::pi)));
+  const double rot2_noise = std::min(std::abs(wrapAngle(rot2_full)), std::abs(wrapAngle(rot2_full - std::numbers::pi)));
   const double a1 = o_.alpha1, a2 = o_.alpha2, a3 = o_.alpha3, a4 = o_.alpha4;
   for (Particle& p : particles_) {
     const double r1 = dtheta(rot1, rng_.gaussian(std::sqrt(a1 * rot1_noise * rot1_noise + a2 * trans * trans)));
-    const double t = trans - rng_.gaussian(std::sqrt(a3 * trans * trans + a4 * rot1_noise * rot1_noise +
-                                                     a4 * rot2_noise * rot2_noise));
-    const double r2 =
-        dtheta(rot2_full, rng_.gaussian(std::sqrt(a1 * rot2_noise * rot2_noise + a2 * trans * trans)));
+    const double t =
+        trans -
+        rng_.gaussian(std::sqrt(a3 * trans * trans + a4 * rot1_noise * rot1_noise + a4 * rot2_noise * rot2_noise));
+    const double r2 = dtheta(rot2_full, rng_.gaussian(std::sqrt(a1 * rot2_noise * rot2_noise + a2 * trans * trans)));
     p.x += t * std::cos(p.theta + r1);
     p.y += t * std::sin(p.theta + r1);
     p.theta = wrapAngle(p.theta + r1 + r2);
@@ -138,10 +137,14 @@ void AmclFilter::measure(const Points2& points) {
   // it by the particle count too, which makes the averages jump when the count changes).
   const double w_avg = total;
   for (Particle& p : particles_) p.w /= total;
-  if (w_slow_ == 0.0) w_slow_ = w_avg;
-  else w_slow_ += o_.alpha_slow * (w_avg - w_slow_);
-  if (w_fast_ == 0.0) w_fast_ = w_avg;
-  else w_fast_ += o_.alpha_fast * (w_avg - w_fast_);
+  if (w_slow_ == 0.0)
+    w_slow_ = w_avg;
+  else
+    w_slow_ += o_.alpha_slow * (w_avg - w_slow_);
+  if (w_fast_ == 0.0)
+    w_fast_ = w_avg;
+  else
+    w_fast_ += o_.alpha_fast * (w_avg - w_fast_);
 }
 
 // Low-variance resampling (Probabilistic Robotics, table 4.4) to `n` particles, each replaced by a
@@ -230,8 +233,8 @@ AmclResult AmclFilter::estimate() const {
   r.std_m = std::sqrt(c.var_xy);
   r.std_rad = std::sqrt(c.var_theta);
   r.cluster_weight = total > 0 ? c.w / total : 0.0;
-  r.converged = r.cluster_weight >= o_.converged_weight && r.std_m <= o_.converged_std_m &&
-                r.std_rad <= o_.converged_std_rad;
+  r.converged =
+      r.cluster_weight >= o_.converged_weight && r.std_m <= o_.converged_std_m && r.std_rad <= o_.converged_std_rad;
   r.particles = particles_.size();
   return r;
 }
@@ -249,8 +252,8 @@ AmclResult AmclFilter::add(const Frame& frame) {
 
   if (!first_) motion(step);
   moved_ = moved_ * step;
-  const bool due = first_ || moved_.translation().norm() >= o_.update_min_d_m ||
-                   std::abs(moved_.theta()) >= o_.update_min_a_rad;
+  const bool due =
+      first_ || moved_.translation().norm() >= o_.update_min_d_m || std::abs(moved_.theta()) >= o_.update_min_a_rad;
   bool updated = false;
   if (due) {
     Points2 all;

@@ -46,23 +46,23 @@ struct AmclOptions {
   // Motion noise: variances, e.g. var(rot1) = alpha1 rot1^2 + alpha2 trans^2. amcl's defaults (0.2
   // each) are 45% of every step; these are tuned to the benchmark's odometry (3% of the distance,
   // 3% of the turn and 1 deg per metre), with a margin of about three.
-  double alpha1 = 0.01;   ///< rotation noise from rotation [odom_alpha1] [rad^2/rad^2], >= 0
-  double alpha2 = 0.003;  ///< rotation noise from translation [odom_alpha2] [rad^2/m^2], >= 0
-  double alpha3 = 0.01;   ///< translation noise from translation [odom_alpha3] [m^2/m^2], >= 0
-  double alpha4 = 0.003;  ///< translation noise from rotation [odom_alpha4] [m^2/rad^2], >= 0
-  std::size_t beams = 60;          ///< scan points used per update [laser_max_beams], >= 1
-  double z_hit = 0.95;             ///< [laser_z_hit], in [0, 1]
-  double z_rand = 0.05;            ///< [laser_z_rand], in [0, 1]
-  double sigma_hit_m = 0.2;        ///< [laser_sigma_hit] [m], > 0
-  double max_range_m = 30.0;       ///< range of the uniform term [laser_max_range] [m], > 0
+  double alpha1 = 0.01;              ///< rotation noise from rotation [odom_alpha1] [rad^2/rad^2], >= 0
+  double alpha2 = 0.003;             ///< rotation noise from translation [odom_alpha2] [rad^2/m^2], >= 0
+  double alpha3 = 0.01;              ///< translation noise from translation [odom_alpha3] [m^2/m^2], >= 0
+  double alpha4 = 0.003;             ///< translation noise from rotation [odom_alpha4] [m^2/rad^2], >= 0
+  std::size_t beams = 60;            ///< scan points used per update [laser_max_beams], >= 1
+  double z_hit = 0.95;               ///< [laser_z_hit], in [0, 1]
+  double z_rand = 0.05;              ///< [laser_z_rand], in [0, 1]
+  double sigma_hit_m = 0.2;          ///< [laser_sigma_hit] [m], > 0
+  double max_range_m = 30.0;         ///< range of the uniform term [laser_max_range] [m], > 0
   double max_obstacle_dist_m = 2.0;  ///< distances are clamped here [laser_likelihood_max_dist] [m], > 0
-  double update_min_d_m = 0.2;     ///< [update_min_d] [m], >= 0
+  double update_min_d_m = 0.2;       ///< [update_min_d] [m], >= 0
   double update_min_a_rad = std::numbers::pi / 6.0;  ///< [update_min_a] [rad], >= 0
-  std::size_t resample_interval = 2;  ///< measurements between resamplings [resample_interval], >= 1
-  double alpha_slow = 0.001;       ///< [recovery_alpha_slow], in [0, 1]; 0 with alpha_fast 0: no random particles
-  double alpha_fast = 0.1;         ///< [recovery_alpha_fast], in [0, 1]
+  std::size_t resample_interval = 2;                 ///< measurements between resamplings [resample_interval], >= 1
+  double alpha_slow = 0.001;      ///< [recovery_alpha_slow], in [0, 1]; 0 with alpha_fast 0: no random particles
+  double alpha_fast = 0.1;        ///< [recovery_alpha_fast], in [0, 1]
   double converged_weight = 0.5;  ///< weight share of the heaviest cluster for convergence, in (0, 1]
-  double converged_std_m = 0.5;    ///< position std under which the cluster is converged [m], > 0
+  double converged_std_m = 0.5;   ///< position std under which the cluster is converged [m], > 0
   double converged_std_rad = 15.0 * std::numbers::pi / 180.0;  ///< heading std for that [rad], > 0
   std::uint64_t seed = 1;
   void validate() const;
@@ -70,13 +70,13 @@ struct AmclOptions {
 
 /// The filter's answer for one scan.
 struct AmclResult {
-  SE2 T_world_robot;        ///< weighted mean of the heaviest cluster of particles
+  SE2 T_world_robot;            ///< weighted mean of the heaviest cluster of particles
   double cluster_weight = 0.0;  ///< that cluster's share of the weight, in [0, 1]
-  bool converged = false;   ///< the cloud is within converged_std_m / converged_std_rad
-  bool updated = false;     ///< the measurement ran on this scan (the robot moved enough)
-  double std_m = 0.0;       ///< weighted position std of the cluster [m]
-  double std_rad = 0.0;     ///< weighted heading std of the cluster [rad]
-  std::size_t particles = 0;  ///< particles after this scan
+  bool converged = false;       ///< the cloud is within converged_std_m / converged_std_rad
+  bool updated = false;         ///< the measurement ran on this scan (the robot moved enough)
+  double std_m = 0.0;           ///< weighted position std of the cluster [m]
+  double std_rad = 0.0;         ///< weighted heading std of the cluster [rad]
+  std::size_t particles = 0;    ///< particles after this scan
 };
 
 /// One robot in one map. Non-copyable (holds the field of the map).

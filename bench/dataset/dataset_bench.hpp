@@ -103,9 +103,9 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
 struct TrackBenchOptions {
   std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
   std::vector<std::string> maps{"half"};  ///< maps from the first half and/or the whole log: half, whole
-  std::size_t passes = 10;  ///< times the log is tracked in a row by one Tracker (0: AMCL only)
-  std::uint64_t seed = 1;   ///< seed of the odometry noise (perturb --odom-model realistic)
-  bool amcl = true;         ///< also one pass of the AMCL-style baseline
+  std::size_t passes = 10;                ///< times the log is tracked in a row by one Tracker (0: AMCL only)
+  std::uint64_t seed = 1;                 ///< seed of the odometry noise (perturb --odom-model realistic)
+  bool amcl = true;                       ///< also one pass of the AMCL-style baseline
   localization::TrackerOptions tracker;
   AmclOptions amcl_options;
   bool verbose = false;  ///< the AMCL filter's state after every scan on stderr

@@ -85,10 +85,10 @@ PassStats amclPass(AmclFilter& filter, const std::vector<Frame>& frames, bool ve
     const AmclResult r = filter.add(f);
     if (verbose) {
       const SE2 e = f.T_world_robot->inverse() * r.T_world_robot;
-      std::cerr << fmt::format("amcl scan {}: {} particles, cluster {:.2f}, std {:.2f} m {:.1f} deg, error {:.2f} m {:.1f} deg{}{}\n",
-                               f.index, r.particles, r.cluster_weight, r.std_m, r.std_rad / kDeg, e.translation().norm(),
-                               std::abs(e.theta()) / kDeg, r.updated ? "" : " (no update)",
-                               r.converged ? " converged" : "");
+      std::cerr << fmt::format(
+          "amcl scan {}: {} particles, cluster {:.2f}, std {:.2f} m {:.1f} deg, error {:.2f} m {:.1f} deg{}{}\n",
+          f.index, r.particles, r.cluster_weight, r.std_m, r.std_rad / kDeg, e.translation().norm(),
+          std::abs(e.theta()) / kDeg, r.updated ? "" : " (no update)", r.converged ? " converged" : "");
     }
     s.add(f, frames.front().time, r.converged, r.converged, r.T_world_robot, 1e3 * (threadCpuSeconds() - c0));
   }
@@ -154,8 +154,9 @@ void runTrackBenchmark(const std::string& data_dir, const TrackBenchOptions& bo)
       }
       if (bo.amcl) {
         AmclFilter filter(map, bo.amcl_options);
-        compare.push_back({run, fmt::format("AMCL-style PF ({} / {} particles)", bo.amcl_options.global_particles,
-                                            bo.amcl_options.tracking_particles),
+        compare.push_back({run,
+                           fmt::format("AMCL-style PF ({} / {} particles)", bo.amcl_options.global_particles,
+                                       bo.amcl_options.tracking_particles),
                            amclPass(filter, frames, bo.verbose)});
         std::cerr << fmt::format("{}: AMCL pass done, RSS {:.1f} MB\n", run, rssMb());
       }
