@@ -49,6 +49,7 @@ struct PassStats {
   std::optional<double> first_fix_s;  ///< log seconds from the pass's first scan to its first placed scan
   std::vector<double> ms;             ///< CPU ms per scan
   std::vector<double> tracked_ms;     ///< CPU ms per tracked scan (Tracker only)
+  std::vector<double> err_m, err_deg;  ///< errors of the scans reported as tracking [m], [deg]
 
   void add(const Frame& f, double t0, bool placed, bool tracking_now, const SE2& pose, double cpu_ms) {
     ++scans;
@@ -57,10 +58,16 @@ struct PassStats {
     if (!tracking_now) return;
     ++tracking;
     const SE2 e = f.T_world_robot->inverse() * pose;
+    err_m.push_back(e.translation().norm());
+    err_deg.push_back(std::abs(e.theta()) / kDeg);
     within += e.translation().norm() <= 0.1 && std::abs(e.theta()) <= 2.0 * kDeg;
     wrong += e.translation().norm() > 0.5 || std::abs(e.theta()) > 10.0 * kDeg;
   }
   double share(std::size_t n) const { return 100.0 * static_cast<double>(n) / static_cast<double>(scans); }
+  std::string medianError() const {
+    if (err_m.empty()) return "-";
+    return fmt::format("{:.1f} / {:.2f}", 100.0 * eval::percentile(err_m, 0.5), eval::percentile(err_deg, 0.5));
+  }
   std::string firstFix() const { return first_fix_s ? fmt::format("{:.2f}", *first_fix_s) : std::string("never"); }
 };
 
@@ -162,12 +169,13 @@ void runTrackBenchmark(const std::string& data_dir, const TrackBenchOptions& bo)
       }
     }
   }
-  std::cout << "\n| run | method | scans | tracking | within | wrong while tracking | first fix (log s) | CPU ms per "
-               "scan median / p99 |\n";
-  std::cout << "|---|---|---|---|---|---|---|---|\n";
+  std::cout << "\n| run | method | scans | tracking | within | wrong while tracking | median error while tracking "
+               "(cm / deg) | first fix (log s) | CPU ms per scan median / p99 |\n";
+  std::cout << "|---|---|---|---|---|---|---|---|---|\n";
   for (const Row& r : compare)
-    std::cout << fmt::format("| {} | {} | {} | {:.1f}% | {:.1f}% | {} | {} | {} |\n", r.run, r.method, r.s.scans,
-                             r.s.share(r.s.tracking), r.s.share(r.s.within), r.s.wrong, r.s.firstFix(), msCell(r.s.ms));
+    std::cout << fmt::format("| {} | {} | {} | {:.1f}% | {:.1f}% | {} | {} | {} | {} |\n", r.run, r.method, r.s.scans,
+                             r.s.share(r.s.tracking), r.s.share(r.s.within), r.s.wrong, r.s.medianError(),
+                             r.s.firstFix(), msCell(r.s.ms));
 }
 
 }  // namespace lidar2d::bench
