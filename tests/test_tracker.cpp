@@ -1,8 +1,8 @@
 // Tracker: localization in a known map without an initial pose. Simulated office: the map from
 // the noise-free run, then a noisy-odometry run tracked (first fix, accuracy, never wrong while
 // `tracking`), the same without odometry (constant velocity), a kidnapped run (stretches B, A, C
-// with continuous odometry across the cuts: recovers within 10 scans each time), scans without
-// beams, bad options, a database of another map.
+// with continuous odometry across the cuts: recovers within 10 scans each time), the run tracked
+// three times in a row by one tracker, scans without beams, bad options, a database of another map.
 
 #include <gtest/gtest.h>
 
@@ -158,6 +158,19 @@ TEST(Tracker, RecoversFromKidnappingWithinTenScans) {
            (res[k].status == TrackStatus::kLost || !near(*frames[k].T_world_robot, res[k].T_world_robot, 0.3, 5.0)))
       ++k;
     EXPECT_LT(k, c + 10) << "no correct pose within 10 scans of the cut at " << c;
+  }
+}
+
+// Lifelong use: one tracker, never reset, fed the same run three times in a row (at each wrap the
+// robot is carried from the route's end to its start). Every pass is placed as well as the first:
+// the tracker carries nothing from one pass into the next but its pose.
+TEST(Tracker, SameAccuracyPassAfterPass) {
+  const Office& o = office();
+  Tracker tracker(o.map, std::nullopt, fastOptions());
+  for (int pass = 1; pass <= 3; ++pass) {
+    SCOPED_TRACE(::testing::Message() << "pass " << pass);
+    const auto res = trackAll(tracker, o.frames);
+    expectAccurate(o.frames, res, 0.95);
   }
 }
 

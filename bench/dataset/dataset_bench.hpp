@@ -6,9 +6,11 @@
 #include <string>
 #include <vector>
 
+#include "amcl_baseline.hpp"
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/localization/tracker.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/icp.hpp"
@@ -96,5 +98,18 @@ struct LocalizeBenchOptions {
   localization::LocalizerOptions loc;
 };
 void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOptions& options);
+
+/// Options of the `track` subcommand (track_bench.cpp): lifelong tracking and the AMCL baseline.
+struct TrackBenchOptions {
+  std::vector<std::string> logs{"corrected/intel.log.gz", "corrected/freiburg-079.log.gz"};  ///< under data_dir
+  std::vector<std::string> maps{"half"};  ///< maps from the first half and/or the whole log: half, whole
+  std::size_t passes = 10;                ///< times the log is tracked in a row by one Tracker (0: AMCL only)
+  std::uint64_t seed = 1;                 ///< seed of the odometry noise (perturb --odom-model realistic)
+  bool amcl = true;                       ///< also one pass of the AMCL-style baseline
+  localization::TrackerOptions tracker;
+  AmclOptions amcl_options;
+  bool verbose = false;  ///< the AMCL filter's state after every scan on stderr
+};
+void runTrackBenchmark(const std::string& data_dir, const TrackBenchOptions& options);
 
 }  // namespace lidar2d::bench

@@ -5,6 +5,7 @@
 //   lidar2d_dataset_bench match [--data DIR] [--sigma-xy M] [--sigma-theta DEG] [--seed N] [--methods p2p p2l ...]
 //   lidar2d_dataset_bench match --relations [--truth-check]   (the raw bags' Kuemmerle relations as pairs)
 //   lidar2d_dataset_bench match-map [--data DIR] [--methods lf corr] [--solvers gn ceres]   (scan to map)
+//   lidar2d_dataset_bench track [--data DIR] [--logs ...] [--passes 10] [--maps half whole] [--no-amcl]
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
@@ -118,6 +119,30 @@ int main(int argc, char** argv) {
   loc->add_option("--regions", loc_options.loc.max_regions, "candidate regions searched by branch and bound (0: none)")->capture_default_str();
   loc->add_option("--confident", loc_options.loc.confident_score, "answers scoring this skip the region search")->capture_default_str();
   loc->callback([&] { lidar2d::bench::runLocalizeBenchmark(data, loc_options); });
+  lidar2d::bench::TrackBenchOptions track_options;
+  auto* track = app.add_subcommand(
+      "track", "tracking: one log tracked N times in a row (accuracy, RSS per pass); AMCL-style baseline");
+  track->add_option("--logs", track_options.logs, "logs under --data")->capture_default_str();
+  track->add_option("--maps", track_options.maps, "maps from the log's first half and/or all of it: half whole")
+      ->capture_default_str();
+  track->add_option("--passes", track_options.passes, "passes of one tracker over the log (0: baseline only)")
+      ->capture_default_str();
+  track->add_option("--seed", track_options.seed, "seed of the odometry noise")->capture_default_str();
+  track->add_flag("!--no-amcl", track_options.amcl, "skip the AMCL-style baseline");
+  track
+      ->add_option("--amcl-particles", track_options.amcl_options.global_particles,
+                   "AMCL: particles of the uniform start")
+      ->capture_default_str();
+  track
+      ->add_option("--amcl-tracking-particles", track_options.amcl_options.tracking_particles,
+                   "AMCL: particles once converged")
+      ->capture_default_str();
+  track->add_option("--amcl-beams", track_options.amcl_options.beams, "AMCL: scan points per update")
+      ->capture_default_str();
+  track->add_option("--amcl-sigma-hit", track_options.amcl_options.sigma_hit_m, "AMCL: likelihood field sigma [m]")
+      ->capture_default_str();
+  track->add_flag("-v,--verbose", track_options.verbose, "print the AMCL filter's state after every scan (stderr)");
+  track->callback([&] { lidar2d::bench::runTrackBenchmark(data, track_options); });
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
