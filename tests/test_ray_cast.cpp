@@ -162,6 +162,17 @@ TEST(CastRayInClearance, MatchesCastRayOnRandomGridsAndRays) {
       EXPECT_EQ(t, kInf) << "trial " << trial;
     else
       ASSERT_NEAR(t, ref, 1e-9) << "trial " << trial;
+    // The batched cast answers exactly as the single one, for any number of rays.
+    std::vector<V> dirs;
+    const std::size_t n = 1 + rng() % 20;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double a = 2.0 * std::numbers::pi * u(rng);
+      dirs.emplace_back(std::cos(a), std::sin(a));
+    }
+    std::vector<double> batch(n);
+    castRaysInClearance(start, dirs.data(), n, max_t, c, batch.data());
+    for (std::size_t i = 0; i < n; ++i)
+      ASSERT_EQ(batch[i], castRayInClearance(start, dirs[i], max_t, c)) << "trial " << trial << " ray " << i;
   }
   EXPECT_GT(leaps_possible, 500);  // the test exercises the leaps
 }

@@ -75,4 +75,26 @@ ClearanceGrid::ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int
   }
 }
 
+void castRaysInClearance(const Eigen::Vector2d& start, const Eigen::Vector2d* dirs, std::size_t n, double max_t,
+                         const ClearanceGrid& grid, double* out) {
+  constexpr std::size_t kBatch = 8;
+  for (std::size_t first = 0; first < n; first += kBatch) {
+    const std::size_t m = std::min(kBatch, n - first);
+    double t[kBatch] = {};
+    std::size_t active[kBatch];
+    std::size_t n_active = m;
+    for (std::size_t k = 0; k < m; ++k) active[k] = first + k;
+    while (n_active > 0) {
+      for (std::size_t k = 0; k < n_active;) {
+        const std::size_t i = active[k];
+        if (internal::advanceInClearance(start, dirs[i], max_t, grid, &t[i - first], &out[i])) {
+          active[k] = active[--n_active];  // done: swap the last active ray in
+        } else {
+          ++k;
+        }
+      }
+    }
+  }
+}
+
 }  // namespace lidar2d::geometry

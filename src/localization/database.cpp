@@ -226,18 +226,15 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
   const auto B = static_cast<std::size_t>(options.profile_bins);
   // Every beam's direction in the map frame (ray casting) and the world frame (its point), and its
   // profile sector: the same for every position.
-  struct Beam {
-    Eigen::Vector2d dir_map, dir_world;
-    std::size_t sector;
-  };
-  std::vector<Beam> beams;
-  beams.reserve(static_cast<std::size_t>(n_orient) * static_cast<std::size_t>(options.beams));
+  std::vector<Eigen::Vector2d> dir_map, dir_world;
+  std::vector<std::size_t> sector;
   for (int o = 0; o < n_orient; ++o)
     for (int b = 0; b < options.beams; ++b) {
       const double a_world = o * kTwoPi / n_orient + a0 + b * inc;  // beam angle in the world frame
       const double a_map = a_world - yaw;
-      beams.push_back({Eigen::Vector2d(std::cos(a_map), std::sin(a_map)),
-                       Eigen::Vector2d(std::cos(a_world), std::sin(a_world)), B > 0 ? sectorOf(a_world, B) : 0});
+      dir_map.emplace_back(std::cos(a_map), std::sin(a_map));
+      dir_world.emplace_back(std::cos(a_world), std::sin(a_world));
+      sector.push_back(B > 0 ? sectorOf(a_world, B) : 0);
     }
   // Lines of each candidate, compact (the Line of the extraction holds its points' fit as well).
   std::vector<std::vector<LineFeature>> per_pos(cand.size());
@@ -248,23 +245,24 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
   auto worker = [&](bool report) {
     Points2 pts;
     std::vector<Line> all;
+    std::vector<double> range(dir_map.size());
     for (std::size_t i; (i = next.fetch_add(1)) < cand.size();) {
-      const Eigen::Vector2d start = cand[i] / res;
+      // Range to the first obstacle cell [cells], +inf when nothing is hit within max_cells.
+      geometry::castRaysInClearance(cand[i] / res, dir_map.data(), dir_map.size(), max_cells, clearance, range.data());
       all.clear();
       for (int o = 0; o < n_orient; ++o) {
         pts.clear();
         for (int b = 0; b < options.beams; ++b) {
-          const Beam& beam = beams[static_cast<std::size_t>(o) * static_cast<std::size_t>(options.beams) +
-                                   static_cast<std::size_t>(b)];
-          // Range to the first obstacle cell plus half a cell (a real return lies inside the cell,
-          // on average at its middle) [cells]; +inf when nothing is hit within max_cells.
-          const double r = geometry::castRayInClearance(start, beam.dir_map, max_cells, clearance) + 0.5;
+          const std::size_t k =
+              static_cast<std::size_t>(o) * static_cast<std::size_t>(options.beams) + static_cast<std::size_t>(b);
+          // Plus half a cell: a real return lies inside the cell, on average at its middle.
+          const double r = range[k] + 0.5;
           if (std::isfinite(r))
-            pts.emplace_back(r * res * beam.dir_world);
+            pts.emplace_back(r * res * dir_world[k]);
           else
             pts.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0.0);
           if (B > 0 && std::isfinite(r)) {
-            float& v = cand_profiles[i * B + beam.sector];
+            float& v = cand_profiles[i * B + sector[k]];
             v = std::min(v, static_cast<float>(r * res));
           }
         }

@@ -103,6 +103,59 @@ class ClearanceGrid {
   std::vector<std::uint8_t> cells_;
 };
 
+namespace internal {
+
+/// One stage of castRayInClearance for the ray at parameter *t: a leap, or a walk up to the next
+/// leap. Returns true when the ray is done (its answer in *result), else advances *t.
+[[gnu::always_inline]] inline bool advanceInClearance(const Eigen::Vector2d& start, const Eigen::Vector2d& dir,
+                                                      double max_t, const ClearanceGrid& grid, double* t,
+                                                      double* result) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  // A leap stops this short of the bound, for the rounding of the point it lands on.
+  constexpr double kMargin = 1e-6;
+  // Leaps of fewer cells than this are left to the walk (a leap costs more than a step).
+  constexpr int kMinLeap = 2;
+  const std::int32_t width = grid.width(), height = grid.height();
+  if (*t > max_t) {
+    *result = kInf;
+    return true;
+  }
+  const Eigen::Vector2d p = start + *t * dir;
+  const std::int32_t x = floorToInt32(p.x()), y = floorToInt32(p.y());
+  if (x < 0 || y < 0 || x >= width || y >= height) {
+    *result = kInf;
+    return true;
+  }
+  const int v = grid.at(x, y);
+  if (v == 0) {  // only where the ray starts: a leap never lands on an obstacle
+    *result = *t;
+    return true;
+  }
+  if (v - 1 >= kMinLeap) {
+    *t += (v - 1) - kMargin;
+    return false;
+  }
+  // Walk from p until an obstacle, or a cell with room to leap again.
+  for (GridRay ray(p, dir);; ray.step()) {
+    const double tc = *t + ray.t();
+    if (tc > max_t || ray.x() < 0 || ray.y() < 0 || ray.x() >= width || ray.y() >= height) {
+      *result = kInf;
+      return true;
+    }
+    const int c = grid.at(ray.x(), ray.y());
+    if (c == 0) {
+      *result = tc;
+      return true;
+    }
+    if (c - 1 >= kMinLeap) {
+      *t = tc + (c - 1) - kMargin;  // the entry point lies on the closed square of this cell
+      return false;
+    }
+  }
+}
+
+}  // namespace internal
+
 /// `castRay` with `hit(x, y)` = "obstacle cell of `grid`", the same answer (the entry parameter of
 /// the first obstacle cell, +inf when the ray leaves the grid or passes max_t first) up to rounding
 /// (~1e-12 cells), but it leaps over open space instead of visiting every cell: from any point of a
@@ -112,37 +165,16 @@ class ClearanceGrid {
 /// `start` within the int32 range.
 inline double castRayInClearance(const Eigen::Vector2d& start, const Eigen::Vector2d& dir, double max_t,
                                  const ClearanceGrid& grid) {
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  // A leap stops this short of the bound, for the rounding of the point it lands on.
-  constexpr double kMargin = 1e-6;
-  // Leaps of fewer cells than this are left to the walk (a leap costs more than a step).
-  constexpr int kMinLeap = 2;
-  const std::int32_t width = grid.width(), height = grid.height();
-  double t = 0.0;
-  for (;;) {
-    if (t > max_t) return kInf;
-    const Eigen::Vector2d p = start + t * dir;
-    const std::int32_t x = floorToInt32(p.x()), y = floorToInt32(p.y());
-    if (x < 0 || y < 0 || x >= width || y >= height) return kInf;
-    const int v = grid.at(x, y);
-    if (v == 0) return t;  // only where the ray starts: a leap never lands on an obstacle
-    if (v - 1 >= kMinLeap) {
-      t += (v - 1) - kMargin;
-      continue;
-    }
-    // Walk from p until an obstacle, or a cell with room to leap again.
-    for (GridRay ray(p, dir);; ray.step()) {
-      const double tc = t + ray.t();
-      if (tc > max_t) return kInf;
-      if (ray.x() < 0 || ray.y() < 0 || ray.x() >= width || ray.y() >= height) return kInf;
-      const int c = grid.at(ray.x(), ray.y());
-      if (c == 0) return tc;
-      if (c - 1 >= kMinLeap) {
-        t = tc + (c - 1) - kMargin;  // the entry point lies on the closed square of this cell
-        break;
-      }
-    }
+  double t = 0.0, result = 0.0;
+  while (!internal::advanceInClearance(start, dir, max_t, grid, &t, &result)) {
   }
+  return result;
 }
+
+/// castRayInClearance of `n` rays from one start: out[i] is the answer for dirs[i], exactly as
+/// castRayInClearance gives it. The rays advance in turns, so that the memory accesses of one
+/// overlap those of the others (a single ray waits on each cell it reads).
+void castRaysInClearance(const Eigen::Vector2d& start, const Eigen::Vector2d* dirs, std::size_t n, double max_t,
+                         const ClearanceGrid& grid, double* out);
 
 }  // namespace lidar2d::geometry
