@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <memory>
 #include <thread>
 
 #include "lidar2d/core/error.hpp"
@@ -217,7 +218,11 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
 
   // Virtual scans, line extraction: in parallel over positions. Rays leap over open space
   // (geometry::castRayInClearance: castRay's answer in a fraction of the cell visits).
-  const geometry::ClearanceGrid clearance(obstacle, W, H);
+  // (The per-cell arrays are released as soon as they have served: on a large map each is tens of
+  // megabytes, and the index built last is the peak of the build's memory.)
+  auto clearance_grid = std::make_unique<geometry::ClearanceGrid>(obstacle, W, H);
+  const geometry::ClearanceGrid& clearance = *clearance_grid;
+  std::vector<std::uint8_t>().swap(obstacle);
   const int n_orient = std::max(1, static_cast<int>(std::ceil(kTwoPi / options.fov_rad - 1e-9)));
   const double inc = options.fov_rad >= kTwoPi - 1e-9 ? kTwoPi / options.beams : options.fov_rad / (options.beams - 1);
   const double a0 = options.fov_rad >= kTwoPi - 1e-9 ? -kPi : -0.5 * options.fov_rad;
@@ -312,6 +317,7 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
   worker(true);
   for (auto& t : pool) t.join();
   if (progress) progress(cand.size(), cand.size(), progress_user);
+  clearance_grid.reset();
 
   std::vector<Position> positions;
   std::vector<LineFeature> lines;
@@ -350,6 +356,8 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
       const auto gy = std::min(GH - 1, static_cast<std::size_t>((y + 0.5) * res / options.step_m));
       n_covered += indexed_square[gy * GW + gx];
     }
+  std::vector<std::uint8_t>().swap(free);
+  std::vector<std::uint8_t>().swap(indexed_square);
   Database db = fromParts(options, localization::mapChecksum(map), std::move(positions), std::move(lines),
                           std::move(profiles));
   db.impl_->coverage = n_free ? static_cast<double>(n_covered) / static_cast<double>(n_free) : 0.0;
