@@ -109,8 +109,10 @@ TEST(ClearanceGrid, IsTheDistanceBetweenSquaresToTheNearestObstacle) {
     const double density = trial % 5 == 0 ? 0.0 : 0.002 + 0.05 * u(rng);
     for (int i = 0; i < g.width * g.height; ++i) g.occupied.push_back(u(rng) < density);
     const ClearanceGrid c(g.occupied, g.width, g.height);
+    const ClearanceGrid c3(g.occupied, g.width, g.height, 3);  // in three threads: the same
     for (int y = 0; y < g.height; ++y)
       for (int x = 0; x < g.width; ++x) {
+        ASSERT_EQ(c3.at(x, y), c.at(x, y)) << "trial " << trial << " cell " << x << " " << y;
         double best = 1e9;
         for (int oy = 0; oy < g.height; ++oy)
           for (int ox = 0; ox < g.width; ++ox)

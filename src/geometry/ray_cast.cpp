@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <thread>
 
 namespace lidar2d::geometry {
 
@@ -11,20 +12,44 @@ namespace lidar2d::geometry {
 // obstacles dilated by one cell (Felzenszwalb & Huttenlocher 2012: a column pass, then the lower
 // envelope of parabolas along each row). The column distances saturate at 255 cells (one byte
 // each): g is exact below 255 and the grid stores at most 254 + 1 anyway.
-ClearanceGrid::ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int32_t width, std::int32_t height)
+namespace {
+
+// Calls f(begin, end) on `threads` consecutive parts of [0, n) in parallel.
+template <class F>
+void parallelRanges(std::size_t n, unsigned threads, F&& f) {
+  threads = std::max(1u, std::min<unsigned>(threads, static_cast<unsigned>(std::min<std::size_t>(n, 64))));
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back([&, t] { f(n * t / threads, n * (t + 1) / threads); });
+  f(std::size_t{0}, n / threads);
+  for (auto& th : pool) th.join();
+}
+
+}  // namespace
+
+ClearanceGrid::ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int32_t width, std::int32_t height,
+                             unsigned threads)
     : width_(std::max(0, width)), height_(std::max(0, height)) {
   const auto W = static_cast<std::size_t>(width_), H = static_cast<std::size_t>(height_);
   cells_.assign(W * H, 0);
   if (W == 0 || H == 0) return;
   // Rows dilated horizontally.
-  for (std::size_t y = 0; y < H; ++y)
-    for (std::size_t x = 0; x < W; ++x) {
-      const std::size_t i = y * W + x;
-      cells_[i] = obstacle[i] || (x > 0 && obstacle[i - 1]) || (x + 1 < W && obstacle[i + 1]);
-    }
+  parallelRanges(H, threads, [&](std::size_t y0, std::size_t y1) {
+    for (std::size_t y = y0; y < y1; ++y)
+      for (std::size_t x = 0; x < W; ++x) {
+        const std::size_t i = y * W + x;
+        cells_[i] = obstacle[i] || (x > 0 && obstacle[i - 1]) || (x + 1 < W && obstacle[i + 1]);
+      }
+  });
   // Column pass: vertical distance to the nearest dilated cell (vertically dilated on the fly).
+  parallelRanges(W, threads, [&](std::size_t x0, std::size_t x1) { columns(x0, x1); });
+  // Row pass.
+  parallelRanges(H, threads, [&](std::size_t y0, std::size_t y1) { rows(obstacle, y0, y1); });
+}
+
+void ClearanceGrid::columns(std::size_t x0, std::size_t x1) {
+  const auto W = static_cast<std::size_t>(width_), H = static_cast<std::size_t>(height_);
   std::vector<std::uint8_t> col(H), dist(H);
-  for (std::size_t x = 0; x < W; ++x) {
+  for (std::size_t x = x0; x < x1; ++x) {
     for (std::size_t y = 0; y < H; ++y) col[y] = cells_[y * W + x];
     auto dilated = [&](std::size_t y) { return col[y] || (y > 0 && col[y - 1]) || (y + 1 < H && col[y + 1]); };
     int d = 255;
@@ -39,10 +64,14 @@ ClearanceGrid::ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int
     }
     for (std::size_t y = 0; y < H; ++y) cells_[y * W + x] = dist[y];
   }
-  // Row pass: g^2(x) = min_q (x - q)^2 + f(q), f = squared column distance.
+}
+
+// Row pass: g^2(x) = min_q (x - q)^2 + f(q), f = squared column distance.
+void ClearanceGrid::rows(const std::vector<std::uint8_t>& obstacle, std::size_t y0, std::size_t y1) {
+  const auto W = static_cast<std::size_t>(width_);
   std::vector<double> f(W), z(W + 1);
   std::vector<std::size_t> v(W);
-  for (std::size_t y = 0; y < H; ++y) {
+  for (std::size_t y = y0; y < y1; ++y) {
     std::uint8_t* row = cells_.data() + y * W;
     for (std::size_t x = 0; x < W; ++x) f[x] = static_cast<double>(row[x]) * row[x];
     std::size_t k = 0;

@@ -220,7 +220,8 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
   // (geometry::castRayInClearance: castRay's answer in a fraction of the cell visits).
   // (The per-cell arrays are released as soon as they have served: on a large map each is tens of
   // megabytes, and the index built last is the peak of the build's memory.)
-  auto clearance_grid = std::make_unique<geometry::ClearanceGrid>(obstacle, W, H);
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  auto clearance_grid = std::make_unique<geometry::ClearanceGrid>(obstacle, W, H, threads);
   const geometry::ClearanceGrid& clearance = *clearance_grid;
   std::vector<std::uint8_t>().swap(obstacle);
   const int n_orient = std::max(1, static_cast<int>(std::ceil(kTwoPi / options.fov_rad - 1e-9)));
@@ -245,7 +246,6 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
   std::vector<std::vector<LineFeature>> per_pos(cand.size());
   std::vector<float> cand_profiles(cand.size() * B, static_cast<float>(options.max_range_m));
   std::atomic<std::size_t> next{0}, done{0};
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   threads = static_cast<unsigned>(std::min<std::size_t>(threads, cand.size()));
   auto worker = [&](bool report) {
     Points2 pts;

@@ -89,8 +89,9 @@ double castRay(const Eigen::Vector2d& start, const Eigen::Vector2d& dir, double 
 class ClearanceGrid {
  public:
   /// `obstacle[y * width + x]` != 0 marks an obstacle cell (the vector holds width x height
-  /// values); width, height >= 0.
-  ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int32_t width, std::int32_t height);
+  /// values); width, height >= 0. Computed by `threads` threads (at least one; same result).
+  ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int32_t width, std::int32_t height,
+                unsigned threads = 1);
   std::int32_t width() const { return width_; }
   std::int32_t height() const { return height_; }
   /// Precondition: the cell is inside the grid (not checked).
@@ -99,6 +100,8 @@ class ClearanceGrid {
   }
 
  private:
+  void columns(std::size_t x0, std::size_t x1);
+  void rows(const std::vector<std::uint8_t>& obstacle, std::size_t y0, std::size_t y1);
   std::int32_t width_, height_;
   std::vector<std::uint8_t> cells_;
 };

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <thread>
 #include <vector>
 
 namespace lidar2d::localization::internal {
@@ -72,8 +73,16 @@ class ImplicitPairTree {
                      first + static_cast<std::ptrdiff_t>(hi),
                      [dim](const P& a, const P& b) { return a.key[dim] < b.key[dim]; });
     nodes_[node] = {pairs[mid].key[dim], static_cast<std::uint8_t>(dim)};
-    if (mid - lo > kLeafSize) buildNode(pairs, scale, 2 * node + 1, lo, mid);
+    // The root's two halves are independent (disjoint pairs and nodes): one in a second thread.
+    std::thread left;
+    if (mid - lo > kLeafSize) {
+      if (node == 0 && hi - lo > (std::size_t{1} << 16))
+        left = std::thread([&, node, lo, mid] { buildNode(pairs, scale, 2 * node + 1, lo, mid); });
+      else
+        buildNode(pairs, scale, 2 * node + 1, lo, mid);
+    }
     if (hi - mid > kLeafSize) buildNode(pairs, scale, 2 * node + 2, mid, hi);
+    if (left.joinable()) left.join();
   }
 
   template <class P, class Scale, class Visit>
