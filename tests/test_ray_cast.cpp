@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -94,6 +95,88 @@ TEST(CastRay, MatchesPerCellReferenceOnRandomGridsAndRays) {
     EXPECT_EQ(hit_x, ref_x) << "trial " << trial;
     EXPECT_EQ(hit_y, ref_y) << "trial " << trial;
   }
+}
+
+// The clearance of every cell by brute force: 0 on obstacles, else 1 + floor of the distance
+// between its square and the nearest obstacle square, at most 255.
+TEST(ClearanceGrid, IsTheDistanceBetweenSquaresToTheNearestObstacle) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 60; ++trial) {
+    Grid g;
+    g.width = 1 + static_cast<int>(rng() % 40);
+    g.height = 1 + static_cast<int>(rng() % 40);
+    const double density = trial % 5 == 0 ? 0.0 : 0.002 + 0.05 * u(rng);
+    for (int i = 0; i < g.width * g.height; ++i) g.occupied.push_back(u(rng) < density);
+    const ClearanceGrid c(g.occupied, g.width, g.height);
+    const ClearanceGrid c3(g.occupied, g.width, g.height, 3);  // in three threads: the same
+    for (int y = 0; y < g.height; ++y)
+      for (int x = 0; x < g.width; ++x) {
+        ASSERT_EQ(c3.at(x, y), c.at(x, y)) << "trial " << trial << " cell " << x << " " << y;
+        double best = 1e9;
+        for (int oy = 0; oy < g.height; ++oy)
+          for (int ox = 0; ox < g.width; ++ox)
+            if (g.at(ox, oy)) {
+              const double gx = std::max(0, std::abs(ox - x) - 1), gy = std::max(0, std::abs(oy - y) - 1);
+              best = std::min(best, std::sqrt(gx * gx + gy * gy));
+            }
+        const int expected = g.at(x, y) ? 0 : 1 + static_cast<int>(std::min(254.0, std::floor(best)));
+        ASSERT_EQ(c.at(x, y), expected) << "trial " << trial << " cell " << x << " " << y;
+      }
+  }
+  // Open space farther than 255 cells saturates.
+  const ClearanceGrid open(std::vector<std::uint8_t>(300 * 2, 0), 300, 2);
+  EXPECT_EQ(open.at(150, 1), 255);
+}
+
+// The leaping cast gives castRay's answer, on grids with open space (so that it leaps) and clutter.
+TEST(CastRayInClearance, MatchesCastRayOnRandomGridsAndRays) {
+  std::mt19937_64 rng(33);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int leaps_possible = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    Grid g;
+    g.width = 5 + static_cast<int>(rng() % 120);
+    g.height = 5 + static_cast<int>(rng() % 120);
+    const double density = trial % 4 == 0 ? 0.0 : (trial % 4 == 1 ? 0.002 : 0.01 + 0.05 * u(rng));
+    for (int i = 0; i < g.width * g.height; ++i) g.occupied.push_back(u(rng) < density);
+    // A few walls, as in a building.
+    for (int w = 0; w < 3; ++w) {
+      const int x0 = static_cast<int>(rng() % g.width), y0 = static_cast<int>(rng() % g.height);
+      const bool horizontal = rng() % 2;
+      for (int k = 0; k < 40; ++k) {
+        const int x = horizontal ? x0 + k : x0, y = horizontal ? y0 : y0 + k;
+        if (x < g.width && y < g.height) g.occupied[static_cast<std::size_t>(y) * g.width + x] = 1;
+      }
+    }
+    const ClearanceGrid c(g.occupied, g.width, g.height);
+    const V start(u(rng) * g.width, u(rng) * g.height);
+    leaps_possible += c.at(static_cast<int>(start.x()), static_cast<int>(start.y())) >= 4;  // leaps of 3+ cells
+    double angle = 2.0 * std::numbers::pi * u(rng);
+    if (trial % 5 == 1) angle = std::numbers::pi / 2 * static_cast<double>(rng() % 4);
+    if (trial % 5 == 2) angle = std::numbers::pi / 4 * static_cast<double>(1 + 2 * (rng() % 4));
+    const V dir(std::cos(angle), std::sin(angle));
+    const double max_t = trial % 3 == 0 ? kInf : 150.0 * u(rng);
+    const double ref =
+        castRay(start, dir, max_t, g.width, g.height, [&](std::int32_t x, std::int32_t y) { return g.at(x, y); });
+    const double t = castRayInClearance(start, dir, max_t, c);
+    if (std::isinf(ref))
+      EXPECT_EQ(t, kInf) << "trial " << trial;
+    else
+      ASSERT_NEAR(t, ref, 1e-9) << "trial " << trial;
+    // The batched cast answers exactly as the single one, for any number of rays.
+    std::vector<V> dirs;
+    const std::size_t n = 1 + rng() % 20;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double a = 2.0 * std::numbers::pi * u(rng);
+      dirs.emplace_back(std::cos(a), std::sin(a));
+    }
+    std::vector<double> batch(n);
+    castRaysInClearance(start, dirs.data(), n, max_t, c, batch.data());
+    for (std::size_t i = 0; i < n; ++i)
+      ASSERT_EQ(batch[i], castRayInClearance(start, dirs[i], max_t, c)) << "trial " << trial << " ray " << i;
+  }
+  EXPECT_GT(leaps_possible, 500);  // the test exercises the leaps
 }
 
 TEST(CastRay, StartCellLeavingTheGridAndRange) {

@@ -94,6 +94,9 @@ struct LocalizeBenchOptions {
   std::string save_maps;             ///< folder to write the even-scan maps to (empty: none)
   bool verbose = false;              ///< print every failure on stderr
   bool extras = true;                ///< also the symmetric world and the ROS2 bag
+  /// Also the calibration curve of each map: for score thresholds, the share of queries answered
+  /// with a score at least the threshold, the success rate and the precision among those answers.
+  bool calibration = false;
   localization::DatabaseOptions db;
   localization::LocalizerOptions loc;
 };

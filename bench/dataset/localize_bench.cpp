@@ -15,6 +15,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <numbers>
 
@@ -54,11 +55,54 @@ void row(const std::string& name, const std::string& method, std::size_t n, std:
       100.0 * static_cast<double>(declined) / static_cast<double>(n), eval::percentile(ms, 0.5), eval::percentile(ms, 0.95), db);
 }
 
+// One query for the calibration curve: answered (not declined), its score, and whether it is right.
+struct Answer {
+  bool answered = false;
+  double score = 0.0;
+  bool ok = false;
+};
+
+// The calibration curve of one map: at each threshold, the queries answered with a score at least
+// the threshold (share of all queries), the successes among all queries, the precision among those
+// answers; then the lowest threshold from which on (every threshold of a 0.01 grid at or above it
+// that still answers something) the precision is at least 99%.
+std::string calibrationCurve(const std::string& name, const std::vector<Answer>& answers) {
+  const auto n = static_cast<double>(answers.size());
+  auto at = [&](double t) {
+    std::size_t a = 0, ok = 0;
+    for (const Answer& q : answers)
+      if (q.answered && q.score >= t - 1e-12) {
+        ++a;
+        ok += q.ok;
+      }
+    return std::pair<std::size_t, std::size_t>{a, ok};
+  };
+  std::string out = fmt::format("| {} |", name);
+  for (const double t : {0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95}) {
+    const auto [a, ok] = at(t);
+    out +=
+        fmt::format(" {:.1f} / {:.1f} / {} |", 100.0 * static_cast<double>(a) / n, 100.0 * static_cast<double>(ok) / n,
+                    a ? fmt::format("{:.1f}", 100.0 * static_cast<double>(ok) / static_cast<double>(a)) : "-");
+  }
+  // Scan the thresholds from the top down: the lowest one before the precision first drops below 99%.
+  double t99 = std::numeric_limits<double>::quiet_NaN();
+  for (int c = 100; c >= 50; --c) {
+    const auto [a, ok] = at(c / 100.0);
+    if (a == 0) continue;
+    if (static_cast<double>(ok) < 0.99 * static_cast<double>(a)) break;
+    t99 = c / 100.0;
+  }
+  if (std::isnan(t99)) return out + " none | - |\n";
+  const auto [a, ok] = at(t99);
+  return out + fmt::format(" {:.2f} | {:.1f}% |\n", t99, 100.0 * static_cast<double>(ok) / n);
+}
+
 }  // namespace
 
 void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOptions& bo) {
   std::cout << "| dataset | method | queries | success | precision | declined | median CPU ms | p95 CPU ms | database |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|\n";
+  std::string curves;
   for (const std::string& log : bo.logs) {
     const std::string path = (std::filesystem::path(data_dir) / log).string();
     if (!std::filesystem::exists(path)) {
@@ -86,6 +130,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     double t_desc = 0, t_look = 0, t_ver = 0;
     std::size_t with_regions = 0, with_fallback = 0;
     std::vector<double> ms;
+    std::vector<Answer> answers;
     std::vector<std::size_t> odd;
     for (std::size_t i = 1; i < frames.size(); i += 2) odd.push_back(i);
     for (std::size_t k = 0; k < odd.size(); k += bo.stride) {
@@ -106,6 +151,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         ++answered;
         ok += near(*f.T_world_robot, r.T_world_robot);
       }
+      answers.push_back({!r.declined, r.score, !r.declined && near(*f.T_world_robot, r.T_world_robot)});
       if (r.declined || !near(*f.T_world_robot, r.T_world_robot)) {
         const bool any = std::any_of(r.candidates.begin(), r.candidates.end(), [&](const localization::Candidate& c) {
           return near(*f.T_world_robot, c.T_world_robot);
@@ -129,6 +175,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
             f.T_world_robot->theta() / kDeg, r.num_regions, r.used_fallback ? " whole-map" : "");
     }
     row(name, "cascade", n, ok, answered, declined, ms, db_desc);
+    if (bo.calibration) curves += calibrationCurve(name, answers);
     {
       std::string dec;
       for (const auto& [reason, c] : f_declined) dec += fmt::format(" {}: {}", reason, c);
@@ -164,6 +211,12 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     }
   }
 
+  if (bo.calibration) {
+    std::cout << "\ncalibration: answered / success / precision [%] among all queries, answers with a score >= the "
+                 "threshold\n\n| dataset | >= 0.5 | >= 0.6 | >= 0.7 | >= 0.8 | >= 0.85 | >= 0.9 | >= 0.95 | 99% "
+                 "precision from | success there |\n|---|---|---|---|---|---|---|---|---|---|\n"
+              << curves;
+  }
   if (!bo.extras) return;
   // Symmetric world: four identical rooms, invariant under a 90 degree rotation about the origin.
   {

@@ -114,6 +114,8 @@ int main(int argc, char** argv) {
   loc->add_option("--profile-candidates", loc_options.loc.profile_candidates, "candidates from the range profiles (0: off)")->capture_default_str();
   loc->add_flag("--fallback", loc_options.loc.fallback_branch_and_bound, "branch-and-bound fallback");
   loc->add_flag("-v,--verbose", loc_options.verbose, "print each failure");
+  loc->add_flag("--calibration", loc_options.calibration,
+                "also the score-threshold curve per map (answered, success, precision)");
   loc->add_flag("!--no-extras", loc_options.extras, "only the logs (not the symmetric world and the ROS2 bag)");
   loc->add_option("--budget-ms", loc_options.loc.budget_ms, "whole-map search budget per query [ms] (0: none)")->capture_default_str();
   loc->add_option("--regions", loc_options.loc.max_regions, "candidate regions searched by branch and bound (0: none)")->capture_default_str();

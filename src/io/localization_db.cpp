@@ -107,6 +107,8 @@ void checkHeader(Reader& r, const std::string& data, const std::string& path) {
 
 void writeLocalizationDatabase(const std::string& path, const localization::Database& db) {
   Writer w;
+  // The whole file is assembled in memory: reserved once (a file of a large map is tens of MB).
+  w.buf.reserve(1024 + db.positions().size() * 16 + db.lines().size() * 12 + db.profiles().size() * 2 + 8);
   w.buf.append(kMagic, sizeof(kMagic));
   w.put(kLocalizationDbVersion);
   w.put(db.mapChecksum());

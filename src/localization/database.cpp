@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <memory>
 #include <thread>
 
 #include "lidar2d/core/error.hpp"
@@ -56,46 +57,52 @@ void Database::Impl::buildIndex() {
   pairs.clear();
   const double min_sin = std::sin(options.min_pair_angle_rad);
   const double k = options.key_angle_scale_m_per_rad;
-  for (std::uint32_t p = 0; p < positions.size(); ++p) {
-    const Position& pos = positions[p];
-    for (std::uint32_t a = 0; a < pos.num_lines; ++a)
-      for (std::uint32_t b = a + 1; b < pos.num_lines; ++b) {
-        const LineFeature& la = lines[pos.first_line + a];
-        const LineFeature& lb = lines[pos.first_line + b];
-        const double rel = wrapTwoPi(static_cast<double>(lb.normal_angle) - la.normal_angle);
-        if (std::abs(std::sin(rel)) < min_sin) continue;
-        internal::Pair pr;
-        pr.key[0] = la.distance;
-        pr.key[1] = lb.distance;
-        pr.key[2] = static_cast<float>(k * rel);
-        pr.ref = pos.first_line + a;
-        pr.other = pos.first_line + b;
-        pr.pos = p;
-        pairs.push_back(pr);
-      }
-  }
-  pairs.shrink_to_fit();
-  doubled.clear();
-  coarse_doubled.clear();
+  line_position.assign(lines.size(), 0);
+  float max_distance = 0.0f;
+  for (std::uint32_t p = 0; p < positions.size(); ++p)
+    for (std::uint32_t a = 0; a < positions[p].num_lines; ++a) {
+      line_position[positions[p].first_line + a] = p;
+      max_distance = std::max(max_distance, lines[positions[p].first_line + a].distance);
+    }
+  key_scale.unit[0] = key_scale.unit[1] = std::max(max_distance, 1e-3f) / 65535.0f;
+  key_scale.unit[2] = static_cast<float>(k * kTwoPi / 65535.0);
+  // Two passes (count, then fill) so that the largest array of the database is allocated once.
+  auto for_each_pair = [&](auto&& emit) {
+    for (const Position& pos : positions)
+      for (std::uint32_t a = 0; a < pos.num_lines; ++a)
+        for (std::uint32_t b = a + 1; b < pos.num_lines; ++b) {
+          const LineFeature& la = lines[pos.first_line + a];
+          const LineFeature& lb = lines[pos.first_line + b];
+          const double rel = wrapTwoPi(static_cast<double>(lb.normal_angle) - la.normal_angle);
+          if (std::abs(std::sin(rel)) < min_sin) continue;
+          emit(pos.first_line + a, b - a, la.distance, lb.distance, k * rel);
+        }
+  };
+  std::size_t n_pairs = 0;
+  for_each_pair([&](std::uint32_t, std::uint32_t, float, float, double) { ++n_pairs; });
+  pairs.reserve(n_pairs);
+  for_each_pair([&](std::uint32_t ref, std::uint32_t delta, float da, float db, double ka) {
+    internal::Pair pr;
+    pr.key[0] = key_scale.quantize(0, da);
+    pr.key[1] = key_scale.quantize(1, db);
+    pr.key[2] = key_scale.quantize(2, ka);
+    pr.other_delta = static_cast<std::uint16_t>(delta);
+    pr.ref = ref;
+    pairs.push_back(pr);
+  });
+  coarse.clear();
   if (!profiles.empty()) {
     const auto B = static_cast<std::size_t>(options.profile_bins);
     coarse_factor = B % 3 == 0 ? 3 : (B % 2 == 0 ? 2 : 1);
     const std::size_t C = B / coarse_factor;
-    doubled.resize(2 * profiles.size());
-    coarse_doubled.resize(2 * C * positions.size());
+    coarse.resize(C * positions.size());
     for (std::size_t p = 0; p < positions.size(); ++p) {
       const float* prof = profiles.data() + p * B;
-      std::copy_n(prof, B, doubled.begin() + static_cast<std::ptrdiff_t>(2 * p * B));
-      std::copy_n(prof, B, doubled.begin() + static_cast<std::ptrdiff_t>((2 * p + 1) * B));
-      for (std::size_t c = 0; c < C; ++c) {
-        const float v = *std::min_element(prof + c * coarse_factor, prof + (c + 1) * coarse_factor);
-        coarse_doubled[2 * p * C + c] = coarse_doubled[2 * p * C + C + c] = v;
-      }
+      for (std::size_t c = 0; c < C; ++c)
+        coarse[p * C + c] = *std::min_element(prof + c * coarse_factor, prof + (c + 1) * coarse_factor);
     }
   }
-  adaptor.pairs = &pairs;
-  tree = std::make_unique<internal::PairTree>(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-  if (!pairs.empty()) tree->buildIndex();
+  tree.build(pairs, key_scale);
 }
 
 Database::Database() : impl_(std::make_unique<Impl>()) {}
@@ -116,10 +123,9 @@ double Database::coverage() const { return impl_->coverage; }
 bool Database::empty() const { return impl_->pairs.empty(); }
 std::size_t Database::memoryBytes() const {
   const Impl& d = *impl_;
-  // Tree: one index per pair plus about one node (~48 bytes) per leaf of 16.
   return d.positions.capacity() * sizeof(Position) + d.lines.capacity() * sizeof(LineFeature) +
-         d.pairs.capacity() * sizeof(internal::Pair) + d.pairs.size() * (sizeof(std::uint32_t) + 48 / 8) +
-         (d.profiles.capacity() + d.doubled.capacity() + d.coarse_doubled.capacity()) * sizeof(float);
+         d.line_position.capacity() * sizeof(std::uint32_t) + d.pairs.capacity() * sizeof(internal::Pair) +
+         d.tree.memoryBytes() + (d.profiles.capacity() + d.coarse.capacity()) * sizeof(float);
 }
 
 std::uint64_t mapChecksum(const OccupancyImage& map) {
@@ -210,42 +216,58 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
                                options.clearance_m),
                    ErrorLocation({}, 0, "free space"));
 
-  // Virtual scans, line extraction: in parallel over positions.
-  const auto is_obstacle = [&](std::int32_t x, std::int32_t y) {
-    return obstacle[static_cast<std::size_t>(y) * static_cast<std::size_t>(W) + static_cast<std::size_t>(x)] != 0;
-  };
+  // Virtual scans, line extraction: in parallel over positions. Rays leap over open space
+  // (geometry::castRayInClearance: castRay's answer in a fraction of the cell visits).
+  // (The per-cell arrays are released as soon as they have served: on a large map each is tens of
+  // megabytes, and the index built last is the peak of the build's memory.)
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  auto clearance_grid = std::make_unique<geometry::ClearanceGrid>(obstacle, W, H, threads);
+  const geometry::ClearanceGrid& clearance = *clearance_grid;
+  std::vector<std::uint8_t>().swap(obstacle);
   const int n_orient = std::max(1, static_cast<int>(std::ceil(kTwoPi / options.fov_rad - 1e-9)));
   const double inc = options.fov_rad >= kTwoPi - 1e-9 ? kTwoPi / options.beams : options.fov_rad / (options.beams - 1);
   const double a0 = options.fov_rad >= kTwoPi - 1e-9 ? -kPi : -0.5 * options.fov_rad;
   const double max_cells = options.max_range_m / res;
   const double yaw = map.origin().theta();
-  std::vector<std::vector<Line>> per_pos(cand.size());
   const auto B = static_cast<std::size_t>(options.profile_bins);
+  // Every beam's direction in the map frame (ray casting) and the world frame (its point), and its
+  // profile sector: the same for every position.
+  std::vector<Eigen::Vector2d> dir_map, dir_world;
+  std::vector<std::size_t> sector;
+  for (int o = 0; o < n_orient; ++o)
+    for (int b = 0; b < options.beams; ++b) {
+      const double a_world = o * kTwoPi / n_orient + a0 + b * inc;  // beam angle in the world frame
+      const double a_map = a_world - yaw;
+      dir_map.emplace_back(std::cos(a_map), std::sin(a_map));
+      dir_world.emplace_back(std::cos(a_world), std::sin(a_world));
+      sector.push_back(B > 0 ? sectorOf(a_world, B) : 0);
+    }
+  // Lines of each candidate, compact (the Line of the extraction holds its points' fit as well).
+  std::vector<std::vector<LineFeature>> per_pos(cand.size());
   std::vector<float> cand_profiles(cand.size() * B, static_cast<float>(options.max_range_m));
   std::atomic<std::size_t> next{0}, done{0};
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   threads = static_cast<unsigned>(std::min<std::size_t>(threads, cand.size()));
   auto worker = [&](bool report) {
     Points2 pts;
     std::vector<Line> all;
+    std::vector<double> range(dir_map.size());
     for (std::size_t i; (i = next.fetch_add(1)) < cand.size();) {
-      const Eigen::Vector2d start = cand[i] / res;
+      // Range to the first obstacle cell [cells], +inf when nothing is hit within max_cells.
+      geometry::castRaysInClearance(cand[i] / res, dir_map.data(), dir_map.size(), max_cells, clearance, range.data());
       all.clear();
       for (int o = 0; o < n_orient; ++o) {
         pts.clear();
         for (int b = 0; b < options.beams; ++b) {
-          const double a_world = o * kTwoPi / n_orient + a0 + b * inc;  // beam angle in the world frame
-          const double a_map = a_world - yaw;
-          // Range to the first obstacle cell plus half a cell (a real return lies inside the cell,
-          // on average at its middle) [cells]; +inf when nothing is hit within max_cells.
-          const Eigen::Vector2d dir(std::cos(a_map), std::sin(a_map));
-          const double r = geometry::castRay(start, dir, max_cells, W, H, is_obstacle) + 0.5;
+          const std::size_t k =
+              static_cast<std::size_t>(o) * static_cast<std::size_t>(options.beams) + static_cast<std::size_t>(b);
+          // Plus half a cell: a real return lies inside the cell, on average at its middle.
+          const double r = range[k] + 0.5;
           if (std::isfinite(r))
-            pts.emplace_back(r * res * std::cos(a_world), r * res * std::sin(a_world));
+            pts.emplace_back(r * res * dir_world[k]);
           else
             pts.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0.0);
           if (B > 0 && std::isfinite(r)) {
-            float& v = cand_profiles[i * B + sectorOf(a_world, B)];
+            float& v = cand_profiles[i * B + sector[k]];
             v = std::min(v, static_cast<float>(r * res));
           }
         }
@@ -281,7 +303,11 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
         if (!dup) kept.push_back(l);
       }
       if (kept.size() > options.max_lines) kept.resize(options.max_lines);
-      per_pos[i] = std::move(kept);
+      std::vector<LineFeature>& out = per_pos[i];
+      out.reserve(kept.size());
+      for (const Line& l : kept)
+        out.push_back(
+            {static_cast<float>(l.normal_angle), static_cast<float>(l.distance), static_cast<float>(l.length)});
       const std::size_t d = done.fetch_add(1) + 1;
       if (report && progress && (d % 256 == 0 || d == cand.size())) progress(d, cand.size(), progress_user);
     }
@@ -291,11 +317,16 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
   worker(true);
   for (auto& t : pool) t.join();
   if (progress) progress(cand.size(), cand.size(), progress_user);
+  clearance_grid.reset();
 
   std::vector<Position> positions;
   std::vector<LineFeature> lines;
   std::vector<float> profiles;
   std::vector<std::uint8_t> indexed_square(GW * GH, 0);
+  std::size_t n_lines = 0;
+  for (const auto& l : per_pos) n_lines += l.size();
+  lines.reserve(n_lines);
+  profiles.reserve(cand_profiles.size());
   for (std::size_t i = 0; i < cand.size(); ++i) {
     // A position with fewer than two lines gives no pair but may still be found by its profile.
     if (per_pos[i].size() < 2 && B == 0) continue;
@@ -309,11 +340,11 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
     p.y = static_cast<float>(w.y());
     p.first_line = static_cast<std::uint32_t>(lines.size());
     p.num_lines = static_cast<std::uint32_t>(per_pos[i].size());
-    for (const Line& l : per_pos[i])
-      lines.push_back(
-          {static_cast<float>(l.normal_angle), static_cast<float>(l.distance), static_cast<float>(l.length)});
+    lines.insert(lines.end(), per_pos[i].begin(), per_pos[i].end());
+    std::vector<LineFeature>().swap(per_pos[i]);
     positions.push_back(p);
   }
+  std::vector<float>().swap(cand_profiles);
   // Coverage: the share of free cells whose square of the grid of positions holds an indexed
   // position (a scan taken there is near a virtual scan of the database).
   std::size_t n_free = 0, n_covered = 0;
@@ -325,6 +356,8 @@ Database Database::build(const OccupancyImage& map, const DatabaseOptions& optio
       const auto gy = std::min(GH - 1, static_cast<std::size_t>((y + 0.5) * res / options.step_m));
       n_covered += indexed_square[gy * GW + gx];
     }
+  std::vector<std::uint8_t>().swap(free);
+  std::vector<std::uint8_t>().swap(indexed_square);
   Database db = fromParts(options, localization::mapChecksum(map), std::move(positions), std::move(lines),
                           std::move(profiles));
   db.impl_->coverage = n_free ? static_cast<double>(n_covered) / static_cast<double>(n_free) : 0.0;
@@ -345,8 +378,10 @@ Database Database::fromParts(const DatabaseOptions& options, std::uint64_t map_c
   for (std::size_t i = 0; i < positions.size(); ++i) {
     const Position& p = positions[i];
     if (!std::isfinite(p.x) || !std::isfinite(p.y) ||
-        static_cast<std::uint64_t>(p.first_line) + p.num_lines > lines.size())
-      throw badInput(fmt::format("database position {} is invalid (non-finite or lines out of range)", i),
+        static_cast<std::uint64_t>(p.first_line) + p.num_lines > lines.size() || p.num_lines > 65535)
+      throw badInput(fmt::format("database position {} is invalid (non-finite, lines out of range or more than "
+                                 "65535 lines)",
+                                 i),
                      ErrorLocation({}, 0, "positions"));
   }
   for (std::size_t i = 0; i < lines.size(); ++i)

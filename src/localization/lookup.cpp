@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <nanoflann.hpp>
 #include <unordered_map>
 
 #include "lidar2d/localization/localizer.hpp"
@@ -32,7 +31,7 @@ std::vector<PoseVote> voteLinePairs(const Database& database, const std::vector<
   const double k = dbo.key_angle_scale_m_per_rad;
   const double min_sin = std::sin(std::max(0.0, dbo.min_pair_angle_rad - o.key_radius_m / k));
   const float r2 = static_cast<float>(o.key_radius_m * o.key_radius_m);
-  std::vector<std::pair<std::uint32_t, float>> hits;
+  std::vector<std::uint32_t> hits;
   std::uint32_t stamp = 0;
   if (!db.pairs.empty()) {
     for (std::size_t i = 0; i < lines.size(); ++i)
@@ -48,13 +47,14 @@ std::vector<PoseVote> voteLinePairs(const Database& database, const std::vector<
           if (shift != 0.0 && (ka < -o.key_radius_m || ka > k * kTwoPi + o.key_radius_m)) continue;
           const float q[3] = {static_cast<float>(li.distance), static_cast<float>(lj.distance), static_cast<float>(ka)};
           hits.clear();
-          db.tree->radiusSearch(q, r2, hits, nanoflann::SearchParams(32, 0.0f, false));
+          db.tree.radiusSearch(db.pairs, db.key_scale, q, r2,
+                               [&hits](std::size_t h) { hits.push_back(static_cast<std::uint32_t>(h)); });
           if (num_hits) *num_hits += hits.size();
-          for (const auto& h : hits) {
-            const internal::Pair& pr = db.pairs[h.first];
+          for (const std::uint32_t h : hits) {
+            const internal::Pair& pr = db.pairs[h];
             const Database::LineFeature& ma = db.lines[pr.ref];
-            const Database::LineFeature& mb = db.lines[pr.other];
-            const Database::Position& pos = db.positions[pr.pos];
+            const Database::LineFeature& mb = db.lines[pr.ref + pr.other_delta];
+            const Database::Position& pos = db.positions[db.line_position[pr.ref]];
             // theta: map normal = scan normal + theta, averaged over the two lines.
             const double th_a = angleDiff(ma.normal_angle, li.normal_angle);
             const double th_b = angleDiff(mb.normal_angle, lj.normal_angle);
@@ -127,13 +127,17 @@ std::vector<Observed> observedSectors(const Points2& pts, const Eigen::Vector2d&
   return seen;
 }
 
-// Lowest mismatch over all turns of one doubled profile, and that turn.
-std::pair<float, std::size_t> bestTurn(const float* doubled, std::size_t bins, const std::vector<Observed>& seen,
+// Lowest mismatch over all turns of one profile, and that turn.
+std::pair<float, std::size_t> bestTurn(const float* profile, std::size_t bins, const std::vector<Observed>& seen,
                                        std::vector<float>& cost) {
   std::fill(cost.begin(), cost.begin() + static_cast<std::ptrdiff_t>(bins), 0.0f);
   for (const Observed& o : seen) {
-    const float* d = doubled + o.bin;  // robot sector b at turn t is world sector b + t
-    for (std::size_t t = 0; t < bins; ++t) cost[t] += std::min(std::abs(o.range - d[t]) * o.inv_scale, 1.0f);
+    // Robot sector b at turn t is world sector (b + t) mod bins: two contiguous runs of turns.
+    const std::size_t wrap = bins - o.bin;
+    const float* d = profile + o.bin;
+    for (std::size_t t = 0; t < wrap; ++t) cost[t] += std::min(std::abs(o.range - d[t]) * o.inv_scale, 1.0f);
+    for (std::size_t t = wrap; t < bins; ++t)
+      cost[t] += std::min(std::abs(o.range - profile[t - wrap]) * o.inv_scale, 1.0f);
   }
   const auto it = std::min_element(cost.begin(), cost.begin() + static_cast<std::ptrdiff_t>(bins));
   return {*it, static_cast<std::size_t>(it - cost.begin())};
@@ -154,7 +158,7 @@ namespace internal {
 std::vector<PoseVote> profileCandidates(const Database& database, const Points2& pts, const Eigen::Vector2d& sensor,
                                         std::size_t k) {
   const Database::Impl& db = database.impl();
-  if (k == 0 || db.doubled.empty()) return {};
+  if (k == 0 || db.profiles.empty()) return {};
   const auto B = static_cast<std::size_t>(db.options.profile_bins);
   const std::size_t C = B / db.coarse_factor;
   const std::vector<Observed> fine = observedSectors(pts, sensor, B);
@@ -163,14 +167,13 @@ std::vector<PoseVote> profileCandidates(const Database& database, const Points2&
   const std::size_t P = db.positions.size();
   std::vector<float> cost(B);
   std::vector<std::pair<float, std::size_t>> ranked(P);  // (cost, position)
-  for (std::size_t p = 0; p < P; ++p)
-    ranked[p] = {bestTurn(db.coarse_doubled.data() + 2 * p * C, C, coarse, cost).first, p};
+  for (std::size_t p = 0; p < P; ++p) ranked[p] = {bestTurn(db.coarse.data() + p * C, C, coarse, cost).first, p};
   const std::size_t shortlist = std::min(P, 32 * k);
   std::partial_sort(ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(shortlist), ranked.end());
   std::vector<std::pair<float, std::size_t>> best(shortlist);  // (cost, position * B + turn)
   for (std::size_t c = 0; c < shortlist; ++c) {
     const std::size_t p = ranked[c].second;
-    const auto [v, turn] = bestTurn(db.doubled.data() + 2 * p * B, B, fine, cost);
+    const auto [v, turn] = bestTurn(db.profiles.data() + p * B, B, fine, cost);
     best[c] = {v, p * B + turn};
   }
   const std::size_t n = std::min(k, shortlist);

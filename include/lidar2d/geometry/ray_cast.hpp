@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <vector>
 
 namespace lidar2d::geometry {
 
@@ -80,5 +81,103 @@ double castRay(const Eigen::Vector2d& start, const Eigen::Vector2d& dir, double 
   }
   return std::numeric_limits<double>::infinity();
 }
+
+/// A grid of cells [0, width) x [0, height) that knows, for every cell, how much open space
+/// surrounds it: `at(x, y)` is 0 on an obstacle cell, else 1 + floor(g) (at most 255), where g is
+/// the Euclidean distance between the cell's square and the nearest obstacle cell's square (0 for
+/// a neighbour of an obstacle). One byte per cell.
+class ClearanceGrid {
+ public:
+  /// `obstacle[y * width + x]` != 0 marks an obstacle cell (the vector holds width x height
+  /// values); width, height >= 0. Computed by `threads` threads (at least one; same result).
+  ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int32_t width, std::int32_t height,
+                unsigned threads = 1);
+  std::int32_t width() const { return width_; }
+  std::int32_t height() const { return height_; }
+  /// Precondition: the cell is inside the grid (not checked).
+  std::uint8_t at(std::int32_t x, std::int32_t y) const {
+    return cells_[static_cast<std::size_t>(y) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(x)];
+  }
+
+ private:
+  void columns(std::size_t x0, std::size_t x1);
+  void rows(const std::vector<std::uint8_t>& obstacle, std::size_t y0, std::size_t y1);
+  std::int32_t width_, height_;
+  std::vector<std::uint8_t> cells_;
+};
+
+namespace internal {
+
+/// One stage of castRayInClearance for the ray at parameter *t: a leap, or a walk up to the next
+/// leap. Returns true when the ray is done (its answer in *result), else advances *t.
+[[gnu::always_inline]] inline bool advanceInClearance(const Eigen::Vector2d& start, const Eigen::Vector2d& dir,
+                                                      double max_t, const ClearanceGrid& grid, double* t,
+                                                      double* result) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  // A leap stops this short of the bound, for the rounding of the point it lands on.
+  constexpr double kMargin = 1e-6;
+  // Leaps of fewer cells than this are left to the walk (a leap costs more than a step).
+  constexpr int kMinLeap = 2;
+  const std::int32_t width = grid.width(), height = grid.height();
+  if (*t > max_t) {
+    *result = kInf;
+    return true;
+  }
+  const Eigen::Vector2d p = start + *t * dir;
+  const std::int32_t x = floorToInt32(p.x()), y = floorToInt32(p.y());
+  if (x < 0 || y < 0 || x >= width || y >= height) {
+    *result = kInf;
+    return true;
+  }
+  const int v = grid.at(x, y);
+  if (v == 0) {  // only where the ray starts: a leap never lands on an obstacle
+    *result = *t;
+    return true;
+  }
+  if (v - 1 >= kMinLeap) {
+    *t += (v - 1) - kMargin;
+    return false;
+  }
+  // Walk from p until an obstacle, or a cell with room to leap again.
+  for (GridRay ray(p, dir);; ray.step()) {
+    const double tc = *t + ray.t();
+    if (tc > max_t || ray.x() < 0 || ray.y() < 0 || ray.x() >= width || ray.y() >= height) {
+      *result = kInf;
+      return true;
+    }
+    const int c = grid.at(ray.x(), ray.y());
+    if (c == 0) {
+      *result = tc;
+      return true;
+    }
+    if (c - 1 >= kMinLeap) {
+      *t = tc + (c - 1) - kMargin;  // the entry point lies on the closed square of this cell
+      return false;
+    }
+  }
+}
+
+}  // namespace internal
+
+/// `castRay` with `hit(x, y)` = "obstacle cell of `grid`", the same answer (the entry parameter of
+/// the first obstacle cell, +inf when the ray leaves the grid or passes max_t first) up to rounding
+/// (~1e-12 cells), but it leaps over open space instead of visiting every cell: from any point of a
+/// cell whose square is g away from every obstacle square, the ray meets no obstacle cell before
+/// it has gone g, so it resumes that far ahead; it walks cell by cell (GridRay) only near
+/// obstacles. Preconditions: `dir` of unit length (t is then the distance in cells), finite
+/// `start` within the int32 range.
+inline double castRayInClearance(const Eigen::Vector2d& start, const Eigen::Vector2d& dir, double max_t,
+                                 const ClearanceGrid& grid) {
+  double t = 0.0, result = 0.0;
+  while (!internal::advanceInClearance(start, dir, max_t, grid, &t, &result)) {
+  }
+  return result;
+}
+
+/// castRayInClearance of `n` rays from one start: out[i] is the answer for dirs[i], exactly as
+/// castRayInClearance gives it. The rays advance in turns, so that the memory accesses of one
+/// overlap those of the others (a single ray waits on each cell it reads).
+void castRaysInClearance(const Eigen::Vector2d& start, const Eigen::Vector2d* dirs, std::size_t n, double max_t,
+                         const ClearanceGrid& grid, double* out);
 
 }  // namespace lidar2d::geometry

@@ -11,12 +11,12 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
-#include <nanoflann.hpp>
 #include <numbers>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "src/localization/internal/pair_tree.hpp"
 
 namespace lidar2d::localization {
 namespace internal {
@@ -42,24 +42,24 @@ inline std::size_t sectorOf(double angle, std::size_t bins) {
   return std::min(bins - 1, static_cast<std::size_t>(wrapTwoPi(angle + kPi) / kTwoPi * static_cast<double>(bins)));
 }
 
-// One indexed pair: reference line `ref` and second line `other` of position `pos`.
+// One indexed pair of lines of one position: reference line `ref` (index into Database::lines())
+// and second line ref + other_delta, keyed by (d_ref, d_other, k * angle) quantized to 16 bits per
+// dimension (PairKeyScale: sub-millimetre steps for the distances of a 30 m scan, far below the
+// query's key radius). 12 bytes: the index of a large map holds millions of pairs.
 struct Pair {
-  float key[3];
-  std::uint32_t ref = 0, other = 0, pos = 0;
+  std::uint16_t key[3];
+  std::uint16_t other_delta = 0;
+  std::uint32_t ref = 0;
 };
 
-struct PairAdaptor {
-  const std::vector<Pair>* pairs = nullptr;
-  std::size_t kdtree_get_point_count() const { return pairs->size(); }
-  float kdtree_get_pt(std::size_t i, std::size_t dim) const { return (*pairs)[i].key[dim]; }
-  template <class BBox>
-  bool kdtree_get_bbox(BBox&) const {
-    return false;
+// The metres (or scaled radians) per unit of each quantized key dimension, fixed by the largest
+// value of the data so that a database loaded from a file rebuilds the identical index.
+struct PairKeyScale {
+  float unit[3] = {1.0f, 1.0f, 1.0f};
+  std::uint16_t quantize(int dim, double v) const {
+    return static_cast<std::uint16_t>(std::clamp<long>(std::lround(v / unit[dim]), 0L, 65535L));
   }
 };
-
-using PairTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PairAdaptor>, PairAdaptor, 3,
-                                                     std::uint32_t>;
 
 // Candidates from the range profiles (lookup.cpp): the `k` database positions whose profile, at its
 // best turn, best matches the profile of `pts` (robot frame) seen from `sensor`; empty when the
@@ -74,17 +74,17 @@ struct Database::Impl {
   std::uint64_t map_checksum = 0;
   std::vector<Position> positions;
   std::vector<LineFeature> lines;
+  std::vector<std::uint32_t> line_position;  // position of each line
   std::vector<internal::Pair> pairs;
-  internal::PairAdaptor adaptor;
-  std::unique_ptr<internal::PairTree> tree;
+  internal::PairKeyScale key_scale;
+  internal::ImplicitPairTree tree;    // over `pairs`, which it orders
   std::vector<float> profiles;        // profile_bins per position, or empty
-  std::vector<float> doubled;         // each profile twice in a row: turning it is then a contiguous slice
   std::size_t coarse_factor = 1;      // sectors merged per coarse sector (the prefilter of the query)
-  std::vector<float> coarse_doubled;  // the same at profile_bins / coarse_factor sectors (nearest of each group)
+  std::vector<float> coarse;          // the same at profile_bins / coarse_factor sectors (nearest of each group)
   double coverage = std::numeric_limits<double>::quiet_NaN();  // Database::coverage()
 
   // Indexes every non-parallel pair of lines of every position (both orders are not needed: the
-  // query tries both orders of its own pairs) and lays out the profiles for the query.
+  // query tries both orders of its own pairs) and derives the coarse profiles of the query.
   void buildIndex();
 };
 
