@@ -10,6 +10,7 @@
 
 #include "lidar2d/mapping/export.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
+#include "src/slam/internal/descriptor_loops.hpp"
 #include "src/slam/internal/motion_prior.hpp"
 #include "src/slam/internal/points.hpp"
 
@@ -161,6 +162,15 @@ void LoopClosure::searchUntied(std::size_t n) {
   c.searched = true;
   c.score = best.score;
   refine(c, sm, pts, best.T);
+  // As for a descriptor closure: across a lost track the estimate says nothing, so a look-alike
+  // place is told from the right one only by the scan, which must not see through the submap's walls.
+  if (c.accepted) {
+    if (const double through = DescriptorLoops::seeThroughFraction(*sm.icp, pts, c.T_from_to);
+        through > opt.descriptor_max_see_through) {
+      c.accepted = false;
+      c.reason = fmt::format("sees through the submap's walls ({:.0f}% of the beams)", 100.0 * through);
+    }
+  }
   if (!c.accepted) {
     ++s_.stats.loop_rejected;
     s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
@@ -295,29 +305,29 @@ void LoopClosure::expirePending() {
       }
 }
 
-// A grid with its max-grids takes megabytes, and a long run would otherwise hold one per submap.
-const registration::CorrelativeGrid& LoopClosure::gridOf(std::size_t s) {
+// A grid with its max-grids takes megabytes, and a long run would otherwise hold one per submap:
+// only the `max_kept` most recently used of each kind are kept (`lru`: least recently used first).
+const registration::CorrelativeGrid& LoopClosure::cachedGrid(std::size_t s,
+                                                             std::unique_ptr<registration::CorrelativeGrid> Submap::*grid,
+                                                             std::vector<std::size_t>& lru, std::size_t max_kept,
+                                                             const registration::CorrelativeOptions& options) {
   Submap& sm = s_.submaps[s];
-  grid_lru.erase(std::remove(grid_lru.begin(), grid_lru.end(), s), grid_lru.end());
-  grid_lru.push_back(s);
-  if (!sm.grid) sm.grid = std::make_unique<registration::CorrelativeGrid>(submapGrid(sm, loop_search));
-  while (grid_lru.size() > kMaxGrids) {
-    s_.submaps[grid_lru.front()].grid.reset();
-    grid_lru.erase(grid_lru.begin());
+  lru.erase(std::remove(lru.begin(), lru.end(), s), lru.end());
+  lru.push_back(s);
+  if (!(sm.*grid)) sm.*grid = std::make_unique<registration::CorrelativeGrid>(submapGrid(sm, options));
+  while (lru.size() > max_kept) {
+    (s_.submaps[lru.front()].*grid).reset();
+    lru.erase(lru.begin());
   }
-  return *sm.grid;
+  return *(sm.*grid);
+}
+
+const registration::CorrelativeGrid& LoopClosure::gridOf(std::size_t s) {
+  return cachedGrid(s, &Submap::grid, grid_lru, kMaxGrids, loop_search);
 }
 
 const registration::CorrelativeGrid& LoopClosure::coarseGridOf(std::size_t s) {
-  Submap& sm = s_.submaps[s];
-  coarse_lru.erase(std::remove(coarse_lru.begin(), coarse_lru.end(), s), coarse_lru.end());
-  coarse_lru.push_back(s);
-  if (!sm.coarse_grid) sm.coarse_grid = std::make_unique<registration::CorrelativeGrid>(submapGrid(sm, untied_search));
-  while (coarse_lru.size() > kMaxCoarseGrids) {
-    s_.submaps[coarse_lru.front()].coarse_grid.reset();
-    coarse_lru.erase(coarse_lru.begin());
-  }
-  return *sm.coarse_grid;
+  return cachedGrid(s, &Submap::coarse_grid, coarse_lru, kMaxCoarseGrids, untied_search);
 }
 
 /// The score grid of a finished submap for the branch-and-bound searches, from its occupancy grid

@@ -32,9 +32,11 @@ class DescriptorLoops {
   void indexSubmap(Submap& sm);
   /// Looks node `n` up when it is due; `covered`: the submaps the proximity search considered.
   void search(std::size_t n, const std::vector<char>& covered);
+  /// The share of the beams of `pts` (robot frame) at `T` in `target`'s frame that cross a wall of
+  /// `target` well before their endpoint: a placement in a look-alike place sees through walls.
+  static double seeThroughFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T);
 
  private:
-  static double seeThroughFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T);
 
   SlamState& s_;
   LoopClosure& closure_;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <memory>
 #include <numbers>
 #include <optional>
 #include <vector>
@@ -73,6 +74,10 @@ class LoopClosure {
   /// The score grid of submap `s` at searchUntied's coarse resolution, built on demand (a few kept).
   const registration::CorrelativeGrid& coarseGridOf(std::size_t s);
   registration::CorrelativeGrid submapGrid(const Submap& sm, const registration::CorrelativeOptions& grid_options) const;
+  const registration::CorrelativeGrid& cachedGrid(std::size_t s,
+                                                  std::unique_ptr<registration::CorrelativeGrid> Submap::*grid,
+                                                  std::vector<std::size_t>& lru, std::size_t max_kept,
+                                                  const registration::CorrelativeOptions& options);
   void acceptLoop(Constraint c, Submap& sm);
   /// `c` ties the untied fragment to the map before it: when it contradicts the odometry across
   /// the lost track beyond prior_gate_sigmas, that odometry is wrong (a kidnapped robot) and its
