@@ -46,9 +46,9 @@ double rssMb() {
 // What one pass over the log gave.
 struct PassStats {
   std::size_t scans = 0, tracking = 0, within = 0, wrong = 0, relocalizations = 0;
-  std::optional<double> first_fix_s;  ///< log seconds from the pass's first scan to its first placed scan
-  std::vector<double> ms;             ///< CPU ms per scan
-  std::vector<double> tracked_ms;     ///< CPU ms per tracked scan (Tracker only)
+  std::optional<double> first_fix_s;   ///< log seconds from the pass's first scan to its first placed scan
+  std::vector<double> ms;              ///< CPU ms per scan
+  std::vector<double> tracked_ms;      ///< CPU ms per tracked scan (Tracker only)
   std::vector<double> err_m, err_deg;  ///< errors of the scans reported as tracking [m], [deg]
 
   void add(const Frame& f, double t0, bool placed, bool tracking_now, const SE2& pose, double cpu_ms) {

@@ -307,10 +307,9 @@ void LoopClosure::expirePending() {
 
 // A grid with its max-grids takes megabytes, and a long run would otherwise hold one per submap:
 // only the `max_kept` most recently used of each kind are kept (`lru`: least recently used first).
-const registration::CorrelativeGrid& LoopClosure::cachedGrid(std::size_t s,
-                                                             std::unique_ptr<registration::CorrelativeGrid> Submap::*grid,
-                                                             std::vector<std::size_t>& lru, std::size_t max_kept,
-                                                             const registration::CorrelativeOptions& options) {
+const registration::CorrelativeGrid& LoopClosure::cachedGrid(
+    std::size_t s, std::unique_ptr<registration::CorrelativeGrid> Submap::*grid, std::vector<std::size_t>& lru,
+    std::size_t max_kept, const registration::CorrelativeOptions& options) {
   Submap& sm = s_.submaps[s];
   lru.erase(std::remove(lru.begin(), lru.end(), s), lru.end());
   lru.push_back(s);
@@ -335,7 +334,7 @@ const registration::CorrelativeGrid& LoopClosure::coarseGridOf(std::size_t s) {
 /// the anchor's frame. A finished submap is frozen (the front end's relative poses of its nodes
 /// no longer change), so the grid can be dropped and rebuilt alike.
 registration::CorrelativeGrid LoopClosure::submapGrid(const Submap& sm,
-                                                     const registration::CorrelativeOptions& grid_options) const {
+                                                      const registration::CorrelativeOptions& grid_options) const {
   mapping::MapOptions mo;
   mo.resolution_m = grid_options.resolution_m;
   mo.insert.max_range_m = opt.max_range_m;

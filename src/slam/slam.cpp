@@ -208,8 +208,7 @@ struct Slam::Impl {
   SlamStats published_stats;
   // Runs the nodes' graph work (graphNode) in order with back_end_thread. Declared last: destroyed
   // (joined) before the state it works on.
-  std::unique_ptr<Worker> back_end =
-      state.opt.back_end_thread ? std::make_unique<Worker>(kMaxQueuedNodes) : nullptr;
+  std::unique_ptr<Worker> back_end = state.opt.back_end_thread ? std::make_unique<Worker>(kMaxQueuedNodes) : nullptr;
 
   /// Waits until the back end has worked through every node added and merges its events.
   /// Everything it touches (nodes, submaps, constraints, its counters) is the caller's afterwards.

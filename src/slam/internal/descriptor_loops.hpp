@@ -37,7 +37,6 @@ class DescriptorLoops {
   static double seeThroughFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T);
 
  private:
-
   SlamState& s_;
   LoopClosure& closure_;
   const SlamOptions& opt;

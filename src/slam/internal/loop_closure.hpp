@@ -18,7 +18,10 @@ class LoopClosure {
  public:
   /// Reads and extends `s` (submaps, constraints, counters, the back end's flags).
   explicit LoopClosure(SlamState& s)
-      : s_(s), opt(s.opt), loop_icp(s.match.loop_icp), loop_search(s.match.loop_search),
+      : s_(s),
+        opt(s.opt),
+        loop_icp(s.match.loop_icp),
+        loop_search(s.match.loop_search),
         untied_search(untiedSearch(s.match.loop_search)) {}
   LoopClosure(const LoopClosure&) = delete;
   LoopClosure& operator=(const LoopClosure&) = delete;
@@ -68,12 +71,13 @@ class LoopClosure {
   }
   static constexpr std::size_t kUntiedEveryNodes = 3;
   static constexpr std::size_t kUntiedSubmapsPerSearch = 4;
-  static constexpr double kUntiedMarginM = 2.0;     // beyond the box of a submap's nodes
+  static constexpr double kUntiedMarginM = 2.0;      // beyond the box of a submap's nodes
   static constexpr double kUntiedMaxWindowM = 15.0;  // the largest half-window of that search
 
   /// The score grid of submap `s` at searchUntied's coarse resolution, built on demand (a few kept).
   const registration::CorrelativeGrid& coarseGridOf(std::size_t s);
-  registration::CorrelativeGrid submapGrid(const Submap& sm, const registration::CorrelativeOptions& grid_options) const;
+  registration::CorrelativeGrid submapGrid(const Submap& sm,
+                                           const registration::CorrelativeOptions& grid_options) const;
   const registration::CorrelativeGrid& cachedGrid(std::size_t s,
                                                   std::unique_ptr<registration::CorrelativeGrid> Submap::*grid,
                                                   std::vector<std::size_t>& lru, std::size_t max_kept,
