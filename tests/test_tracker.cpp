@@ -20,6 +20,7 @@
 #include "lidar2d/sim/path.hpp"
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
+#include "support/office_run.hpp"
 #include "support/test_support.hpp"
 
 namespace lidar2d {
@@ -37,32 +38,8 @@ bool near(const SE2& a, const SE2& b, double m, double deg) {
 }
 bool wrong(const SE2& truth, const SE2& est) { return !near(truth, est, 0.5, 10.0); }
 
-struct Office {
-  OccupancyImage map;
-  std::vector<Frame> frames;  // noisy scans and odometry along the route
-};
-
-// The office's map from its noise-free run (as `lidar2d map` would build it from truth poses),
-// and a noisy run along the same route: 5 scans per second, about 0.16 m apart.
-const Office& office() {
-  static const Office o = [] {
-    Office s;
-    const auto scenario = sim::builtinScenario("office");
-    sim::PathOptions po;
-    po.rate_hz = 5.0;
-    const auto truth = sim::samplePath(scenario.waypoints, po, 400);
-    sim::SimulatorOptions so;
-    so.laser.beams = 361;
-    so.seed = 7;
-    const auto clean = sim::simulate(scenario.world, truth, so.noiseFree());
-    auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
-    for (const Frame& f : clean) m->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
-    s.map = mapping::toOccupancyImage(*m);
-    s.frames = sim::simulate(scenario.world, truth, so);
-    return s;
-  }();
-  return o;
-}
+using Office = test::OfficeRun;
+const Office& office() { return test::officeMapAndRun(); }
 
 TrackerOptions fastOptions() {
   TrackerOptions o;

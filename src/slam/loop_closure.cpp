@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <numbers>
 #include <utility>
 
@@ -23,18 +24,16 @@ void LoopClosure::finishSubmap(Submap& sm) {
   const SE2 T_anchor_local = s_.nodes[sm.anchor].T_local_robot.inverse();
   sm.points_anchor.clear();
   Eigen::Vector2d center = Eigen::Vector2d::Zero();
+  sm.nodes_min_anchor = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
+  sm.nodes_max_anchor = -sm.nodes_min_anchor;
   for (std::size_t n : sm.nodes) {
     const SE2 T = T_anchor_local * s_.nodes[n].T_local_robot;
     center += T.translation();
+    sm.nodes_min_anchor = sm.nodes_min_anchor.cwiseMin(T.translation());
+    sm.nodes_max_anchor = sm.nodes_max_anchor.cwiseMax(T.translation());
     for (const auto& p : s_.node_points[n]) sm.points_anchor.push_back(T * p);
   }
   sm.center_anchor = center / static_cast<double>(sm.nodes.size());
-  sm.nodes_min_anchor = sm.nodes_max_anchor = (T_anchor_local * s_.nodes[sm.nodes.front()].T_local_robot).translation();
-  for (std::size_t n : sm.nodes) {
-    const Eigen::Vector2d p = (T_anchor_local * s_.nodes[n].T_local_robot).translation();
-    sm.nodes_min_anchor = sm.nodes_min_anchor.cwiseMin(p);
-    sm.nodes_max_anchor = sm.nodes_max_anchor.cwiseMax(p);
-  }
   sm.points_anchor = voxelFilter(sm.points_anchor, opt.map_voxel_m);
   sm.icp = std::make_unique<IcpTarget>(sm.points_anchor, loop_icp);
   sm.finished = true;
