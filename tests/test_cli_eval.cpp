@@ -97,6 +97,26 @@ TEST(CliEval, TimeToleranceDecidesMatching) {
   EXPECT_LT(j.at("ate_rmse_m").get<double>(), 1e-9);
 }
 
+// Two clocks that agree on one pose only (an estimate of a log whose times were rewritten): the
+// ATE of that one pose is zero, and must not read as a perfect score.
+TEST(CliEval, AFewStrayMatchesAreSaidToBeAFew) {
+  TempDir tmp;
+  const Trajectory truth = path(20, 1.0);
+  Trajectory est = truth;
+  for (std::size_t i = 1; i < est.size(); ++i) est[i].time += 1000.0;
+  io::writeTrajectory((tmp / "truth.txt").string(), truth);
+  io::writeTrajectory((tmp / "est.txt").string(), est);
+  const CliResult r = runCli({"eval", (tmp / "est.txt").string(), "--truth", (tmp / "truth.txt").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json j = json::parse(r.out);
+  EXPECT_EQ(j.at("matched").get<int>(), 1);
+  EXPECT_NE(j.at("warnings").dump().find("only 1 of the 20 estimated and 20 truth poses"), std::string::npos)
+      << j.dump(2);
+  EXPECT_NE(r.err.find("warning: only 1 of the 20"), std::string::npos) << r.err;
+  const json all = parse(runCli({"eval", (tmp / "truth.txt").string(), "--truth", (tmp / "truth.txt").string()}));
+  EXPECT_TRUE(all.at("warnings").empty()) << all.dump(2);
+}
+
 TEST(CliEval, RelationsWithKnownErrors) {
   TempDir tmp;
   writeFile(tmp / "est.txt", "10 0 0 0\n11 1 0 0\n12 2 0 0\n");

@@ -16,6 +16,7 @@
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
 #include "lidar2d/slam/slam.hpp"
+#include "src/slam/internal/loop_closure.hpp"
 #include "support/test_support.hpp"
 
 namespace lidar2d::slam {
@@ -187,6 +188,24 @@ TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
   for (const auto& t : traj) nodes += t.is_node ? 1 : 0;
   EXPECT_EQ(nodes, slam->nodes().size());
   EXPECT_LT(nodes, traj.size());
+}
+
+// A log whose clock wraps once (a negative time written as an unsigned 32-bit number, as in the
+// Infinite Corridor log) and then repeats one stamp on every scan: the stamps say nothing about the
+// steps, so the odometry's own uncertainty sizes the search, as on the same log with good stamps.
+TEST(Slam, StampsThatWrapAndThenRepeatDoNotWidenEverySearch) {
+  const auto frames = simulateWorld("office", 1, 400);
+  std::vector<Frame> wrapped = frames;
+  for (std::size_t i = 1; i < wrapped.size(); ++i) wrapped[i].time = 4294967296.0;
+  Slam* slam = nullptr;
+  runSlam(frames, {}, &slam);
+  const SlamStats clean = slam->stats();
+  const auto est = runSlam(wrapped, {}, &slam);
+  const SlamStats s = slam->stats();
+  EXPECT_LE(s.correlative_fallbacks, clean.correlative_fallbacks + 3) << "clean: " << clean.correlative_fallbacks;
+  EXPECT_EQ(s.unmatched, 0u);
+  EXPECT_EQ(s.fragments, 1u);
+  EXPECT_LT(poseErrors(est, frames).rms, 0.05);
 }
 
 // The alternative front end (likelihood field instead of point-to-line ICP) is less accurate (8 cm
@@ -415,6 +434,24 @@ TEST(Slam, CarriedIntoNewGroundIsRelocalizedWhenItComesBack) {
   // The end of the run is in the map's frame.
   const Errors last = poseErrorsBesides(est, frames, 0, frames.size() - 100);
   EXPECT_LT(last.max, 0.15);
+}
+
+TEST(Slam, AnUntiedFragmentIsSearchedLessOftenAsItGrows) {
+  // The search of whole submaps costs tens of milliseconds each time: a fragment that never comes
+  // back to the map (a long log after a lost track) must not pay it every few nodes to its end.
+  using lidar2d::slam::internal::LoopClosure;
+  std::size_t searches = 0, last = 0;
+  for (std::size_t age = 0; age < 4096; ++age) {
+    if (!LoopClosure::untiedSearchDue(age)) continue;
+    if (searches > 0) {
+      EXPECT_LE(age - last, std::max<std::size_t>(3, last / 4)) << "no search from " << last << " to " << age;
+    }
+    ++searches;
+    last = age;
+  }
+  EXPECT_TRUE(LoopClosure::untiedSearchDue(0));
+  EXPECT_LE(searches, 45u);  // 4 while young, then 4 per doubling
+  EXPECT_GE(searches, 30u);
 }
 
 TEST(Slam, TheBackEndThreadChangesNothingButWhereTheWorkRuns) {

@@ -174,6 +174,17 @@ void run(const EvalArgs& args) {
     const auto& a = r.association;
     if (a.ambiguous_times)
       warnings.push_back("the estimate repeats timestamps and is associated by time: the first pose of a repeated time is used");
+    // Figures over a few stray matches of two trajectories whose clocks differ (an estimate of a
+    // log with its times rewritten, say) would read as a perfect score.
+    if (a.matches.size() < a.unmatched_estimate || a.matches.size() < a.unmatched_reference) {
+      const std::string w = fmt::format(
+          "only {} of the {} estimated and {} truth poses are within {} s of each other: the figures cover "
+          "those only (estimated times span {:.6f} .. {:.6f}, truth times {:.6f} .. {:.6f})",
+          a.matches.size(), est.size(), ref.size(), options.max_dt_s, minTime(est), maxTime(est), minTime(ref),
+          maxTime(ref));
+      warnings.push_back(w);
+      fmt::print(stderr, "lidar2d eval: warning: {}\n", w);
+    }
     j["association"] = eval::toString(a.mode);
     j["matched"] = a.matches.size();
     j["unmatched"] = a.unmatched_reference;

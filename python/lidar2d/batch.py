@@ -7,9 +7,10 @@ an existing Dask scheduler (`dask scheduler` on one machine, `dask worker ADDRES
 others; the logs and DIR must then be on a path every worker sees). --sequential runs the tasks one
 after the other in this process, without Dask (the reference for the parallel run's results).
 
-Under Dask every task runs on one thread (SLAM without its back-end thread, the pose graph on one
-Ceres thread): the workers fill the cores, and a task that used two would oversubscribe them. The
-results do not change (SLAM's estimates are identical either way); --sequential keeps the threads.
+SLAM solves its pose graph on one Ceres thread in every mode: its estimate depends on the count of
+Ceres threads (floating-point sums in another order), and a batch's results must not depend on
+where it ran. Under Dask a task also runs SLAM without its back-end thread: the workers fill the
+cores. That thread changes nothing in the results; --sequential keeps it.
 
 Writes DIR/results.csv and DIR/results.json, one row per log: log, task, ok, error, seconds, and the
 task's figures; each log's outputs go to DIR/<log name>/. A log whose task fails gets ok=False and
@@ -108,7 +109,7 @@ def _task_map(log: str, out_dir: str, single_thread: bool) -> dict:
 def _task_slam(log: str, out_dir: str, single_thread: bool) -> dict:
     import lidar2d
 
-    threads = {"back_end_thread": False, "graph_threads": 1} if single_thread else {}
+    threads = {"back_end_thread": False, "graph_threads": 1} if single_thread else {"graph_threads": 1}
     result = lidar2d.run_slam(log, out_dir=out_dir, **threads)
     stats = result["stats"]
     trajectory = result["trajectory"]

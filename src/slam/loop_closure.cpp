@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <limits>
@@ -107,15 +108,16 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   return covered;
 }
 
+bool LoopClosure::untiedSearchDue(std::size_t age) {
+  if (age < 4 * kUntiedEveryNodes) return age % kUntiedEveryNodes == 0;
+  // From 2^k to 2^(k+1) nodes, every 2^(k-2)-th node.
+  return age % (std::bit_floor(age) / 4) == 0;
+}
+
 void LoopClosure::searchUntied(std::size_t n) {
   if (!s_.untied_since || n < *s_.untied_since) return;
   const std::size_t first = *s_.untied_since;
-  // Every kUntiedEveryNodes nodes at first, then less and less often (the interval a quarter of
-  // the fragment's length): a fragment that never comes back to the map costs a few searches per
-  // doubling of its length.
-  const std::size_t age = n - first;
-  const std::size_t interval = std::max(kUntiedEveryNodes, age / 4);
-  if (age % interval != 0) return;
+  if (!untiedSearchDue(n - first)) return;
   const Points2& pts = s_.node_points[n];
   if (pts.size() < opt.min_points) return;
   std::vector<std::size_t> before;  // finished submaps of the map before the fragment

@@ -122,8 +122,10 @@ void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool tim
     if (!time_ok) recent_steps_.clear();
     recent_steps_.push_back(time_ok ? step : SE2());
     if (recent_steps_.size() > kVelocitySteps) recent_steps_.pop_front();
+    // Repeated stamps count (as 0): in a log whose stamps mostly repeat they do not say how long a
+    // step took, and one absurd interval among them (a clock wrapping) must not become the usual one.
     const double dt = f.time - time_prev_;
-    if (dt > 0.0 && std::isfinite(dt)) {
+    if (dt >= 0.0 && std::isfinite(dt)) {
       recent_intervals_.push_back(dt);
       if (recent_intervals_.size() > kIntervals) recent_intervals_.pop_front();
     }

@@ -94,15 +94,16 @@ def batch_logs(tmp_path_factory, office_log):
     return [office_log, str(corridor), str(bad)]
 
 
-def test_batch_sequential_and_dask_agree(tmp_path, batch_logs):
-    seq = batch.run_batch(batch_logs, str(tmp_path / "seq"), task="map", sequential=True, stream=sys.stdout)
-    par = batch.run_batch(batch_logs, str(tmp_path / "par"), task="map", workers=2, stream=sys.stdout)
+@pytest.mark.parametrize("task,figure", [("map", "map_sha1"), ("slam", "trajectory_sha1")])
+def test_batch_sequential_and_dask_agree(tmp_path, batch_logs, task, figure):
+    seq = batch.run_batch(batch_logs, str(tmp_path / "seq"), task=task, sequential=True, stream=sys.stdout)
+    par = batch.run_batch(batch_logs, str(tmp_path / "par"), task=task, workers=2, stream=sys.stdout)
     for rows in (seq, par):
         assert [r["ok"] for r in rows] == [True, True, False]
-        assert "broken.log" in rows[2]["error"] and "map_sha1" not in rows[2]
+        assert "broken.log" in rows[2]["error"] and figure not in rows[2]
     strip = lambda r: {k: v for k, v in r.items() if k != "seconds"}  # noqa: E731
     assert [strip(r) for r in seq] == [strip(r) for r in par]
-    assert read_rows(tmp_path / "par")[0]["map_sha1"] == seq[0]["map_sha1"]
+    assert read_rows(tmp_path / "par")[0][figure] == seq[0][figure]
     assert (tmp_path / "par" / "office" / "map.yaml").exists()
 
 

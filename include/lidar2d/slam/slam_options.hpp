@@ -348,7 +348,8 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "residual chi2 at the solution exceeds this is scaled by 2 phi / (phi + chi2) and the graph solved "
      "again (0: off)"},
     {LIDAR2D_SLAM_FIELD(graph.threads), "pose graph", "threads", OptionRange::atLeast(1),
-     "Ceres threads of every optimisation"},
+     "Ceres threads of every optimisation (another count sums in another order: runs with different "
+     "counts may differ, runs with the same count do not)"},
     {LIDAR2D_SLAM_FIELD(back_end_thread), "pose graph", "flag", OptionRange::any(),
      "the nodes' graph work (constraints, loop searches, optimisations) runs on a second thread, in "
      "order, while the next scans are tracked (the results are the same as without it)"},

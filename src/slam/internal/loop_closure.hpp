@@ -40,12 +40,16 @@ class LoopClosure {
   /// candidates and the other searches' do not contradict each other away).
   void submitSearched(Constraint c, Submap& sm, std::optional<Constraint>& pending);
   /// Relocalization of a fragment not yet tied to the map before it (after a lost track or a
-  /// kidnapping, where its estimate says nothing about where it is): one node in
-  /// kUntiedEveryNodes is searched by branch and bound in whole finished submaps from before the
+  /// kidnapping, where its estimate says nothing about where it is): the nodes untiedSearchDue picks
+  /// are searched by branch and bound in whole finished submaps from before the
   /// fragment, over every heading and the box the robot mapped each from, a few submaps per node in
   /// turn; the best match is refined and tested as a searched closure (submitSearched: confirmed by
   /// a later one before it is accepted).
   void searchUntied(std::size_t n);
+  /// Whether searchUntied searches at the fragment's node number `age` (0 = its first node): every
+  /// kUntiedEveryNodes nodes while it is young, then four times per doubling of its length, so that
+  /// a fragment that never comes back to the map costs a number of searches logarithmic in its length.
+  static bool untiedSearchDue(std::size_t age);
   /// Pending closures never confirmed are listed as rejected (at the end of the run).
   void expirePending();
   /// The correlative grid of submap `s`, built on demand; only the most recently used few are kept.

@@ -60,7 +60,8 @@ class MotionPrior {
   }
   /// Frame `f` ended at `step` from the previous scan (front-end estimate; ignored for the first).
   void remember(const Frame& f, const SE2& step, bool first, bool time_ok);
-  /// The usual interval between scans so far (median of the recent positive ones) [s], 0 before any.
+  /// The usual interval between scans so far (median of the recent ones, repeated stamps as 0) [s], 0
+  /// before any.
   double usualInterval() const;
 
  private:
@@ -80,7 +81,7 @@ class MotionPrior {
   // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
   // constant-velocity prediction is their component-wise median (`velocityStep`).
   std::deque<SE2> recent_steps_;
-  std::deque<double> recent_intervals_;  // positive intervals between scans [s], oldest first
+  std::deque<double> recent_intervals_;  // intervals between scans (>= 0) [s], oldest first
 };
 
 }  // namespace lidar2d::slam::internal
