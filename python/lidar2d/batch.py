@@ -10,7 +10,8 @@ after the other in this process, without Dask (the reference for the parallel ru
 SLAM solves its pose graph on one Ceres thread in every mode: its estimate depends on the count of
 Ceres threads (floating-point sums in another order), and a batch's results must not depend on
 where it ran. Under Dask a task also runs SLAM without its back-end thread: the workers fill the
-cores. That thread changes nothing in the results; --sequential keeps it.
+cores. That thread changes nothing in the results; --sequential keeps it (--sequential --one-thread
+runs the tasks as under Dask, one after the other: the reference for the parallel run's speed).
 
 Writes DIR/results.csv and DIR/results.json, one row per log: log, task, ok, error, seconds, and the
 task's figures; each log's outputs go to DIR/<log name>/. A log whose task fails gets ok=False and
@@ -225,7 +226,7 @@ def _progress(done: int, total: int, row: dict, stream) -> None:
 
 
 def run_batch(logs: list[str], out: str, task: str = "slam", scheduler: str | None = None, workers: int = 2,
-              sequential: bool = False, stream=sys.stderr) -> list[dict]:
+              sequential: bool = False, stream=sys.stderr, one_thread: bool = False) -> list[dict]:
     """Runs `task` on every log (see the module's doc) and writes the results table; returns its rows."""
     if task not in TASKS:
         raise ValueError(f"task: unknown '{task}' ({', '.join(TASKS)})")
@@ -234,7 +235,7 @@ def run_batch(logs: list[str], out: str, task: str = "slam", scheduler: str | No
     rows: list[dict | None] = [None] * len(logs)
     if sequential:
         for i, (log, d) in enumerate(zip(logs, dirs)):
-            rows[i] = run_task(log, task, d)
+            rows[i] = run_task(log, task, d, one_thread)
             _progress(i + 1, len(logs), rows[i], stream)
     else:
         import dask
@@ -285,13 +286,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786)")
     parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
     parser.add_argument("--sequential", action="store_true", help="no Dask: one log after the other here")
+    parser.add_argument("--one-thread", action="store_true",
+                        help="with --sequential: each task on one thread, as under Dask (same results)")
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
     if args.sequential and args.scheduler:
         parser.error("--sequential and --scheduler exclude each other")
+    if args.one_thread and not args.sequential:
+        parser.error("--one-thread needs --sequential (under Dask every task runs on one thread)")
     start = time.perf_counter()
-    rows = run_batch(args.logs, args.output, args.task, args.scheduler, args.workers, args.sequential)
+    rows = run_batch(args.logs, args.output, args.task, args.scheduler, args.workers, args.sequential,
+                     one_thread=args.one_thread)
     failed = sum(1 for r in rows if not r["ok"])
     print(f"lidar2d.batch: {len(rows) - failed}/{len(rows)} logs ok in {time.perf_counter() - start:.1f} s -> "
           f"{os.path.join(args.output, 'results.csv')}", file=sys.stderr)

@@ -127,6 +127,16 @@ def test_batch_command_line(tmp_path, batch_logs):
     r = subprocess.run([sys.executable, "-m", "lidar2d.batch", "x.log", "-o", str(tmp_path), "--task", "dance"],
                        capture_output=True, text=True, env=env)
     assert r.returncode == 2 and "invalid choice" in r.stderr
+    r = subprocess.run([sys.executable, "-m", "lidar2d.batch", "x.log", "-o", str(tmp_path), "--one-thread"],
+                       capture_output=True, text=True, env=env)
+    assert r.returncode == 2 and "--one-thread needs --sequential" in r.stderr
+
+
+def test_batch_one_thread_changes_nothing_but_the_threads(tmp_path, batch_logs):
+    threads = batch.run_batch(batch_logs[:2], str(tmp_path / "a"), task="slam", sequential=True, stream=sys.stdout)
+    one = batch.run_batch(batch_logs[:2], str(tmp_path / "b"), task="slam", sequential=True, stream=sys.stdout,
+                          one_thread=True)
+    assert [r["trajectory_sha1"] for r in threads] == [r["trajectory_sha1"] for r in one]
 
 
 EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "python")
