@@ -85,6 +85,25 @@ TEST(Tracker, TracksANoisyOdometryRunWithoutInitialPose) {
   expectAccurate(o.frames, res, 0.95);
 }
 
+// A global answer that explains the scan well is a fix at once: the first scan is placed, where
+// three agreeing answers would need three scans.
+TEST(Tracker, ASureAnswerIsAFixOnTheFirstScan) {
+  const Office& o = office();
+  const std::vector<Frame> first(o.frames.begin(), o.frames.begin() + 3);
+  Tracker sure(o.map, std::nullopt, fastOptions());
+  const auto res = trackAll(sure, first);
+  ASSERT_EQ(res[0].status, TrackStatus::kGlobal) << res[0].reason;
+  EXPECT_GE(res[0].score, sure.options().sure_fix_score);
+  EXPECT_FALSE(wrong(*first[0].T_world_robot, res[0].T_world_robot));
+  TrackerOptions confirm = fastOptions();
+  confirm.sure_fix_score = 1.5;  // never: three answers in a row
+  Tracker unsure(o.map, std::nullopt, confirm);
+  const auto un = trackAll(unsure, first);
+  EXPECT_EQ(un[0].status, TrackStatus::kLost);
+  EXPECT_EQ(un[1].status, TrackStatus::kLost);
+  EXPECT_EQ(un[2].status, TrackStatus::kGlobal) << un[2].reason;
+}
+
 TEST(Tracker, TracksWithoutOdometryByConstantVelocity) {
   const Office& o = office();
   std::vector<Frame> frames = o.frames;
@@ -174,6 +193,10 @@ TEST(Tracker, BadOptionsAndAnotherMapsDatabaseAreRefused) {
   bad.max_lost_scans = 0;
   EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
                                 {"max_lost_scans"}));
+  bad = fastOptions();
+  bad.sure_fix_score = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
+                                {"sure_fix_score"}));
   std::vector<std::int8_t> cells = o.map.cells();
   cells[cells.size() / 2] = cells[cells.size() / 2] == 100 ? 0 : 100;
   const OccupancyImage other =

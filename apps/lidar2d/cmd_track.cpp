@@ -212,6 +212,12 @@ void addTrackCommand(CLI::App& app) {
   sub->add_option("--min-global-score", a->options.min_global_score,
                   "a global fix scoring below this is not taken (the scan stays lost)")
       ->capture_default_str();
+  sub->add_option("--confirm-fixes", a->options.confirm_fixes,
+                  "global answers in a row, agreeing with the odometry between them, needed for a fix")
+      ->capture_default_str();
+  sub->add_option("--sure-fix-score", a->options.sure_fix_score,
+                  "a global answer scoring at least this is a fix at once (above 1: never)")
+      ->capture_default_str();
   sub->add_option("--max-lost", a->options.max_lost_scans,
                   "failed scans in a row after which the prior is dropped (global localization only)")
       ->capture_default_str();

@@ -27,6 +27,7 @@ void TrackerOptions::validate() const {
     throw badOption("max_correction_rad", max_correction_rad);
   if (!(min_global_score >= 0 && min_global_score <= 1)) throw badOption("min_global_score", min_global_score);
   if (confirm_fixes < 1) throw badOption("confirm_fixes", static_cast<double>(confirm_fixes));
+  if (!(sure_fix_score >= 0) || std::isnan(sure_fix_score)) throw badOption("sure_fix_score", sure_fix_score);
   if (max_lost_scans < 1) throw badOption("max_lost_scans", static_cast<double>(max_lost_scans));
 }
 
@@ -193,7 +194,7 @@ TrackResult Tracker::add(const Frame& frame) {
     s.candidate.reset();
     s.confirmations = 0;
   }
-  if (answered && s.confirmations >= o.confirm_fixes) {
+  if (answered && (s.confirmations >= o.confirm_fixes || g.score >= o.sure_fix_score)) {
     r.status = TrackStatus::kGlobal;
     r.T_world_robot = g.T_world_robot;
     r.score = g.score;

@@ -10,7 +10,8 @@
 /// `min_track_score`: points on obstacles minus beams through obstacles) and the correction from
 /// the prior stays plausible. A scan that fails is tried at once by global localization (a robot
 /// carried elsewhere, "kidnapped", is found again); a global answer is taken only when it scores
-/// `min_global_score` and `confirm_fixes` answers in a row agree with the odometry between them.
+/// `min_global_score` and `confirm_fixes` answers in a row agree with the odometry between them, or
+/// at once when it scores `sure_fix_score`.
 /// Until then, or when global localization declines, the scan is
 /// `lost` and the prior is kept for the next scans, up to `max_lost_scans`, after which only global
 /// localization runs until it answers. A pose is never reported as `tracking` unless its match
@@ -54,6 +55,10 @@ struct TrackerOptions {
   /// `lost`. One wrong answer in a place the map lacks is common; the same wrong place found again
   /// and again in agreement with odometry is not. >= 1
   std::size_t confirm_fixes = 3;
+  /// A global answer scoring at least this is taken at once, without confirmation (a scan the map
+  /// explains this well is rarely placed wrong; the first fix then needs no second scan), in
+  /// [0, 1]; above 1: off
+  double sure_fix_score = 0.9;
   /// A match moving the pose farther than this from its prior fails (the prior, from odometry or
   /// constant velocity, is not that wrong between two scans; a larger jump is a wrong minimum) [m], > 0
   double max_correction_m = 0.5;
