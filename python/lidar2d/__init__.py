@@ -35,6 +35,7 @@ from ._lidar2d import (  # noqa: F401
     build_localization_db,
     load_localization_db,
     Localizer,
+    Tracker,
     Slam,
     run_slam,
     evaluate_trajectory,
@@ -46,5 +47,5 @@ __all__ = [
     "write_trajectory", "read_relations", "list_worlds", "simulate", "write_log", "MatchResult",
     "match_scans", "match_scan_to_map", "MapImage", "load_map", "OccupancyMap", "build_map",
     "analyze_degeneracy", "LocalizationDatabase", "build_localization_db", "load_localization_db",
-    "Localizer", "Slam", "run_slam", "evaluate_trajectory", "evaluate_relations",
+    "Localizer", "Tracker", "Slam", "run_slam", "evaluate_trajectory", "evaluate_relations",
 ]

@@ -1,5 +1,5 @@
-// Global localization: the descriptor database of a map (build, save, load) and the localizer of
-// single scans.
+// Global localization: the descriptor database of a map (build, save, load), the localizer of
+// single scans, and the tracker (localization scan by scan without an initial pose).
 #include <fmt/format.h>
 
 #include <cmath>
@@ -11,6 +11,7 @@
 #include "lidar2d/core/occupancy_image.hpp"
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/localization/tracker.hpp"
 
 namespace lidar2d::python {
 
@@ -25,6 +26,20 @@ struct PyDatabase {
 };
 
 py::object poseOrNone(const SE2& T) { return T.isFinite() ? py::cast(T) : py::none(); }
+
+// The database a Localizer or Tracker is built with: None (built from the map), a
+// LocalizationDatabase (taken over: it cannot be used again) or a database file path.
+std::optional<localization::Database> takeDatabase(const py::handle& database) {
+  if (database.is_none()) return std::nullopt;
+  if (py::isinstance<PyDatabase>(database)) {
+    auto& d = database.cast<PyDatabase&>();
+    d.get();
+    localization::Database out = std::move(*d.db);
+    d.db.reset();
+    return out;
+  }
+  return io::readLocalizationDatabase(py::str(database).cast<std::string>());
+}
 
 py::dict resultDict(const localization::LocalizationResult& r) {
   py::dict d;
@@ -71,21 +86,10 @@ void bindLocalization(py::module_& m) {
   py::class_<localization::Localizer>(m, "Localizer",
                                       "Global localization of single scans in a map, no initial pose.")
       .def(py::init([](const OccupancyImage& map, const py::handle& database) {
-             if (database.is_none()) {
-               py::gil_scoped_release release;
-               return std::make_unique<localization::Localizer>(map);
-             }
-             localization::Database db = py::isinstance<PyDatabase>(database)
-                                             ? [&] {
-                                                 auto& d = database.cast<PyDatabase&>();
-                                                 d.get();
-                                                 localization::Database out = std::move(*d.db);
-                                                 d.db.reset();
-                                                 return out;
-                                               }()
-                                             : io::readLocalizationDatabase(py::str(database).cast<std::string>());
+             std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
-             return std::make_unique<localization::Localizer>(map, std::move(db));
+             return db ? std::make_unique<localization::Localizer>(map, std::move(*db))
+                       : std::make_unique<localization::Localizer>(map);
            }),
            py::arg("map"), py::arg("database") = py::none(),
            "map: a MapImage; database: None (built here), a LocalizationDatabase (which the localizer\n"
@@ -106,6 +110,55 @@ void bindLocalization(py::module_& m) {
           "Localizes one scan (a Frame, or (N, 2) points in the robot frame) on its own. Returns a dict:\n"
           "declined, reason, pose (SE2 T_world_robot or None), score in [0, 1], alternatives [(SE2, score)],\n"
           "num_points, num_lines, num_candidates, seconds.");
+
+  const localization::TrackerOptions defaults;
+  py::class_<localization::Tracker>(
+      m, "Tracker",
+      "Localization in a known map scan by scan, without an initial pose (`lidar2d track`): global\n"
+      "localization places the first scans, then each scan is tracked from the odometry's step (or\n"
+      "constant velocity) and checked against the map; a robot carried elsewhere is found again.")
+      .def(py::init([](const OccupancyImage& map, const py::handle& database, double min_track_score,
+                       double min_global_score, std::size_t confirm_fixes, double sure_fix_score,
+                       std::size_t max_lost_scans) {
+             localization::TrackerOptions o;
+             o.min_track_score = min_track_score;
+             o.min_global_score = min_global_score;
+             o.confirm_fixes = confirm_fixes;
+             o.sure_fix_score = sure_fix_score;
+             o.max_lost_scans = max_lost_scans;
+             std::optional<localization::Database> db = takeDatabase(database);
+             py::gil_scoped_release release;
+             return std::make_unique<localization::Tracker>(map, std::move(db), o);
+           }),
+           py::arg("map"), py::arg("database") = py::none(), py::kw_only(),
+           py::arg("min_track_score") = defaults.min_track_score,
+           py::arg("min_global_score") = defaults.min_global_score,
+           py::arg("confirm_fixes") = defaults.confirm_fixes, py::arg("sure_fix_score") = defaults.sure_fix_score,
+           py::arg("max_lost_scans") = defaults.max_lost_scans,
+           "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md);\n"
+           "bad options or a database of another map raise lidar2d.Error.")
+      .def("add", [](localization::Tracker& self, const Frame& frame) {
+            localization::TrackResult r;
+            {
+              py::gil_scoped_release release;
+              r = self.add(frame);
+            }
+            py::dict d;
+            d["status"] = localization::toString(r.status);
+            d["pose"] = r.status == localization::TrackStatus::kLost ? py::none() : poseOrNone(r.T_world_robot);
+            d["score"] = r.score;
+            d["relocalized"] = r.relocalized;
+            d["reason"] = r.reason;
+            d["iterations"] = r.iterations;
+            d["track_seconds"] = r.track_ms / 1e3;
+            d["global_seconds"] = r.global_ms / 1e3;
+            return d;
+          }, py::arg("frame"),
+          "Places the next scan (its odometry, when this and the previous frame have it, gives the\n"
+          "prior's step; its truth is ignored). Returns a dict: status ('global', 'tracking' or 'lost'),\n"
+          "pose (SE2 T_world_robot, None when lost), score in [0, 1], relocalized (a global fix after an\n"
+          "earlier one), reason (why a scan was not tracked), iterations, track_seconds, global_seconds.")
+      .def("reset", &localization::Tracker::reset, "Forgets the pose: the next scan is placed by global localization.");
 }
 
 }  // namespace lidar2d::python

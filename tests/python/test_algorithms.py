@@ -118,6 +118,34 @@ def test_global_localization(tmp_path, office_frames, office_map):
         lidar2d.load_localization_db(tmp_path / "junk.l2ddb")
 
 
+def test_tracker(office_frames, office_map):
+    tracker = lidar2d.Tracker(office_map)
+    results = [tracker.add(f) for f in office_frames]
+    statuses = [r["status"] for r in results]
+    assert set(statuses) <= {"global", "tracking", "lost"}
+    assert statuses[0] == "global", results[0]["reason"]  # a sure answer: no initial pose needed
+    assert statuses.count("tracking") >= 0.9 * len(office_frames)
+    for f, r in zip(office_frames, results):
+        if r["status"] == "lost":
+            assert r["pose"] is None and r["reason"]
+        else:
+            err = r["pose"].inverse() * f.truth
+            assert math.hypot(err.x, err.y) < 0.5 and abs(err.theta) < math.radians(10), (f.index, r)
+    tracker.reset()
+    again = tracker.add(office_frames[50])
+    assert again["status"] in ("global", "lost") and again["global_seconds"] > 0
+    if again["status"] == "global":
+        assert again["relocalized"]
+    unsure = lidar2d.Tracker(office_map, sure_fix_score=2.0)
+    assert [unsure.add(f)["status"] for f in office_frames[:3]] == ["lost", "lost", "global"]
+    with pytest.raises(lidar2d.Error, match="min_track_score"):
+        lidar2d.Tracker(office_map, min_track_score=1.5)
+    with pytest.raises(lidar2d.Error, match="sure_fix_score"):
+        lidar2d.Tracker(office_map, sure_fix_score=float("nan"))
+    with pytest.raises(TypeError):
+        tracker.add(np.zeros((10, 2)))
+
+
 def test_evaluation(tmp_path, office_frames):
     truth = np.array([[f.stamp, f.truth.x, f.truth.y, f.truth.theta] for f in office_frames])
     odom = [(f.stamp, f.odometry) for f in office_frames]
