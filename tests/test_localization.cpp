@@ -153,6 +153,35 @@ TEST(Localization, OfficeScansLocalizeCorrectly) {
   EXPECT_GE(correct, n * 8 / 10) << "answered " << answered << " of " << n;
 }
 
+// A query on two threads (profiles beside the line votes, the first scoring split) answers exactly
+// as on one: the same poses, scores and candidates, bit for bit.
+TEST(Localization, TwoThreadsAnswerAsOne) {
+  const SimMap& s = office();
+  LocalizerOptions one;
+  one.threads = 1;
+  LocalizerOptions two;
+  two.threads = 2;
+  const Localizer a(s.map, one, fastDb());
+  const Localizer b(s.map, two, fastDb());
+  for (std::size_t i = 1; i < s.frames.size(); i += 7) {
+    const Frame& f = s.frames[i];
+    const auto ra = a.localize(f.scan, f.T_robot_laser);
+    const auto rb = b.localize(f.scan, f.T_robot_laser);
+    EXPECT_EQ(ra.declined, rb.declined) << "scan " << i;
+    EXPECT_EQ(ra.reason, rb.reason) << "scan " << i;
+    EXPECT_EQ(ra.score, rb.score) << "scan " << i;
+    EXPECT_EQ(ra.num_candidates, rb.num_candidates) << "scan " << i;
+    EXPECT_EQ(ra.num_profile_candidates, rb.num_profile_candidates) << "scan " << i;
+    if (!ra.declined) {
+      EXPECT_EQ(ra.T_world_robot.x(), rb.T_world_robot.x()) << "scan " << i;
+      EXPECT_EQ(ra.T_world_robot.theta(), rb.T_world_robot.theta()) << "scan " << i;
+    }
+  }
+  LocalizerOptions bad;
+  bad.threads = 0;
+  EXPECT_TRUE(test::throwsError([&] { Localizer l(s.map, bad, fastDb()); }, ErrorKind::kInvalidArgument, {"threads"}));
+}
+
 TEST(Localization, RangeProfilesLocalizeScansWithoutLines) {
   // Scans whose lines give no pair (corridors, curved or cluttered walls) are the range profile's
   // job. Here the query extracts no line at all, so only the profile can find the pose; without it

@@ -29,6 +29,8 @@ std::unique_ptr<mapping::OccupancyMap> evenFramesMap(const std::vector<Frame>& f
 /// CPU time of the calling thread [s]: per-item times on a machine shared with other jobs (wall
 /// time there includes waiting for the core).
 double threadCpuSeconds();
+/// CPU seconds of the whole process so far (every thread).
+double processCpuSeconds();
 
 /// True when `name` is in `list`, or `list` is empty (a `--methods` / `--solvers` filter).
 bool wanted(const std::vector<std::string>& list, const std::string& name);

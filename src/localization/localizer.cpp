@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <future>
 #include <optional>
+#include <utility>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/registration/correlative.hpp"
@@ -45,6 +47,7 @@ void LocalizerOptions::validate() const {
   if (!(search_resolution_m > 0) || !std::isfinite(search_resolution_m))
     throw badOption("search_resolution_m", search_resolution_m);
   if (!(budget_ms >= 0)) throw badOption("budget_ms", budget_ms);
+  if (threads < 1) throw badOption("threads", static_cast<double>(threads));
 }
 
 struct Localizer::State {
@@ -194,10 +197,27 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
 
   // 1. Describe: lines of the scan (robot frame), from every point; and its range profile's
   // candidates (the second signature, for scans whose lines give no usable pair).
+  // The profiles' candidates on a second thread when there is one (they read `pts`, which is not
+  // changed until they are in); the time they take counts as lookup time either way.
+  double profiles_ms = 0.0;
+  auto findProfiles = [&, &scan = std::as_const(pts)] {
+    const auto start = Clock::now();
+    std::vector<PoseVote> found = internal::profileCandidates(s_->db, scan, sensor_robot, o.profile_candidates);
+    profiles_ms = ms(start, Clock::now());
+    return found;
+  };
+  std::future<std::vector<PoseVote>> profiles_task;
+  if (o.threads >= 2) profiles_task = std::async(std::launch::async, findProfiles);
   std::vector<Line> lines = extractLines(pts, o.lines);
-  const auto t_lines = Clock::now();
-  std::vector<PoseVote> from_profiles = internal::profileCandidates(s_->db, pts, sensor_robot, o.profile_candidates);
-  const auto t_profiles = Clock::now();
+  std::vector<PoseVote> from_profiles = o.threads >= 2 ? std::vector<PoseVote>{} : findProfiles();
+  if (lines.size() > o.max_query_lines) lines.resize(o.max_query_lines);
+  res.num_lines = lines.size();
+  const auto t1 = Clock::now();
+  res.describe_ms = ms(t0, t1) - (o.threads >= 2 ? 0.0 : profiles_ms);
+
+  // 2. Look up every ordered pair; each hit gives a pose that votes for a bin.
+  std::vector<PoseVote> ranked = voteLinePairs(s_->db, lines, o, o.max_candidates, &res.num_hits);
+  if (profiles_task.valid()) from_profiles = profiles_task.get();
   // Verification needs no more than max_verify_points (evenly subsampled) to score and refine.
   if (pts.size() > o.max_verify_points) {
     Points2 thin;
@@ -205,19 +225,11 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     for (std::size_t k = 0; k < o.max_verify_points; ++k) thin.push_back(pts[static_cast<std::size_t>(k * stride)]);
     pts = std::move(thin);
   }
-  if (lines.size() > o.max_query_lines) lines.resize(o.max_query_lines);
-  res.num_lines = lines.size();
-  const auto t1 = Clock::now();
-  res.describe_ms = ms(t0, t1);
-
-  // 2. Look up every ordered pair; each hit gives a pose that votes for a bin.
-  std::vector<PoseVote> ranked = voteLinePairs(s_->db, lines, o, o.max_candidates, &res.num_hits);
   res.num_profile_candidates = from_profiles.size();
   ranked.insert(ranked.end(), from_profiles.begin(), from_profiles.end());
   const std::size_t n_cand = ranked.size();
   const auto t2 = Clock::now();
-  res.lookup_ms = ms(t1, t2) + ms(t_lines, t_profiles);
-  res.describe_ms -= ms(t_lines, t_profiles);
+  res.lookup_ms = ms(t1, t2) + (o.threads >= 2 ? 0.0 : profiles_ms);
 
   // 3. Verify in three stages of decreasing count and increasing cost: (A) every candidate bin's
   // mean pose against the likelihood field on a subsample of the points, (B) the best distinct ones
@@ -230,19 +242,28 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     double pre = 0;
     double votes = 0;
   };
-  std::vector<Pre> pre;
-  pre.reserve(n_cand);
+  std::vector<Pre> pre(n_cand);
   // Stage A: a smooth kernel of the field value (so that near-ties are ordered by how close the
-  // points are, not just whether they are within a tolerance).
+  // points are, not just whether they are within a tolerance). Each candidate's score is its own:
+  // the second thread takes the second half.
   const double pre_sigma = 2.0 * o.hit_distance_m;
-  for (std::size_t c = 0; c < n_cand; ++c) {
-    const SE2& guess = ranked[c].T_world_robot;
-    double acc = 0;
-    for (const auto& p : sub) {
-      const double v = s_->field.sample(guess * p, 0).value / pre_sigma;
-      acc += v < 1.0 ? 1.0 - v * v : 0.0;
+  auto preScore = [&](std::size_t begin, std::size_t end) {
+    for (std::size_t c = begin; c < end; ++c) {
+      const SE2& guess = ranked[c].T_world_robot;
+      double acc = 0;
+      for (const auto& p : sub) {
+        const double v = s_->field.sample(guess * p, 0).value / pre_sigma;
+        acc += v < 1.0 ? 1.0 - v * v : 0.0;
+      }
+      pre[c] = {guess, acc / static_cast<double>(sub.size()), ranked[c].votes};
     }
-    pre.push_back({guess, acc / static_cast<double>(sub.size()), ranked[c].votes});
+  };
+  if (o.threads >= 2 && n_cand >= 64) {
+    auto second = std::async(std::launch::async, preScore, n_cand / 2, n_cand);
+    preScore(0, n_cand / 2);
+    second.get();
+  } else {
+    preScore(0, n_cand);
   }
   std::sort(pre.begin(), pre.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
   // Stage B: the best distinct ones (neighbouring bins of one pose suppressed, so that distinct
