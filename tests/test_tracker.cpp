@@ -195,8 +195,8 @@ TEST(Tracker, BadOptionsAndAnotherMapsDatabaseAreRefused) {
                                 {"max_lost_scans"}));
   bad = fastOptions();
   bad.sure_fix_score = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
-                                {"sure_fix_score"}));
+  EXPECT_TRUE(
+      test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument, {"sure_fix_score"}));
   std::vector<std::int8_t> cells = o.map.cells();
   cells[cells.size() / 2] = cells[cells.size() / 2] == 100 ? 0 : 100;
   const OccupancyImage other =

@@ -55,7 +55,8 @@ void row(const std::string& name, const std::string& method, std::size_t n, std:
       100.0 * static_cast<double>(ok) / static_cast<double>(n),
       answered ? fmt::format("{:.1f}%", 100.0 * static_cast<double>(ok) / static_cast<double>(answered))
                : std::string("-"),
-      100.0 * static_cast<double>(declined) / static_cast<double>(n), eval::percentile(ms, 0.5), eval::percentile(ms, 0.95),
+      100.0 * static_cast<double>(declined) / static_cast<double>(n), eval::percentile(ms, 0.5),
+      eval::percentile(ms, 0.95),
       cpu_ms.empty() ? std::string("-") : fmt::format("{:.1f}", eval::percentile(cpu_ms, 0.5)), db);
 }
 
