@@ -1,5 +1,5 @@
-// SE(2) pose graph: exact recovery from perturbed starts, robustness to a wrong loop closure, and
-// bad input.
+// SE(2) pose graph: exact recovery from perturbed starts, robustness to a wrong loop closure, rigid
+// groups of nodes, and bad input.
 
 #include <gtest/gtest.h>
 
@@ -164,6 +164,55 @@ TEST(PoseGraph, UntouchedNodesKeepTheirPose) {
   EXPECT_TRUE(test::IsNearPose(SE2(5, 5, 1), poses[2], 1e-12, 1e-9));
 }
 
+TEST(PoseGraph, RigidGroupsMoveAsOneBody) {
+  // Two sides of the square as two rigid groups whose inner chains are exact; the second group
+  // starts rotated and shifted. Only the edges between the groups can move it, and they do so
+  // without bending it.
+  const auto truth = squareLoop(5);
+  std::vector<PoseGraphEdge> edges;
+  for (std::size_t i = 0; i + 1 < 10; ++i) edges.push_back(edgeBetween(truth, i, i + 1, 0.05, 0.01));
+  edges.push_back(edgeBetween(truth, 2, 8, 0.05, 0.01));
+  std::vector<SE2> poses(truth.begin(), truth.begin() + 10);
+  const SE2 shove(0.4, -0.3, 0.2);
+  for (std::size_t i = 5; i < 10; ++i) poses[i] = truth[5] * shove * (truth[5].inverse() * truth[i]);
+  const std::vector<std::size_t> group{0, 0, 0, 0, 0, 1, 1, 1, 1, 1};
+  const std::vector<SE2> before = poses;
+  const PoseGraphSummary s = optimizePoseGraphRigid(poses, edges, group, 0);
+  ASSERT_TRUE(s.usable) << s.message;
+  EXPECT_LT(s.final_cost, 1e-12);
+  for (std::size_t i = 0; i < 10; ++i) EXPECT_TRUE(test::IsNearPose(truth[i], poses[i], 1e-5, 1e-4)) << "node " << i;
+  // Within a group the relative poses are those it started with, to rounding.
+  for (std::size_t i = 6; i < 10; ++i)
+    EXPECT_TRUE(test::IsNearPose(before[5].inverse() * before[i], poses[5].inverse() * poses[i], 1e-9, 1e-9));
+  ASSERT_EQ(s.edge_scale.size(), edges.size());
+}
+
+TEST(PoseGraph, RigidGroupsKeepTheirShapeAgainstTheEdges) {
+  // A drifting chain in one group cannot be straightened by the loop closure: the group is rigid,
+  // so the closure only moves the other group; with a group per node the same edges spread the error.
+  const auto truth = squareLoop(6);
+  std::vector<PoseGraphEdge> edges;
+  const std::vector<SE2> start = driftingChain(truth, edges);
+  edges.push_back(edgeBetween(truth, truth.size() - 1, 0, 0.01, 0.002));
+  std::vector<std::size_t> halves(truth.size()), singles(truth.size());
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    halves[i] = i < truth.size() / 2 ? 0 : 1;
+    singles[i] = truth.size() - 1 - i;  // any numbering
+  }
+  std::vector<SE2> rigid = start, single = start, plain = start;
+  ASSERT_TRUE(optimizePoseGraphRigid(rigid, edges, halves, 0).usable);
+  ASSERT_TRUE(optimizePoseGraphRigid(single, edges, singles, 0).usable);
+  ASSERT_TRUE(optimizePoseGraph(plain, edges, 0).usable);
+  for (std::size_t i = 1; i < truth.size() / 2; ++i)  // the fixed node's group does not move
+    EXPECT_TRUE(test::IsNearPose(start[i], rigid[i], 1e-9, 1e-9)) << "node " << i;
+  const std::size_t h = truth.size() / 2;
+  for (std::size_t i = h + 1; i < truth.size(); ++i)
+    EXPECT_TRUE(test::IsNearPose(start[h].inverse() * start[i], rigid[h].inverse() * rigid[i], 1e-9, 1e-9));
+  EXPECT_FALSE(test::IsNearPose(start[h], rigid[h], 1e-3, 1e-3));  // the second half moved
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    EXPECT_TRUE(test::IsNearPose(plain[i], single[i], 1e-6, 1e-6)) << "node " << i;
+}
+
 TEST(PoseGraph, BadInputThrows) {
   std::vector<SE2> poses{SE2(), SE2(1, 0, 0)};
   PoseGraphEdge e;
@@ -188,6 +237,10 @@ TEST(PoseGraph, BadInputThrows) {
   EXPECT_THROW(optimizePoseGraph(poses, {e}, 0, o), Error);
   std::vector<SE2> empty;
   EXPECT_TRUE(optimizePoseGraph(empty, {}, 0).usable);
+  const std::vector<std::size_t> one_group{0};
+  EXPECT_THROW(optimizePoseGraphRigid(poses, {e}, one_group, 0), Error);  // a group for each node
+  const std::vector<std::size_t> far_group{0, 7};
+  EXPECT_THROW(optimizePoseGraphRigid(poses, {e}, far_group, 0), Error);  // numbered below the node count
 }
 
 }  // namespace

@@ -238,6 +238,66 @@ TEST(Slam, OfficeWithoutOdometry) {
   EXPECT_GT(slam->stats().loop_accepted, 0u);
 }
 
+// The optimisations while running move finished submaps as rigid bodies (one pose each, not one
+// per node), each on its own, but for the newest; the final optimisation frees every node, and the
+// run ends where the run with every node free all along ends.
+TEST(Slam, WhileRunningFinishedSubmapsMoveAsBodies) {
+  const auto frames = simulateWorld("office", 2);
+  // How much the shape of each submap finished by the first snapshot changed by the second, and how
+  // much the submaps moved against each other (their anchors' relative poses).
+  struct Change {
+    double within = 0.0, between = 0.0;
+  };
+  auto runTwice = [&](bool rigid, std::vector<SE2>& final_poses) {
+    SlamOptions o;
+    o.use_odometry = false;
+    o.intermediate_rigid_submaps = rigid;
+    o.intermediate_free_submaps = 2;  // the office has too few submaps for the default 8
+    Slam slam(o);
+    const std::size_t half = frames.size() / 2;
+    for (std::size_t i = 0; i < half; ++i) slam.add(frames[i]);
+    const std::vector<Node> a = slam.nodes();
+    const std::size_t optimizations = slam.stats().optimizations;
+    for (std::size_t i = half; i < frames.size(); ++i) slam.add(frames[i]);
+    const std::vector<Node> b = slam.nodes();
+    EXPECT_GT(slam.stats().optimizations, optimizations);
+    EXPECT_EQ(slam.stats().descriptor_accepted, 0u);  // its optimisation would free every node
+    Change c;
+    // First node of each submap rigid from the first snapshot on (finished, and older than the
+    // free ones).
+    std::vector<std::size_t> anchor;
+    for (std::size_t i = 0; i < a.size() && a[i].submap + 2 <= a.back().submap; ++i) {
+      if (anchor.size() <= a[i].submap) anchor.push_back(i);
+      const std::size_t f = anchor[a[i].submap];
+      const SE2 before = a[f].T_world_robot.inverse() * a[i].T_world_robot;
+      const SE2 after = b[f].T_world_robot.inverse() * b[i].T_world_robot;
+      c.within = std::max(c.within, (before.inverse() * after).translation().norm());
+    }
+    for (std::size_t k = 1; k < anchor.size(); ++k) {
+      const SE2 before = a[anchor[0]].T_world_robot.inverse() * a[anchor[k]].T_world_robot;
+      const SE2 after = b[anchor[0]].T_world_robot.inverse() * b[anchor[k]].T_world_robot;
+      c.between = std::max(c.between, (before.inverse() * after).translation().norm());
+    }
+    EXPECT_GT(anchor.size(), 3u);
+    slam.finish();
+    final_poses.clear();
+    for (const auto& e : slam.trajectory()) final_poses.push_back(e.T_world_robot);
+    return c;
+  };
+  std::vector<SE2> rigid_poses, free_poses;
+  const Change rigid = runTwice(true, rigid_poses);
+  const Change free = runTwice(false, free_poses);
+  EXPECT_LT(rigid.within, 1e-9);
+  EXPECT_GT(rigid.between, 1e-5);  // to rounding (1e-15) if they moved as one body; 0.4 mm here
+  EXPECT_GT(free.within, 1e-4);  // with every node free the closures bend the submaps too (3 mm)
+  ASSERT_EQ(rigid_poses.size(), free_poses.size());
+  EXPECT_LT(ateAgainstTruth(rigid_poses, frames).trans_m.rmse, 0.08);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < rigid_poses.size(); ++i)
+    worst = std::max(worst, (rigid_poses[i].translation() - free_poses[i].translation()).norm());
+  EXPECT_LT(worst, 0.05);
+}
+
 TEST(Slam, CorridorDoesNotSlide) {
   // In the featureless corridor scan matching cannot tell the position along x; the front end must
   // keep the odometry's estimate there instead of sliding.

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <span>
 
 #include "lidar2d/core/error.hpp"
 
@@ -64,8 +65,40 @@ Eigen::Vector3d edgeResidual(const SE2& T_world_from, const SE2& T_world_to, con
   return r;
 }
 
-PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges, std::size_t fixed,
-                                   const PoseGraphOptions& options) {
+namespace {
+
+/// EdgeCost between two nodes that move with their groups: each node's pose is its group's
+/// parameter composed with the node's fixed offset in the group.
+struct RigidEdgeCost {
+  RigidEdgeCost(const SE2& meas, const Eigen::Matrix3d& sqrt_info, const SE2& offset_from, const SE2& offset_to)
+      : edge_(meas, sqrt_info), from_(offset_from), to_(offset_to) {}
+
+  template <typename T>
+  static void compose(const T* g, const SE2& offset, T* out) {
+    using std::cos;
+    using std::sin;
+    const T c = cos(g[2]), s = sin(g[2]);
+    out[0] = g[0] + c * T(offset.x()) - s * T(offset.y());
+    out[1] = g[1] + s * T(offset.x()) + c * T(offset.y());
+    out[2] = g[2] + T(offset.theta());
+  }
+
+  template <typename T>
+  bool operator()(const T* ga, const T* gb, T* residual) const {
+    T a[3], b[3];
+    compose(ga, from_, a);
+    compose(gb, to_, b);
+    return edge_(a, b, residual);
+  }
+
+  EdgeCost edge_;
+  SE2 from_, to_;
+};
+
+/// The solve behind optimizePoseGraph (group_of empty: every node its own parameter) and
+/// optimizePoseGraphRigid.
+PoseGraphSummary solve(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges,
+                       std::span<const std::size_t> group_of, std::size_t fixed, const PoseGraphOptions& options) {
   if (options.max_iterations < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "max_iterations"});
   if (options.threads < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "threads"});
   if (!(options.function_tolerance > 0.0))
@@ -73,6 +106,10 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   if (!(std::isfinite(options.dcs_phi) && options.dcs_phi >= 0.0))
     throw invalidArgument("must be finite and >= 0", {"PoseGraphOptions", 0, "dcs_phi"});
   if (options.dcs_rounds < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "dcs_rounds"});
+  const bool grouped = !group_of.empty();
+  if (grouped && group_of.size() != poses.size())
+    throw invalidArgument(fmt::format("{} groups given for {} nodes", group_of.size(), poses.size()),
+                          {"pose graph", 0, "groups"});
   if (poses.empty())
     return {.usable = true, .message = "empty graph", .edge_scale = std::vector<double>(edges.size(), 1.0)};
   if (fixed >= poses.size())
@@ -80,8 +117,49 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   for (std::size_t i = 0; i < poses.size(); ++i)
     if (!poses[i].isFinite()) throw invalidArgument(fmt::format("node {} is not finite", i), {"pose graph", 0, "poses"});
 
-  std::vector<std::array<double, 3>> params(poses.size());
-  for (std::size_t i = 0; i < poses.size(); ++i) params[i] = {poses[i].x(), poses[i].y(), poses[i].theta()};
+  // One parameter per group, at its first node's pose; each node's offset from it is held.
+  std::vector<std::size_t> param_of(poses.size());
+  std::vector<std::size_t> anchor;  // per parameter, its first node
+  if (grouped) {
+    std::vector<std::size_t> param_of_group;
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      const std::size_t g = group_of[i];
+      if (g >= poses.size())
+        throw invalidArgument(fmt::format("node {} is in group {}: groups are numbered below the node count {}", i, g,
+                                          poses.size()),
+                              {"pose graph", 0, "groups"});
+      if (g >= param_of_group.size()) param_of_group.resize(g + 1, poses.size());
+      if (param_of_group[g] == poses.size()) {
+        param_of_group[g] = anchor.size();
+        anchor.push_back(i);
+      }
+      param_of[i] = param_of_group[g];
+    }
+  } else {
+    anchor.resize(poses.size());
+    for (std::size_t i = 0; i < poses.size(); ++i) param_of[i] = anchor[i] = i;
+  }
+  std::vector<SE2> offset;
+  if (grouped) {
+    offset.reserve(poses.size());
+    for (std::size_t i = 0; i < poses.size(); ++i) offset.push_back(poses[anchor[param_of[i]]].inverse() * poses[i]);
+  }
+  std::vector<std::array<double, 3>> params(anchor.size());
+  for (std::size_t p = 0; p < anchor.size(); ++p) {
+    const SE2& T = poses[anchor[p]];
+    params[p] = {T.x(), T.y(), T.theta()};
+  }
+  auto residualAt = [&](std::size_t k) {
+    const PoseGraphEdge& e = edges[k];
+    Eigen::Vector3d r;
+    const double* a = params[param_of[e.from]].data();
+    const double* b = params[param_of[e.to]].data();
+    if (grouped)
+      RigidEdgeCost(e.T_from_to, e.sqrt_information, offset[e.from], offset[e.to])(a, b, r.data());
+    else
+      EdgeCost(e.T_from_to, e.sqrt_information)(a, b, r.data());
+    return r;
+  };
 
   ceres::Problem::Options po;
   po.loss_function_ownership = ceres::TAKE_OWNERSHIP;
@@ -96,12 +174,18 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
     if (!e.T_from_to.isFinite() || !e.sqrt_information.allFinite() || !std::isfinite(e.huber_scale) ||
         e.huber_scale < 0.0)
       throw invalidArgument(fmt::format("edge {} is not finite", k), {"pose graph", 0, "edges"});
-    auto* cost = new ceres::AutoDiffCostFunction<EdgeCost, 3, 3, 3>(new EdgeCost(e.T_from_to, e.sqrt_information));
+    const std::size_t a = param_of[e.from], b = param_of[e.to];
+    if (a == b) continue;  // within one rigid group: constant
+    ceres::CostFunction* cost =
+        grouped ? static_cast<ceres::CostFunction*>(new ceres::AutoDiffCostFunction<RigidEdgeCost, 3, 3, 3>(
+                      new RigidEdgeCost(e.T_from_to, e.sqrt_information, offset[e.from], offset[e.to])))
+                : new ceres::AutoDiffCostFunction<EdgeCost, 3, 3, 3>(new EdgeCost(e.T_from_to, e.sqrt_information));
     ceres::LossFunction* loss = huberOf(e);
     if (e.scalable) loss = scalable[k] = new ceres::LossFunctionWrapper(loss, ceres::TAKE_OWNERSHIP);
-    problem.AddResidualBlock(cost, loss, params[e.from].data(), params[e.to].data());
+    problem.AddResidualBlock(cost, loss, params[a].data(), params[b].data());
   }
-  if (problem.HasParameterBlock(params[fixed].data())) problem.SetParameterBlockConstant(params[fixed].data());
+  double* fixed_param = params[param_of[fixed]].data();
+  if (problem.HasParameterBlock(fixed_param)) problem.SetParameterBlockConstant(fixed_param);
 
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
@@ -123,9 +207,7 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
     double change = 0.0;
     for (std::size_t k = 0; k < edges.size(); ++k) {
       if (scalable[k] == nullptr) continue;
-      Eigen::Vector3d r;
-      EdgeCost(edges[k].T_from_to, edges[k].sqrt_information)(params[edges[k].from].data(), params[edges[k].to].data(),
-                                                              r.data());
+      const Eigen::Vector3d r = residualAt(k);
       const double s = std::min(1.0, 2.0 * options.dcs_phi / (options.dcs_phi + r.squaredNorm()));
       change = std::max(change, std::abs(s - scale[k]));
       scale[k] = s;
@@ -152,10 +234,33 @@ PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<Po
   out.message = summary.BriefReport();
   if (out.usable)
     for (std::size_t i = 0; i < poses.size(); ++i) {
-      const auto& p = params[i];
-      if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) poses[i] = SE2(p[0], p[1], wrapAngle(p[2]));
+      const auto& p = params[param_of[i]];
+      if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) continue;
+      if (grouped) {
+        if (!problem.HasParameterBlock(p.data())) continue;  // no edge out of its group: unchanged
+        poses[i] = SE2(p[0], p[1], wrapAngle(p[2])) * offset[i];
+        poses[i] = SE2(poses[i].x(), poses[i].y(), wrapAngle(poses[i].theta()));
+      } else {
+        poses[i] = SE2(p[0], p[1], wrapAngle(p[2]));
+      }
     }
   return out;
+}
+
+}  // namespace
+
+PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges, std::size_t fixed,
+                                   const PoseGraphOptions& options) {
+  return solve(poses, edges, {}, fixed, options);
+}
+
+PoseGraphSummary optimizePoseGraphRigid(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges,
+                                        std::span<const std::size_t> group_of, std::size_t fixed,
+                                        const PoseGraphOptions& options) {
+  if (group_of.size() != poses.size())
+    throw invalidArgument(fmt::format("{} groups given for {} nodes", group_of.size(), poses.size()),
+                          {"pose graph", 0, "groups"});
+  return solve(poses, edges, group_of, fixed, options);
 }
 
 }  // namespace lidar2d::slam

@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -65,6 +66,17 @@ struct PoseGraphSummary {
 /// option is out of its domain.
 PoseGraphSummary optimizePoseGraph(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges, std::size_t fixed,
                                    const PoseGraphOptions& options = {});
+
+/// As optimizePoseGraph, with the nodes in rigid groups: `group_of[i]` names node i's group
+/// (numbers below the node count, in any order; one entry per node). The nodes of a group keep their
+/// poses relative to each other and move as one body, whose parameter is the pose of the group's
+/// first node; edges within a group are constant and left out (their `edge_scale` is 1). With
+/// groups of tens of nodes the problem is that many times smaller: SLAM optimises its submaps this
+/// way between full optimisations. Throws as optimizePoseGraph, and when `group_of` does not hold
+/// one group per node.
+PoseGraphSummary optimizePoseGraphRigid(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>& edges,
+                                        std::span<const std::size_t> group_of, std::size_t fixed,
+                                        const PoseGraphOptions& options = {});
 
 /// The whitened residual of one edge at the given poses (the quantity the solver minimises, before
 /// the robust loss); for diagnostics and tests.

@@ -111,6 +111,8 @@ struct SlamOptions {
   double odometry_sigma_rad = 2.0 * kDeg;
   int optimize_every_nodes = 30;
   int intermediate_iterations = 10;
+  bool intermediate_rigid_submaps = true;
+  int intermediate_free_submaps = 8;
   bool back_end_thread = true;
   /// Solver of the final optimisation (`max_iterations`), of every one (`threads`) and the loop
   /// closures' dynamic covariance scaling (`dcs_phi`: 9, the 97th percentile of a right closure's
@@ -341,6 +343,12 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "optimise this many nodes after a closure found by search (10 times as many after other closures)"},
     {LIDAR2D_SLAM_FIELD(intermediate_iterations), "pose graph", "iterations", OptionRange::atLeast(1),
      "solver iterations of the optimisations during the run"},
+    {LIDAR2D_SLAM_FIELD(intermediate_rigid_submaps), "pose graph", "flag", OptionRange::any(),
+     "the optimisations during the run hold each finished submap's nodes rigid to each other (one pose per "
+     "submap): their cost grows with the submaps, not the nodes; the final optimisation moves every node ..."},
+    {LIDAR2D_SLAM_FIELD(intermediate_free_submaps), "pose graph", "submaps", OptionRange::atLeast(0),
+     "... but for the newest submaps: the one being built and this many finished ones, whose nodes move each "
+     "on its own"},
     {LIDAR2D_SLAM_FIELD(graph.max_iterations), "pose graph", "iterations", OptionRange::atLeast(1),
      "solver iterations of the final optimisation (and after a descriptor closure)"},
     {LIDAR2D_SLAM_FIELD(graph.dcs_phi), "pose graph", "chi2", OptionRange::atLeast(0),

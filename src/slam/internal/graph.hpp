@@ -38,8 +38,10 @@ inline constexpr std::string_view kFragmentEvent = "fragment from node ";
 /// scaled below half weight (PoseGraphOptions::dcs_phi): closures the rest of the graph contradicts.
 void reportDownweighted(SlamState& s);
 
-/// Optimises when due after a new node: at once after a descriptor closure, optimize_every_nodes
-/// nodes after a searched closure, 10x as many after other closures.
+/// Optimises when due after a new node: at once after a descriptor closure (every node),
+/// optimize_every_nodes nodes after a searched closure, 10x as many after other closures (then
+/// with the older submaps rigid, slam::optimizePoseGraphRigid, unless intermediate_rigid_submaps is
+/// off: a problem as many times smaller as a submap has nodes).
 void optimizeIfDue(SlamState& s);
 
 }  // namespace lidar2d::slam::internal
