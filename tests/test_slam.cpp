@@ -289,7 +289,7 @@ TEST(Slam, WhileRunningFinishedSubmapsMoveAsBodies) {
   const Change free = runTwice(false, free_poses);
   EXPECT_LT(rigid.within, 1e-9);
   EXPECT_GT(rigid.between, 1e-5);  // to rounding (1e-15) if they moved as one body; 0.4 mm here
-  EXPECT_GT(free.within, 1e-4);  // with every node free the closures bend the submaps too (3 mm)
+  EXPECT_GT(free.within, 1e-4);    // with every node free the closures bend the submaps too (3 mm)
   ASSERT_EQ(rigid_poses.size(), free_poses.size());
   EXPECT_LT(ateAgainstTruth(rigid_poses, frames).trans_m.rmse, 0.08);
   double worst = 0.0;

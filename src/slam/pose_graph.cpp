@@ -125,9 +125,9 @@ PoseGraphSummary solve(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>
     for (std::size_t i = 0; i < poses.size(); ++i) {
       const std::size_t g = group_of[i];
       if (g >= poses.size())
-        throw invalidArgument(fmt::format("node {} is in group {}: groups are numbered below the node count {}", i, g,
-                                          poses.size()),
-                              {"pose graph", 0, "groups"});
+        throw invalidArgument(
+            fmt::format("node {} is in group {}: groups are numbered below the node count {}", i, g, poses.size()),
+            {"pose graph", 0, "groups"});
       if (g >= param_of_group.size()) param_of_group.resize(g + 1, poses.size());
       if (param_of_group[g] == poses.size()) {
         param_of_group[g] = anchor.size();
