@@ -109,6 +109,35 @@ TEST(CorrelativeGrid, RebuiltInPlaceEqualsAFreshGrid) {
   }
 }
 
+TEST(CorrelativeGrid, SumOfMaxValuesIsTheSumWithOrWithoutTheBoundsTest) {
+  CorrelativeOptions o;
+  o.depth = 4;
+  const auto g = CorrelativeGrid::fromPoints(randomPoints(60, 2.0, 7), o);
+  std::vector<Eigen::Vector2i> cells;
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> u(-6, 6);
+  for (int k = 0; k < 40; ++k) cells.emplace_back(u(rng), u(rng));
+  Eigen::Vector2i lo = cells[0], hi = cells[0];
+  for (const auto& c : cells) {
+    lo = lo.cwiseMin(c);
+    hi = hi.cwiseMax(c);
+  }
+  int inside = 0, straddling = 0;
+  // Shifts that keep every cell inside the max-grid, that put some outside, and all outside.
+  for (int h = 0; h < g.depth(); ++h)
+    for (int j = -20; j < g.height() + 20; j += 3)
+      for (int i = -20; i < g.width() + 20; i += 3) {
+        double ref = 0.0;
+        for (const auto& c : cells) ref += g.maxValue(h, c.x() + i, c.y() + j);
+        ASSERT_EQ(g.sumMaxValues(h, cells, i, j, lo, hi), ref) << "h " << h << " shift " << i << " " << j;
+        const bool in = lo.x() + i >= 0 && lo.y() + j >= 0 && hi.x() + i < g.width() && hi.y() + j < g.height();
+        (in ? inside : straddling) += 1;
+      }
+  EXPECT_GT(inside, 10);
+  EXPECT_GT(straddling, 10);
+  EXPECT_EQ(g.sumMaxValues(0, {}, 0, 0, lo, hi), 0.0);
+}
+
 TEST(Correlative, BranchAndBoundEqualsExhaustiveSearch) {
   const auto& sim = office();
   std::mt19937 rng(13);

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 namespace lidar2d::localization::internal {
@@ -41,12 +42,18 @@ DiscretisedScan::DiscretisedScan(const registration::CorrelativeGrid& grid, cons
         out.emplace_back(static_cast<int>(std::floor(c * p.x() - s * p.y())),
                          static_cast<int>(std::floor(s * p.x() + c * p.y())));
   }
+  lo_.resize(headings, Eigen::Vector2i::Constant(std::numeric_limits<int>::max()));
+  hi_.resize(headings, Eigen::Vector2i::Constant(std::numeric_limits<int>::min()));
+  for (std::size_t k = 0; k < headings; ++k)
+    for (const auto& cell : cells_[k]) {
+      lo_[k] = lo_[k].cwiseMin(cell);
+      hi_[k] = hi_[k].cwiseMax(cell);
+    }
 }
 
 double DiscretisedScan::scoreAt(int k, int ix, int iy, int h) const {
-  double sum = 0;
-  for (const auto& c : cells_[static_cast<std::size_t>(k)]) sum += grid_->maxValue(h, c.x() + ix, c.y() + iy);
-  return sum / static_cast<double>(points_);
+  const auto kk = static_cast<std::size_t>(k);
+  return grid_->sumMaxValues(h, cells_[kk], ix, iy, lo_[kk], hi_[kk]) / static_cast<double>(points_);
 }
 
 GridPose DiscretisedScan::search(std::vector<Node> roots, int h, const Eigen::Vector2i& lo, const Eigen::Vector2i& hi,

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <variant>
 
@@ -27,6 +28,7 @@ struct Discretised {
   double step = 0.0;           // rotation step [rad]
   std::vector<double> angles;  // angle offsets from centre.theta() [rad]
   std::vector<std::vector<Eigen::Vector2i>> cells;  // per angle, per point
+  std::vector<Eigen::Vector2i> lo, hi;              // per angle, the box of its cells
   int nx = 0, ny = 0;          // translation offsets in [-nx, nx] x [-ny, ny] cells
 };
 
@@ -36,10 +38,9 @@ struct Candidate {
 };
 
 double scoreAt(const CorrelativeGrid& g, const Discretised& d, int k, int ix, int iy, int h) {
-  const auto& cells = d.cells[static_cast<std::size_t>(k)];
-  double sum = 0.0;
-  for (const auto& c : cells) sum += g.maxValue(h, c.x() + ix, c.y() + iy);
-  return sum / static_cast<double>(cells.size());
+  const auto kk = static_cast<std::size_t>(k);
+  const auto& cells = d.cells[kk];
+  return g.sumMaxValues(h, cells, ix, iy, d.lo[kk], d.hi[kk]) / static_cast<double>(cells.size());
 }
 
 double angularStep(const CorrelativeOptions& o, const Points2& src, double res) {
@@ -69,6 +70,14 @@ Discretised discretise(const CorrelativeGrid& g, const Points2& src, const SE2& 
       cells.emplace_back(static_cast<int>(std::floor((q.x() - g.origin().x()) * inv)),
                          static_cast<int>(std::floor((q.y() - g.origin().y()) * inv)));
     }
+    Eigen::Vector2i lo = Eigen::Vector2i::Constant(std::numeric_limits<int>::max());
+    Eigen::Vector2i hi = Eigen::Vector2i::Constant(std::numeric_limits<int>::min());
+    for (const auto& c : cells) {
+      lo = lo.cwiseMin(c);
+      hi = hi.cwiseMax(c);
+    }
+    d.lo.push_back(lo);
+    d.hi.push_back(hi);
     d.cells.push_back(std::move(cells));
   }
   return d;

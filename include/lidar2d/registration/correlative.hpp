@@ -14,6 +14,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <numbers>
+#include <span>
 #include <vector>
 
 #include "lidar2d/core/laser_scan.hpp"
@@ -87,6 +88,23 @@ class CorrelativeGrid {
     const int ii = i + m.offset, jj = j + m.offset;
     if (ii < 0 || jj < 0 || ii >= m.width || jj >= m.height) return 0.0f;
     return m.values[static_cast<std::size_t>(jj) * static_cast<std::size_t>(m.width) + static_cast<std::size_t>(ii)];
+  }
+  /// The sum, in order, of maxValue(h, c.x() + i, c.y() + j) over `cells`, whose coordinates all lie
+  /// in [lo, hi]: when the box shifted by (i, j) is inside the max-grid, without a bounds test per
+  /// cell (the branch-and-bound searches' inner loop; the same sum either way).
+  double sumMaxValues(int h, std::span<const Eigen::Vector2i> cells, int i, int j, const Eigen::Vector2i& lo,
+                      const Eigen::Vector2i& hi) const {
+    if (cells.empty()) return 0.0;
+    const auto& m = max_grids_[static_cast<std::size_t>(h)];
+    const int ii = i + m.offset, jj = j + m.offset;
+    double sum = 0.0;
+    if (lo.x() + ii >= 0 && lo.y() + jj >= 0 && hi.x() + ii < m.width && hi.y() + jj < m.height) {
+      const float* base = m.values.data() + static_cast<std::ptrdiff_t>(jj) * m.width + ii;
+      for (const auto& c : cells) sum += base[static_cast<std::ptrdiff_t>(c.y()) * m.width + c.x()];
+    } else {
+      for (const auto& c : cells) sum += maxValue(h, c.x() + i, c.y() + j);
+    }
+    return sum;
   }
 
  private:

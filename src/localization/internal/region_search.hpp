@@ -54,6 +54,7 @@ class DiscretisedScan {
   std::size_t points_ = 0;
   double step_ = 0;
   std::vector<std::vector<Eigen::Vector2i>> cells_;  // per heading k (theta = -pi + k step), per point
+  std::vector<Eigen::Vector2i> lo_, hi_;             // per heading, the box of its cells
 };
 
 }  // namespace lidar2d::localization::internal
