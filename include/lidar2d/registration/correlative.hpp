@@ -18,8 +18,8 @@
 #include <vector>
 
 #include "lidar2d/core/laser_scan.hpp"
-#include "lidar2d/core/se2.hpp"
 #include "lidar2d/core/occupancy_image.hpp"
+#include "lidar2d/core/se2.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
 #include "lidar2d/registration/result.hpp"
 
