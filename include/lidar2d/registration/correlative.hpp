@@ -89,9 +89,10 @@ class CorrelativeGrid {
     if (ii < 0 || jj < 0 || ii >= m.width || jj >= m.height) return 0.0f;
     return m.values[static_cast<std::size_t>(jj) * static_cast<std::size_t>(m.width) + static_cast<std::size_t>(ii)];
   }
-  /// The sum, in order, of maxValue(h, c.x() + i, c.y() + j) over `cells`, whose coordinates all lie
-  /// in [lo, hi]: when the box shifted by (i, j) is inside the max-grid, without a bounds test per
-  /// cell (the branch-and-bound searches' inner loop; the same sum either way).
+  /// The sum of maxValue(h, c.x() + i, c.y() + j) over `cells`, whose coordinates all lie in
+  /// [lo, hi]: when the box shifted by (i, j) is inside the max-grid, without a bounds test per cell
+  /// and in four running sums (the branch-and-bound searches' inner loop: its additions no longer
+  /// wait on each other). The same sum to rounding; floats added in doubles are in practice exact.
   double sumMaxValues(int h, std::span<const Eigen::Vector2i> cells, int i, int j, const Eigen::Vector2i& lo,
                       const Eigen::Vector2i& hi) const {
     if (cells.empty()) return 0.0;
@@ -100,7 +101,13 @@ class CorrelativeGrid {
     double sum = 0.0;
     if (lo.x() + ii >= 0 && lo.y() + jj >= 0 && hi.x() + ii < m.width && hi.y() + jj < m.height) {
       const float* base = m.values.data() + static_cast<std::ptrdiff_t>(jj) * m.width + ii;
-      for (const auto& c : cells) sum += base[static_cast<std::ptrdiff_t>(c.y()) * m.width + c.x()];
+      double s4[4] = {0.0, 0.0, 0.0, 0.0};
+      std::size_t k = 0;
+      for (; k + 4 <= cells.size(); k += 4)
+        for (int q = 0; q < 4; ++q)
+          s4[q] += base[static_cast<std::ptrdiff_t>(cells[k + q].y()) * m.width + cells[k + q].x()];
+      for (; k < cells.size(); ++k) s4[0] += base[static_cast<std::ptrdiff_t>(cells[k].y()) * m.width + cells[k].x()];
+      sum = (s4[0] + s4[1]) + (s4[2] + s4[3]);
     } else {
       for (const auto& c : cells) sum += maxValue(h, c.x() + i, c.y() + j);
     }
