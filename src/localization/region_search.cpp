@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <numbers>
 
 namespace lidar2d::localization::internal {
@@ -42,13 +41,11 @@ DiscretisedScan::DiscretisedScan(const registration::CorrelativeGrid& grid, cons
         out.emplace_back(static_cast<int>(std::floor(c * p.x() - s * p.y())),
                          static_cast<int>(std::floor(s * p.x() + c * p.y())));
   }
-  lo_.resize(headings, Eigen::Vector2i::Constant(std::numeric_limits<int>::max()));
-  hi_.resize(headings, Eigen::Vector2i::Constant(std::numeric_limits<int>::min()));
-  for (std::size_t k = 0; k < headings; ++k)
-    for (const auto& cell : cells_[k]) {
-      lo_[k] = lo_[k].cwiseMin(cell);
-      hi_[k] = hi_[k].cwiseMax(cell);
-    }
+  for (const auto& cells : cells_) {
+    const auto [lo, hi] = registration::CorrelativeGrid::boxOf(cells);
+    lo_.push_back(lo);
+    hi_.push_back(hi);
+  }
 }
 
 double DiscretisedScan::scoreAt(int k, int ix, int iy, int h) const {

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <optional>
 #include <variant>
 
@@ -70,12 +69,7 @@ Discretised discretise(const CorrelativeGrid& g, const Points2& src, const SE2& 
       cells.emplace_back(static_cast<int>(std::floor((q.x() - g.origin().x()) * inv)),
                          static_cast<int>(std::floor((q.y() - g.origin().y()) * inv)));
     }
-    Eigen::Vector2i lo = Eigen::Vector2i::Constant(std::numeric_limits<int>::max());
-    Eigen::Vector2i hi = Eigen::Vector2i::Constant(std::numeric_limits<int>::min());
-    for (const auto& c : cells) {
-      lo = lo.cwiseMin(c);
-      hi = hi.cwiseMax(c);
-    }
+    const auto [lo, hi] = CorrelativeGrid::boxOf(cells);
     d.lo.push_back(lo);
     d.hi.push_back(hi);
     d.cells.push_back(std::move(cells));

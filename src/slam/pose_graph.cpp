@@ -106,10 +106,7 @@ PoseGraphSummary solve(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>
   if (!(std::isfinite(options.dcs_phi) && options.dcs_phi >= 0.0))
     throw invalidArgument("must be finite and >= 0", {"PoseGraphOptions", 0, "dcs_phi"});
   if (options.dcs_rounds < 1) throw invalidArgument("must be >= 1", {"PoseGraphOptions", 0, "dcs_rounds"});
-  const bool grouped = !group_of.empty();
-  if (grouped && group_of.size() != poses.size())
-    throw invalidArgument(fmt::format("{} groups given for {} nodes", group_of.size(), poses.size()),
-                          {"pose graph", 0, "groups"});
+  const bool grouped = !group_of.empty();  // optimizePoseGraphRigid checked: one group per node
   if (poses.empty())
     return {.usable = true, .message = "empty graph", .edge_scale = std::vector<double>(edges.size(), 1.0)};
   if (fixed >= poses.size())
@@ -238,8 +235,7 @@ PoseGraphSummary solve(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>
       if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) continue;
       if (grouped) {
         if (!problem.HasParameterBlock(p.data())) continue;  // no edge out of its group: unchanged
-        poses[i] = SE2(p[0], p[1], wrapAngle(p[2])) * offset[i];
-        poses[i] = SE2(poses[i].x(), poses[i].y(), wrapAngle(poses[i].theta()));
+        poses[i] = SE2(p[0], p[1], p[2]) * offset[i];  // SE2 wraps the angle
       } else {
         poses[i] = SE2(p[0], p[1], wrapAngle(p[2]));
       }

@@ -13,8 +13,10 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <limits>
 #include <numbers>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "lidar2d/core/laser_scan.hpp"
@@ -89,8 +91,19 @@ class CorrelativeGrid {
     if (ii < 0 || jj < 0 || ii >= m.width || jj >= m.height) return 0.0f;
     return m.values[static_cast<std::size_t>(jj) * static_cast<std::size_t>(m.width) + static_cast<std::size_t>(ii)];
   }
+  /// The smallest box [lo, hi] holding every cell of `cells` (sumMaxValues' box; empty `cells`:
+  /// lo above hi).
+  static std::pair<Eigen::Vector2i, Eigen::Vector2i> boxOf(std::span<const Eigen::Vector2i> cells) {
+    Eigen::Vector2i lo = Eigen::Vector2i::Constant(std::numeric_limits<int>::max());
+    Eigen::Vector2i hi = Eigen::Vector2i::Constant(std::numeric_limits<int>::min());
+    for (const auto& c : cells) {
+      lo = lo.cwiseMin(c);
+      hi = hi.cwiseMax(c);
+    }
+    return {lo, hi};
+  }
   /// The sum of maxValue(h, c.x() + i, c.y() + j) over `cells`, whose coordinates all lie in
-  /// [lo, hi]: when the box shifted by (i, j) is inside the max-grid, without a bounds test per cell
+  /// [lo, hi] (boxOf): when the box shifted by (i, j) is inside the max-grid, without a bounds test per cell
   /// and in four running sums (the branch-and-bound searches' inner loop: its additions no longer
   /// wait on each other). The same sum to rounding; floats added in doubles are in practice exact.
   double sumMaxValues(int h, std::span<const Eigen::Vector2i> cells, int i, int j, const Eigen::Vector2i& lo,
