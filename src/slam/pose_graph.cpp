@@ -235,7 +235,7 @@ PoseGraphSummary solve(std::vector<SE2>& poses, const std::vector<PoseGraphEdge>
       if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) continue;
       if (grouped) {
         if (!problem.HasParameterBlock(p.data())) continue;  // no edge out of its group: unchanged
-        poses[i] = SE2(p[0], p[1], p[2]) * offset[i];  // SE2 wraps the angle
+        poses[i] = SE2(p[0], p[1], p[2]) * offset[i];        // SE2 wraps the angle
       } else {
         poses[i] = SE2(p[0], p[1], wrapAngle(p[2]));
       }
