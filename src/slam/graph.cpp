@@ -76,9 +76,8 @@ void optimizeWith(SlamState& s, int iterations, bool rigid_submaps) {
       group_of.push_back(g);
     }
     // Rigid submaps cannot bend to fit right closures as the full graph does: their residuals are
-    // larger, and dynamic covariance scaling would fade right closures (measured with every
-    // finished submap rigid: Intel without odometry 0.027 m before, 0.037 m with the scaling, 0.032 m
-    // without). The final optimisation scales them.
+    // larger, and dynamic covariance scaling would fade right closures (BENCHMARK.md, SLAM). The
+    // final optimisation scales them.
     go.dcs_phi = 0.0;
     summary = optimizePoseGraphRigid(poses, s.edges, group_of, 0, go);
   } else {
