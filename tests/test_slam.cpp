@@ -16,6 +16,7 @@
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
 #include "lidar2d/slam/slam.hpp"
+#include "src/slam/internal/front_end.hpp"
 #include "src/slam/internal/loop_closure.hpp"
 #include "support/test_support.hpp"
 
@@ -296,6 +297,27 @@ TEST(Slam, WhileRunningFinishedSubmapsMoveAsBodies) {
   for (std::size_t i = 0; i < rigid_poses.size(); ++i)
     worst = std::max(worst, (rigid_poses[i].translation() - free_poses[i].translation()).norm());
   EXPECT_LT(worst, 0.05);
+}
+
+TEST(SlamFrontEnd, AMatchAsGoodButFarFromThePriorDoesNotReplaceOneNearIt) {
+  // Intel's keyframes, scan 99: at the prediction ICP's match is degenerate along the corridor; the
+  // correlative search's, a door further (3.6 sigmas), explains as much and pins every direction.
+  using C = internal::FrontEnd::Candidate;
+  C near_prior, door_further;
+  near_prior.explained = door_further.explained = 0.56;
+  near_prior.sigmas = 0.29;
+  near_prior.degenerate = true;
+  door_further.sigmas = 3.56;
+  EXPECT_FALSE(internal::FrontEnd::replaces(door_further, near_prior));
+  EXPECT_TRUE(internal::FrontEnd::replaces(near_prior, door_further));
+  // About as likely under the prior: the one that pins every direction wins, as before.
+  door_further.sigmas = 0.9;
+  EXPECT_TRUE(internal::FrontEnd::replaces(door_further, near_prior));
+  // Clearly more of the scan explained wins however far from the prediction (within the gate).
+  door_further.sigmas = 3.9;
+  door_further.explained = 0.62;
+  EXPECT_TRUE(internal::FrontEnd::replaces(door_further, near_prior));
+  EXPECT_FALSE(internal::FrontEnd::replaces(near_prior, door_further));
 }
 
 TEST(Slam, CorridorDoesNotSlide) {

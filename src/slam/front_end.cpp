@@ -133,6 +133,15 @@ void FrontEnd::rebuildLocalMap() {
   local_grid_built = false;
 }
 
+bool FrontEnd::replaces(const Candidate& c, const Candidate& best) {
+  if (c.explained > best.explained + 0.05) return true;
+  if (c.explained <= best.explained - 0.05) return false;
+  const double prior_nats = 0.5 * (best.sigmas * best.sigmas - c.sigmas * c.sigmas);
+  if (std::abs(prior_nats) > kPriorTieNats) return prior_nats > 0.0;
+  if (c.degenerate != best.degenerate) return !c.degenerate;
+  return c.res.final_cost < 0.8 * best.res.final_cost;
+}
+
 /// Front-end match of `pts` against the local map from `T_pred`, the prediction `p` after the
 /// previous pose. `alternatives`: other starting points, tried when the prediction is not
 /// confirmed. `earlier`: the poses of earlier scans, tried when the best match still explains
@@ -164,16 +173,6 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
     c.sigmas = finite ? p.distance(T_local_prev.inverse() * c.T) : std::numeric_limits<double>::infinity();
     return c;
   };
-  // Another start's result replaces the best so far when it explains clearly more points (5% of
-  // the scan), or about as many and pins every direction where the best does not (a degenerate
-  // match keeps the prediction along the corridor, a guess after a gap), or about as many with a
-  // clearly lower residual cost.
-  auto better = [](const Candidate& c, const Candidate& best) {
-    if (c.explained > best.explained + 0.05) return true;
-    if (c.explained <= best.explained - 0.05) return false;
-    if (c.degenerate != best.degenerate) return !c.degenerate;
-    return c.res.final_cost < 0.8 * best.res.final_cost;
-  };
   std::optional<Candidate> in_gate, beyond_gate;
   // The log-posterior of a match, up to a constant: the scan's evidence (nats per explained point)
   // plus the Gaussian prior's log-density. A match beyond the gate outweighs the prior when its
@@ -182,7 +181,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   auto logPosterior = [&](const Candidate& c) { return nats * c.explained - 0.5 * c.sigmas * c.sigmas; };
   auto consider = [&](Candidate c) {
     if (c.sigmas <= opt.prior_gate_sigmas) {
-      if (!in_gate || better(c, *in_gate)) in_gate = std::move(c);
+      if (!in_gate || replaces(c, *in_gate)) in_gate = std::move(c);
     } else if (!beyond_gate || logPosterior(c) > logPosterior(*beyond_gate)) {
       beyond_gate = std::move(c);
     }

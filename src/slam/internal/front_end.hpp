@@ -62,6 +62,29 @@ class FrontEnd {
   /// `time_ok` as predicted.
   void remember(const Frame& f, const SE2& T_local, bool first, bool time_ok);
 
+  /// One match of the scan: its result, the share of the scan it explains and its distance from
+  /// the prediction in sigmas.
+  struct Candidate {
+    registration::Result res;
+    double explained = 0.0;
+    double sigmas = 0.0;
+    Overlap overlap;
+    SE2 T;  ///< the result, remapped along a degenerate direction (remapDegenerate)
+    bool degenerate = false;
+    Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
+  };
+  /// Whether match `c` replaces `best` among the matches within the prior's gate: it explains
+  /// clearly more of the scan (5%); or about as much and the prior clearly prefers it
+  /// (kPriorTieNats: along an aliased corridor a match one door further explains as much as the
+  /// one at the prediction, and may pin every direction where that one does not); or about as
+  /// much, about as likely, and it pins every direction where `best` does not (a degenerate match
+  /// keeps the prediction along the corridor, a guess after a gap); or about as much with a
+  /// clearly lower residual cost.
+  static bool replaces(const Candidate& c, const Candidate& best);
+  // Two matches explaining about as much: the prior prefers one when its log-density is this much
+  // higher (2 nats: one within 1 sigma of the prediction against one beyond 2.2 sigmas).
+  static constexpr double kPriorTieNats = 2.0;
+
  private:
   static constexpr double kConfirmExplained = 0.9;     // a match explaining this much confirms its start
   static constexpr double kEarlierWithOdometry = 0.8;  // see frontEndMatch's `earlier`
@@ -77,17 +100,6 @@ class FrontEnd {
   // Which earlier scans' poses are starting points (scans back, ascending).
   static constexpr std::array<std::size_t, 4> kEarlierBack{2, 4, 8, 16};
 
-  /// One match of the scan: its result, the share of the scan it explains and its distance from
-  /// the prediction in sigmas.
-  struct Candidate {
-    registration::Result res;
-    double explained = 0.0;
-    double sigmas = 0.0;
-    Overlap overlap;
-    SE2 T;  ///< the result, remapped along a degenerate direction (remapDegenerate)
-    bool degenerate = false;
-    Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
-  };
   /// What frontEndMatch found.
   struct MatchOutcome {
     std::optional<SE2> T;       ///< the pose, or nothing when the scan was not matched
