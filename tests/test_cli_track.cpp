@@ -73,6 +73,10 @@ TEST_F(CliTrack, WritesOneLinePerScanAndTheSummary) {
   EXPECT_GE(j["eval"]["tracking_within_share"].get<double>(), 0.9);
   EXPECT_TRUE(j["time_to_first_fix_s"].is_number());
   EXPECT_TRUE(j["tracked_scan_ms"]["median"].is_number());
+  // global_fix_ms: the queries that placed a scan (status global); global_query_ms: every query.
+  const auto fixes = j["global_fix_ms"]["count"].get<std::size_t>();
+  EXPECT_EQ(fixes, j["status_counts"]["global"].get<std::size_t>());
+  EXPECT_GE(j["global_query_ms"]["count"].get<std::size_t>(), fixes);
   EXPECT_TRUE(j["global_fix_ms"]["median"].is_number());
   EXPECT_TRUE(j.contains("relocalizations"));
 }

@@ -1,7 +1,8 @@
 // Tracker: localization in a known map without an initial pose. Simulated office: the map from
 // the noise-free run, then a noisy-odometry run tracked (first fix, accuracy, never wrong while
 // `tracking`), the same without odometry (constant velocity), a kidnapped run (stretches B, A, C
-// with continuous odometry across the cuts: recovers within 10 scans each time), the run tracked
+// with continuous odometry across the cuts: recovers within 10 scans each time; answers away from
+// dead reckoning need more confirmations), the run tracked
 // three times in a row by one tracker, scans without beams, bad options, a database of another map.
 
 #include <gtest/gtest.h>
@@ -116,32 +117,40 @@ TEST(Tracker, TracksWithoutOdometryByConstantVelocity) {
   expectAccurate(frames, res, 0.8);
 }
 
-TEST(Tracker, RecoversFromKidnappingWithinTenScans) {
-  // Stretches B, A, C of the run: the robot is carried from the end of B to the start of A and
-  // from the end of A to the start of C while its odometry reads (nearly) no motion, as a robot
-  // lifted and put down elsewhere. Odometry stays continuous: the original steps within each
-  // stretch, an identity step across each cut.
-  const Office& o = office();
+/// Stretches B, A, C of the office run, with the cuts' indexes. `carried`: the robot is carried
+/// from the end of B to the start of A and from the end of A to the start of C while its odometry
+/// reads no motion, as a robot lifted and put down elsewhere (odometry continuous: the original
+/// steps within each stretch, an identity step across each cut); otherwise the odometry steps
+/// across the cuts are the true motion (a log reassembled out of order).
+std::vector<Frame> reassembled(const Office& o, bool carried, std::vector<std::size_t>& cuts) {
   const std::size_t n = o.frames.size(), a = n / 3, b = 2 * n / 3;
   std::vector<std::size_t> order;
   for (std::size_t i = a; i < b; ++i) order.push_back(i);
   for (std::size_t i = 0; i < a; ++i) order.push_back(i);
   for (std::size_t i = b; i < n; ++i) order.push_back(i);
   std::vector<Frame> frames;
-  std::vector<std::size_t> cuts;
   SE2 odom;
   for (std::size_t k = 0; k < order.size(); ++k) {
     Frame f = o.frames[order[k]];
-    if (k > 0 && order[k] != order[k - 1] + 1) {
+    const Frame* prev = k > 0 ? &o.frames[order[k - 1]] : nullptr;
+    if (prev && order[k] != order[k - 1] + 1) {
       cuts.push_back(k);
-    } else if (k > 0) {
-      odom = odom * (o.frames[order[k - 1]].T_odom_robot->inverse() * *f.T_odom_robot);
+      if (!carried) odom = odom * (prev->T_world_robot->inverse() * *f.T_world_robot);
+    } else if (prev) {
+      odom = odom * (prev->T_odom_robot->inverse() * *f.T_odom_robot);
     }
     f.T_odom_robot = odom;
     f.index = k;
     f.time = 0.2 * static_cast<double>(k);
     frames.push_back(std::move(f));
   }
+  return frames;
+}
+
+TEST(Tracker, RecoversFromKidnappingWithinTenScans) {
+  const Office& o = office();
+  std::vector<std::size_t> cuts;
+  const std::vector<Frame> frames = reassembled(o, true, cuts);
   ASSERT_EQ(cuts.size(), 2u);
   Tracker tracker(o.map, std::nullopt, fastOptions());
   const auto res = trackAll(tracker, frames);
@@ -155,6 +164,47 @@ TEST(Tracker, RecoversFromKidnappingWithinTenScans) {
       ++k;
     EXPECT_LT(k, c + 10) << "no correct pose within 10 scans of the cut at " << c;
   }
+}
+
+// A global answer far from where the odometry since the last placed scan puts the robot needs
+// confirm_fixes_against_odometry answers in a row (it may be a look-alike of a mapped place); one
+// where the odometry puts it, confirm_fixes or a sure score.
+TEST(Tracker, AnAnswerAwayFromDeadReckoningNeedsMoreConfirmations) {
+  const Office& o = office();
+  const TrackerOptions opt = fastOptions();
+  ASSERT_GT(opt.confirm_fixes_against_odometry, opt.confirm_fixes + 1);
+  auto firstFixFrom = [](const std::vector<TrackResult>& res, std::size_t k) {
+    while (k < res.size() && res[k].status != TrackStatus::kGlobal) ++k;
+    return k;
+  };
+  // Carried: the answers after each cut are away from dead reckoning.
+  std::vector<std::size_t> cuts;
+  const std::vector<Frame> frames = reassembled(o, true, cuts);
+  Tracker tracker(o.map, std::nullopt, opt);
+  const auto res = trackAll(tracker, frames);
+  TrackerOptions relaxed = opt;
+  relaxed.confirm_fixes_against_odometry = relaxed.confirm_fixes;
+  Tracker relaxed_tracker(o.map, std::nullopt, relaxed);
+  const auto relaxed_res = trackAll(relaxed_tracker, frames);
+  for (const std::size_t c : cuts) {
+    const std::size_t fix = firstFixFrom(res, c), relaxed_fix = firstFixFrom(relaxed_res, c);
+    EXPECT_GE(fix + 1, c + opt.confirm_fixes_against_odometry) << "cut at " << c;
+    EXPECT_LT(relaxed_fix + 1, c + opt.confirm_fixes_against_odometry) << "cut at " << c;
+  }
+  // Blind for longer than max_lost_scans (the prior is dropped): the answers after it are where
+  // the odometry says, and the first of them is taken at once or after confirm_fixes.
+  std::vector<Frame> blind(o.frames.begin(), o.frames.begin() + 80);
+  const std::size_t from = 40, to = from + opt.max_lost_scans + 1;
+  for (std::size_t k = from; k < to; ++k) {
+    LaserScanFields blank = blind[k].scan.fields();
+    for (double& r : blank.ranges) r = std::numeric_limits<double>::quiet_NaN();
+    blind[k].scan = LaserScan::create(blank);
+  }
+  Tracker blind_tracker(o.map, std::nullopt, opt);
+  const auto blind_res = trackAll(blind_tracker, blind);
+  EXPECT_EQ(blind_res[to - 1].status, TrackStatus::kLost);
+  const std::size_t fix = firstFixFrom(blind_res, to);
+  EXPECT_LT(fix, to + opt.confirm_fixes) << (fix < blind_res.size() ? blind_res[fix].reason : "never");
 }
 
 // Lifelong use: one tracker, never reset, fed the same run three times in a row (at each wrap the
@@ -193,6 +243,14 @@ TEST(Tracker, BadOptionsAndAnotherMapsDatabaseAreRefused) {
   bad.max_lost_scans = 0;
   EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
                                 {"max_lost_scans"}));
+  bad = fastOptions();
+  bad.confirm_fixes_against_odometry = 0;
+  EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
+                                {"confirm_fixes_against_odometry"}));
+  bad = fastOptions();
+  bad.dead_reckoning_drift_per_m = -0.1;
+  EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
+                                {"dead_reckoning_drift_per_m"}));
   bad = fastOptions();
   bad.sure_fix_score = std::numeric_limits<double>::quiet_NaN();
   EXPECT_TRUE(

@@ -107,7 +107,7 @@ void runTrack(const TrackArgs& a) {
   std::size_t scans = 0, counts[3] = {0, 0, 0}, relocalizations = 0;
   std::size_t within = 0, tracking_within = 0, wrong_tracking = 0, wrong_global = 0;
   std::optional<double> first_time, first_fix_time;
-  std::vector<double> track_ms, global_ms, scan_ms;
+  std::vector<double> track_ms, global_ms, fix_ms, scan_ms;
   RateProgress progress(a.quiet, "tracking", "scans", source->sizeHint());
   while (auto f = source->next()) {
     progress.update(f->index);
@@ -124,6 +124,7 @@ void runTrack(const TrackArgs& a) {
     relocalizations += r.relocalized ? 1 : 0;
     if (r.status == localization::TrackStatus::kTracking) track_ms.push_back(r.track_ms);
     if (r.global_ms > 0) global_ms.push_back(r.global_ms);
+    if (r.status == localization::TrackStatus::kGlobal) fix_ms.push_back(r.global_ms);
     scan_ms.push_back(r.track_ms + r.global_ms);
     if (r.status == localization::TrackStatus::kLost) {
       out.stream() << fmt::format("{:.9f} nan nan nan lost 0\n", f->time);
@@ -159,7 +160,8 @@ void runTrack(const TrackArgs& a) {
   j["time_to_first_fix_s"] = first_fix_time ? nlohmann::json(*first_fix_time - *first_time) : nlohmann::json(nullptr);
   j["relocalizations"] = relocalizations;
   j["tracked_scan_ms"] = timing(track_ms);
-  j["global_fix_ms"] = timing(global_ms);
+  j["global_fix_ms"] = timing(fix_ms);
+  j["global_query_ms"] = timing(global_ms);
   j["scan_ms"] = timing(scan_ms);
   j["total_s"] = std::chrono::duration<double>(Clock::now() - t0).count();
   if (a.eval) {
@@ -214,6 +216,10 @@ void addTrackCommand(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--confirm-fixes", a->options.confirm_fixes,
                   "global answers in a row, agreeing with the odometry between them, needed for a fix")
+      ->capture_default_str();
+  sub->add_option("--confirm-fixes-against-odometry", a->options.confirm_fixes_against_odometry,
+                  "... for an answer away from where the odometry since the last placed scan puts the robot "
+                  "(no sure fix then)")
       ->capture_default_str();
   sub->add_option("--sure-fix-score", a->options.sure_fix_score,
                   "a global answer scoring at least this is a fix at once (above 1: never)")

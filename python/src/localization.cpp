@@ -119,13 +119,14 @@ void bindLocalization(py::module_& m) {
       "constant velocity) and checked against the map; a robot carried elsewhere is found again.")
       .def(py::init([](const OccupancyImage& map, const py::handle& database, double min_track_score,
                        double min_global_score, std::size_t confirm_fixes, double sure_fix_score,
-                       std::size_t max_lost_scans) {
+                       std::size_t max_lost_scans, std::size_t confirm_fixes_against_odometry) {
              localization::TrackerOptions o;
              o.min_track_score = min_track_score;
              o.min_global_score = min_global_score;
              o.confirm_fixes = confirm_fixes;
              o.sure_fix_score = sure_fix_score;
              o.max_lost_scans = max_lost_scans;
+             o.confirm_fixes_against_odometry = confirm_fixes_against_odometry;
              std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
              return std::make_unique<localization::Tracker>(map, std::move(db), o);
@@ -135,6 +136,7 @@ void bindLocalization(py::module_& m) {
            py::arg("min_global_score") = defaults.min_global_score,
            py::arg("confirm_fixes") = defaults.confirm_fixes, py::arg("sure_fix_score") = defaults.sure_fix_score,
            py::arg("max_lost_scans") = defaults.max_lost_scans,
+           py::arg("confirm_fixes_against_odometry") = defaults.confirm_fixes_against_odometry,
            "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md);\n"
            "bad options or a database of another map raise lidar2d.Error.")
       .def("add", [](localization::Tracker& self, const Frame& frame) {

@@ -27,6 +27,12 @@ void TrackerOptions::validate() const {
     throw badOption("max_correction_rad", max_correction_rad);
   if (!(min_global_score >= 0 && min_global_score <= 1)) throw badOption("min_global_score", min_global_score);
   if (confirm_fixes < 1) throw badOption("confirm_fixes", static_cast<double>(confirm_fixes));
+  if (confirm_fixes_against_odometry < 1)
+    throw badOption("confirm_fixes_against_odometry", static_cast<double>(confirm_fixes_against_odometry));
+  if (!(dead_reckoning_drift_per_m >= 0) || !std::isfinite(dead_reckoning_drift_per_m))
+    throw badOption("dead_reckoning_drift_per_m", dead_reckoning_drift_per_m);
+  if (!(dead_reckoning_drift_rad_per_m >= 0) || !std::isfinite(dead_reckoning_drift_rad_per_m))
+    throw badOption("dead_reckoning_drift_rad_per_m", dead_reckoning_drift_rad_per_m);
   if (!(sure_fix_score >= 0) || std::isnan(sure_fix_score)) throw badOption("sure_fix_score", sure_fix_score);
   if (max_lost_scans < 1) throw badOption("max_lost_scans", static_cast<double>(max_lost_scans));
 }
@@ -78,6 +84,22 @@ struct Tracker::State {
   std::size_t confirmations = 0;  ///< global answers in a row agreeing with it
   std::size_t lost = 0;     ///< failed scans in a row since the last checked pose
   bool fixed_once = false;
+  /// Dead reckoning: the last checked pose moved by every odometry step since, and the odometry
+  /// path since [m]; none before the first fix or after a scan without odometry.
+  std::optional<SE2> dead_reckoned;
+  double dead_reckoned_path_m = 0.0;
+
+  void placed(const SE2& T) {
+    dead_reckoned = T;
+    dead_reckoned_path_m = 0.0;
+  }
+  /// Whether `T` is where dead reckoning allows (true when there is none).
+  bool withinDeadReckoning(const SE2& T) const {
+    if (!dead_reckoned) return true;
+    const SE2 e = dead_reckoned->inverse() * T;
+    return e.translation().norm() <= 2.0 * o.max_correction_m + o.dead_reckoning_drift_per_m * dead_reckoned_path_m &&
+           std::abs(e.theta()) <= 2.0 * o.max_correction_rad + o.dead_reckoning_drift_rad_per_m * dead_reckoned_path_m;
+  }
 };
 
 Tracker::Tracker(const OccupancyImage& map, std::optional<Database> database, const TrackerOptions& options)
@@ -93,6 +115,7 @@ void Tracker::reset() {
   s_->confirmations = 0;
   s_->step.reset();
   s_->lost = 0;
+  s_->dead_reckoned.reset();
 }
 
 TrackResult Tracker::add(const Frame& frame) {
@@ -106,10 +129,16 @@ TrackResult Tracker::add(const Frame& frame) {
   SE2 step;
   const bool odom_ok = frame.T_odom_robot && frame.T_odom_robot->isFinite();
   const bool had_odom = s.last_odom.has_value();
-  if (odom_ok && s.last_odom)
+  if (odom_ok && s.last_odom) {
     step = s.last_odom->inverse() * *frame.T_odom_robot;
-  else if (s.step)
-    step = *s.step;
+    if (s.dead_reckoned) {
+      s.dead_reckoned = *s.dead_reckoned * step;
+      s.dead_reckoned_path_m += step.translation().norm();
+    }
+  } else {
+    s.dead_reckoned.reset();
+    if (s.step) step = *s.step;
+  }
   s.last_odom = odom_ok ? frame.T_odom_robot : std::nullopt;
 
   Points2 points;
@@ -167,6 +196,7 @@ TrackResult Tracker::add(const Frame& frame) {
       // The step is measured between checked poses only; carried priors are not evidence.
       if (s.lost == 0) s.step = s.pose->inverse() * m.T_target_source;
       s.pose = m.T_target_source;
+      s.placed(m.T_target_source);
       s.lost = 0;
       s.candidate.reset();
       r.status = TrackStatus::kTracking;
@@ -194,7 +224,9 @@ TrackResult Tracker::add(const Frame& frame) {
     s.candidate.reset();
     s.confirmations = 0;
   }
-  if (answered && (s.confirmations >= o.confirm_fixes || g.score >= o.sure_fix_score)) {
+  const bool expected = answered && s.withinDeadReckoning(g.T_world_robot);
+  const std::size_t needed = expected ? o.confirm_fixes : std::max(o.confirm_fixes, o.confirm_fixes_against_odometry);
+  if (answered && (s.confirmations >= needed || (expected && g.score >= o.sure_fix_score))) {
     r.status = TrackStatus::kGlobal;
     r.T_world_robot = g.T_world_robot;
     r.score = g.score;
@@ -202,6 +234,7 @@ TrackResult Tracker::add(const Frame& frame) {
     r.reason.clear();
     s.fixed_once = true;
     s.pose = g.T_world_robot;
+    s.placed(g.T_world_robot);
     // The step between the last two agreeing answers: the constant-velocity prior of the next scan
     // when there is no odometry (standing still would be metres off on a log of keyframes).
     s.step = s.confirmations >= 2 ? std::optional<SE2>(previous->inverse() * g.T_world_robot) : std::nullopt;
@@ -210,7 +243,9 @@ TrackResult Tracker::add(const Frame& frame) {
     s.confirmations = 0;
     return r;
   }
-  const std::string why = answered ? "unconfirmed" : g.declined ? g.reason : "low score";
+  const std::string why = answered ? (expected ? "unconfirmed" : "unconfirmed, away from dead reckoning")
+                           : g.declined ? g.reason
+                                        : "low score";
   return fail(prior ? r.reason + ", global " + why : (s.fixed_once ? "global " : "no fix yet, global ") + why);
 }
 

@@ -142,6 +142,8 @@ def test_tracker(office_frames, office_map):
         lidar2d.Tracker(office_map, min_track_score=1.5)
     with pytest.raises(lidar2d.Error, match="sure_fix_score"):
         lidar2d.Tracker(office_map, sure_fix_score=float("nan"))
+    with pytest.raises(lidar2d.Error, match="confirm_fixes_against_odometry"):
+        lidar2d.Tracker(office_map, confirm_fixes_against_odometry=0)
     with pytest.raises(TypeError):
         tracker.add(np.zeros((10, 2)))
 

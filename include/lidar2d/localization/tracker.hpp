@@ -11,7 +11,8 @@
 /// the prior stays plausible. A scan that fails is tried at once by global localization (a robot
 /// carried elsewhere, "kidnapped", is found again); a global answer is taken only when it scores
 /// `min_global_score` and `confirm_fixes` answers in a row agree with the odometry between them, or
-/// at once when it scores `sure_fix_score`.
+/// at once when it scores `sure_fix_score`; an answer that contradicts dead reckoning from the last
+/// placed scan (odometry) needs `confirm_fixes_against_odometry` answers.
 /// Until then, or when global localization declines, the scan is
 /// `lost` and the prior is kept for the next scans, up to `max_lost_scans`, after which only global
 /// localization runs until it answers. A pose is never reported as `tracking` unless its match
@@ -59,6 +60,16 @@ struct TrackerOptions {
   /// explains this well is rarely placed wrong; the first fix then needs no second scan), in
   /// [0, 1]; above 1: off
   double sure_fix_score = 0.9;
+  /// A global answer that contradicts dead reckoning (the last checked pose moved by the odometry
+  /// since, within twice max_correction_m / max_correction_rad plus `dead_reckoning_drift_per_m`
+  /// and `dead_reckoning_drift_rad_per_m` per metre of odometry path) needs this many agreeing
+  /// answers in a row, and is never taken at once on its score: a place the map lacks that looks
+  /// like a mapped one tens of metres away gave three consistent answers on freiburg-079, while a
+  /// robot really carried elsewhere (kidnapped) goes on giving them. Without odometry, or before
+  /// the first fix, confirm_fixes applies; never fewer than confirm_fixes. >= 1
+  std::size_t confirm_fixes_against_odometry = 6;
+  double dead_reckoning_drift_per_m = 0.2;                                ///< [m/m], >= 0
+  double dead_reckoning_drift_rad_per_m = 5.0 * std::numbers::pi / 180.0;  ///< [rad/m], >= 0
   /// A match moving the pose farther than this from its prior fails (the prior, from odometry or
   /// constant velocity, is not that wrong between two scans; a larger jump is a wrong minimum) [m], > 0
   double max_correction_m = 0.5;
