@@ -220,6 +220,35 @@ TEST(Tracker, SameAccuracyPassAfterPass) {
   }
 }
 
+// With odometry, a match that moved far from its prior must explain more of the scan: a scan with
+// clutter (every third beam short) after a wheel slip (the odometry 0.4 m off on one step) is lost,
+// where the clutter alone, the slip alone or no such rule (correction_score_slope 0) is tracked.
+TEST(Tracker, AMatchFarFromTheOdometryPriorNeedsMoreOfTheScanExplained) {
+  const Office& o = office();
+  const std::size_t k = 30;
+  auto run = [&](bool slip, bool clutter, double slope) {
+    std::vector<Frame> frames(o.frames.begin(), o.frames.begin() + k + 1);
+    if (clutter) {
+      LaserScanFields f = frames[k].scan.fields();
+      for (std::size_t i = 0; i < f.ranges.size(); i += 3) f.ranges[i] *= 0.6;
+      frames[k].scan = LaserScan::create(f);
+    }
+    if (slip) frames[k].T_odom_robot = *frames[k].T_odom_robot * SE2(0.4, 0.0, 0.0);
+    TrackerOptions opt = fastOptions();
+    opt.correction_score_slope = slope;
+    Tracker tracker(o.map, std::nullopt, opt);
+    return trackAll(tracker, frames).back();
+  };
+  const double slope = fastOptions().correction_score_slope;
+  const TrackResult both = run(true, true, slope);
+  EXPECT_EQ(both.status, TrackStatus::kLost);
+  EXPECT_NE(both.reason.find("low score for its correction"), std::string::npos) << both.reason;
+  const TrackResult clutter = run(false, true, slope), slip = run(true, false, slope), off = run(true, true, 0.0);
+  EXPECT_EQ(clutter.status, TrackStatus::kTracking) << clutter.reason;
+  EXPECT_EQ(slip.status, TrackStatus::kTracking) << slip.reason;
+  EXPECT_EQ(off.status, TrackStatus::kTracking) << off.reason;
+}
+
 TEST(Tracker, ScanWithoutBeamsIsLostAndTrackingResumes) {
   const Office& o = office();
   Tracker tracker(o.map, std::nullopt, fastOptions());

@@ -211,6 +211,10 @@ void addTrackCommand(CLI::App& app) {
   sub->add_option("--min-score", a->options.min_track_score,
                   "a tracked scan explaining less than this fraction of its points fails")
       ->capture_default_str();
+  sub->add_option("--correction-score-slope", a->options.correction_score_slope,
+                  "with odometry, a tracked match must explain min-score + this x its correction from the prior "
+                  "(a share of 0.5 m / 15 deg)")
+      ->capture_default_str();
   sub->add_option("--min-global-score", a->options.min_global_score,
                   "a global fix scoring below this is not taken (the scan stays lost)")
       ->capture_default_str();

@@ -26,6 +26,8 @@ void TrackerOptions::validate() const {
   if (!(max_correction_rad > 0) || !std::isfinite(max_correction_rad))
     throw badOption("max_correction_rad", max_correction_rad);
   if (!(min_global_score >= 0 && min_global_score <= 1)) throw badOption("min_global_score", min_global_score);
+  if (!(correction_score_slope >= 0 && correction_score_slope <= 1))
+    throw badOption("correction_score_slope", correction_score_slope);
   if (confirm_fixes < 1) throw badOption("confirm_fixes", static_cast<double>(confirm_fixes));
   if (confirm_fixes_against_odometry < 1)
     throw badOption("confirm_fixes_against_odometry", static_cast<double>(confirm_fixes_against_odometry));
@@ -187,7 +189,15 @@ TrackResult Tracker::add(const Frame& frame) {
         why = "unconstrained";
       } else {
         r.score = s.loc->score(sub, m.T_target_source, sensor);
-        why = r.score < o.min_track_score ? "low score" : "";
+        // With odometry a large correction is itself unlikely: the further the match moved from
+        // the prior, the more of the scan it must explain (min_track_score at no correction, up to
+        // min_track_score + correction_score_slope at max_correction). On freiburg-079 a scan in a
+        // turn in place slid 14 degrees from a prior right to 1 degree, explaining 68% where the
+        // scans before had explained 93-96%.
+        const double moved = std::max(correction.translation().norm() / o.max_correction_m,
+                                      std::abs(correction.theta()) / o.max_correction_rad);
+        const double needed = o.min_track_score + (with_odometry ? o.correction_score_slope * moved : 0.0);
+        why = r.score < o.min_track_score ? "low score" : r.score < needed ? "low score for its correction" : "";
       }
       if (why.empty()) break;
     }

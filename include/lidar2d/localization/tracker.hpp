@@ -7,8 +7,9 @@
 /// (or, without odometry, by the last step: constant velocity), the scan is matched to the map's
 /// likelihood field from that prior (registration::matchLikelihoodField, Gauss-Newton with line
 /// search) and the match is accepted only when the map explains it (Localizer::score at least
-/// `min_track_score`: points on obstacles minus beams through obstacles) and the correction from
-/// the prior stays plausible. A scan that fails is tried at once by global localization (a robot
+/// `min_track_score`: points on obstacles minus beams through obstacles; with odometry more, the
+/// further the match moved from the prior: `correction_score_slope`) and the correction from the
+/// prior stays plausible. A scan that fails is tried at once by global localization (a robot
 /// carried elsewhere, "kidnapped", is found again); a global answer is taken only when it scores
 /// `min_global_score` and `confirm_fixes` answers in a row agree with the odometry between them, or
 /// at once when it scores `sure_fix_score`; an answer that contradicts dead reckoning from the last
@@ -47,6 +48,10 @@ struct TrackerOptions {
   registration::LikelihoodFieldOptions field = trackingField();
   std::size_t max_points = 240;  ///< scan points (evenly subsampled) used to match and score a tracked scan, >= 10
   double min_track_score = 0.5;  ///< a tracked match explaining less of the scan than this (Localizer::score) fails, in [0, 1]
+  /// With odometry, a tracked match must also explain min_track_score + this x its correction (the
+  /// larger of the distance and the turn from the prior, each as a share of max_correction_m /
+  /// max_correction_rad): a match that moved far from a good prior needs more evidence, in [0, 1]
+  double correction_score_slope = 0.3;
   /// A global fix scoring below this is not taken (the scan stays `lost`): stricter than the
   /// localizer's own min_score, because the scans after a fix are tracked from it, and a wrong fix
   /// in a part of the building the map lacks (a room like a mapped one) would be tracked on, in [0, 1]
