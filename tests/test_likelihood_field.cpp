@@ -288,6 +288,25 @@ TEST(LikelihoodField, GradientMatchesNumericDifferences) {
   EXPECT_GT(checked, 300);
 }
 
+TEST(LikelihoodField, ValueIsSamplesValueToTheLastBit) {
+  const auto& sim = office();
+  const auto target = sim.scanAt(sim.route()[30].T_world_robot);
+  const auto field = LikelihoodField::fromPoints(target);
+  std::mt19937 rng(5);
+  for (int l = 0; l < field.numLevels(); ++l) {
+    const auto& lv = field.level(l);
+    std::uniform_int_distribution<std::size_t> pick(0, target.size() - 1);
+    // Also points beyond the grid and beyond the truncation.
+    std::uniform_real_distribution<double> off(-40.0 * lv.resolution, 40.0 * lv.resolution);
+    for (int n = 0; n < 2000; ++n) {
+      const Eigen::Vector2d p = target[pick(rng)] + Eigen::Vector2d(off(rng), off(rng));
+      EXPECT_EQ(field.value(p, l), field.sample(p, l).value) << "level " << l << " at " << p.transpose();
+    }
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_EQ(field.value(Eigen::Vector2d(nan, 0.0), l), lv.truncation);
+  }
+}
+
 TEST(LikelihoodField, InterpolatesTheNodesAndIsZeroOnAWall) {
   // A straight wall x = 1.013 seen by a sensor at the origin: the signed distance is 1.013 - x,
   // linear, so bilinear interpolation reproduces it exactly between nodes (sub-cell accurate).

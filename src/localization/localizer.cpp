@@ -135,7 +135,7 @@ ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, co
   for (const auto& p : points_robot) {
     if (!p.allFinite()) continue;
     ++n;
-    const double d = s.field.sample(T_world_robot * p, 0).value;
+    const double d = s.field.value(T_world_robot * p);
     hit += d < hd;
     if (d < hd) kernel += 1.0 - (d / hd) * (d / hd);
     // Free-space check: walk the beam cell by cell up to free_margin before the endpoint.
@@ -252,7 +252,7 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
       const SE2& guess = ranked[c].T_world_robot;
       double acc = 0;
       for (const auto& p : sub) {
-        const double v = s_->field.sample(guess * p, 0).value / pre_sigma;
+        const double v = s_->field.value(guess * p) / pre_sigma;
         acc += v < 1.0 ? 1.0 - v * v : 0.0;
       }
       pre[c] = {guess, acc / static_cast<double>(sub.size()), ranked[c].votes};
