@@ -253,9 +253,9 @@ TrackResult Tracker::add(const Frame& frame) {
     s.confirmations = 0;
     return r;
   }
-  const std::string why = answered ? (expected ? "unconfirmed" : "unconfirmed, away from dead reckoning")
-                           : g.declined ? g.reason
-                                        : "low score";
+  const std::string why = answered     ? (expected ? "unconfirmed" : "unconfirmed, away from dead reckoning")
+                          : g.declined ? g.reason
+                                       : "low score";
   return fail(prior ? r.reason + ", global " + why : (s.fixed_once ? "global " : "no fix yet, global ") + why);
 }
 

@@ -73,7 +73,7 @@ struct TrackerOptions {
   /// robot really carried elsewhere (kidnapped) goes on giving them. Without odometry, or before
   /// the first fix, confirm_fixes applies; never fewer than confirm_fixes. >= 1
   std::size_t confirm_fixes_against_odometry = 6;
-  double dead_reckoning_drift_per_m = 0.2;                                ///< [m/m], >= 0
+  double dead_reckoning_drift_per_m = 0.2;                                 ///< [m/m], >= 0
   double dead_reckoning_drift_rad_per_m = 5.0 * std::numbers::pi / 180.0;  ///< [rad/m], >= 0
   /// A match moving the pose farther than this from its prior fails (the prior, from odometry or
   /// constant velocity, is not that wrong between two scans; a larger jump is a wrong minimum) [m], > 0
