@@ -220,6 +220,27 @@ TEST(FirstHour, InfoDurationIsUnknownWhenTheClockIsBroken) {
   EXPECT_EQ(j["duration_unknown"].get<std::string>(), "");
 }
 
+TEST(FirstHour, InfoWarnsOfReturnsBeyondTheDeclaredRangeMax) {
+  TempDir tmp;
+  // A declared range max of 10 m, a laser that reads walls at 12-15 m and 51.15 for no return (as
+  // edmonton's log): the 12-15 m returns are dropped, and info says so; the no-return code is not
+  // counted.
+  auto scan = [](const std::string& t) {
+    return "FLASER 5 2 12.5 15 51.15 51.15 0 0 0 0 0 0 " + t + " host " + t + "\n";
+  };
+  const std::string scans = scan("1") + scan("2") + scan("3");
+  test::writeFile(tmp / "short.log", "PARAM robot_front_laser_max 10 nohost 0\n" + scans);
+  nlohmann::json j = infoJson(tmp / "short.log");
+  EXPECT_EQ(j["beams_beyond_range_max"].get<int>(), 6) << j.dump(2);
+  EXPECT_NE(j["warnings"].dump().find("40.0% of the beams read beyond the range max (10.00 m"), std::string::npos)
+      << j.dump(2);
+  // With the default range max (80 m) they are returns, and 51.15 too.
+  test::writeFile(tmp / "long.log", scans);
+  j = infoJson(tmp / "long.log");
+  EXPECT_EQ(j["beams_beyond_range_max"].get<int>(), 0) << j.dump(2);
+  EXPECT_EQ(j["warnings"].dump().find("beyond the range max"), std::string::npos) << j.dump(2);
+}
+
 TEST(FirstHour, InfoOnTheInfiniteCorridorSaysWhyItHasNoDuration) {
   LIDAR2D_REQUIRE_DATA("corrected/infinite-corridor.log.gz");
   const nlohmann::json j = infoJson(test::dataFile("corrected/infinite-corridor.log.gz"));
