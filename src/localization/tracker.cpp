@@ -91,7 +91,9 @@ struct Tracker::State {
   std::optional<SE2> dead_reckoned;
   double dead_reckoned_path_m = 0.0;
 
+  /// A checked pose: the new pose and the new start of dead reckoning.
   void placed(const SE2& T) {
+    pose = T;
     dead_reckoned = T;
     dead_reckoned_path_m = 0.0;
   }
@@ -205,7 +207,6 @@ TrackResult Tracker::add(const Frame& frame) {
     if (why.empty()) {
       // The step is measured between checked poses only; carried priors are not evidence.
       if (s.lost == 0) s.step = s.pose->inverse() * m.T_target_source;
-      s.pose = m.T_target_source;
       s.placed(m.T_target_source);
       s.lost = 0;
       s.candidate.reset();
@@ -243,7 +244,6 @@ TrackResult Tracker::add(const Frame& frame) {
     r.relocalized = s.fixed_once;
     r.reason.clear();
     s.fixed_once = true;
-    s.pose = g.T_world_robot;
     s.placed(g.T_world_robot);
     // The step between the last two agreeing answers: the constant-velocity prior of the next scan
     // when there is no odometry (standing still would be metres off on a log of keyframes).

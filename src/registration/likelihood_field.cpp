@@ -104,17 +104,13 @@ void splatSegments(LikelihoodField::Level& lv, const std::vector<internal::Segme
 inline LikelihoodField::Sample sampleLevel(const LikelihoodField::Level& lv, const Eigen::Vector2d& p) {
   LikelihoodField::Sample s;
   s.value = lv.truncation;
-  const double inv_res = lv.inv_resolution;  // (multiplying: a division per coordinate cost a fifth of the time)
-  const double ux = (p.x() - lv.origin.x()) * inv_res, uy = (p.y() - lv.origin.y()) * inv_res;
-  // The negated comparison also rejects NaN.
-  if (!(ux >= 0.0 && uy >= 0.0 && ux < lv.width - 1 && uy < lv.height - 1)) return s;
-  const int i = static_cast<int>(ux), j = static_cast<int>(uy);
-  const double fx = ux - i, fy = uy - j;
-  const std::size_t k = static_cast<std::size_t>(j) * static_cast<std::size_t>(lv.width) + static_cast<std::size_t>(i);
-  const float* row0 = lv.values.data() + k;
+  const LikelihoodField::Level::Cell c = lv.cellAt(p);
+  if (!c.row0) return s;
+  const float* row0 = c.row0;
   const float* row1 = row0 + lv.width;
   const double v00 = row0[0], v10 = row0[1], v01 = row1[0], v11 = row1[1];
-  s.value = (1 - fx) * (1 - fy) * v00 + fx * (1 - fy) * v10 + (1 - fx) * fy * v01 + fx * fy * v11;
+  const double fx = c.fx, fy = c.fy, inv_res = lv.inv_resolution;
+  s.value = lv.interpolate(c);
   s.gradient.x() = ((1 - fy) * (v10 - v00) + fy * (v11 - v01)) * inv_res;
   s.gradient.y() = ((1 - fx) * (v01 - v00) + fx * (v11 - v10)) * inv_res;
   const float t = static_cast<float>(lv.truncation);

@@ -177,8 +177,8 @@ struct Slam::Impl {
   // Nodes the back end may be behind by before `add` waits for it: a bound on the queue's memory
   // (each holds a scan and its points, under 20 KB for 361 beams: at most about 20 MB). A log
   // replayed as fast as possible runs ahead of the back end; a scan that waits for it is not slower
-  // to match, so the bound is set well above what such replays reach (Intel's 45 minutes in 7 s:
-  // the back end 381 nodes behind at worst; 64 made its scans wait up to 100 ms).
+  // to match, so the bound is set well above what such replays reach (Intel's 45 minutes in 8 s:
+  // the back end 381 nodes behind at worst), and their scans' times are the front end's.
   static constexpr std::size_t kMaxQueuedNodes = 1024;
 
   Impl(const SlamOptions& o, std::string session)

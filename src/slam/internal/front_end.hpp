@@ -81,11 +81,11 @@ class FrontEnd {
   /// keeps the prediction along the corridor, a guess after a gap); or about as much with a
   /// clearly lower residual cost.
   static bool replaces(const Candidate& c, const Candidate& best);
+
+ private:
   // Two matches explaining about as much: the prior prefers one when its log-density is this much
   // higher (2 nats: one within 1 sigma of the prediction against one beyond 2.2 sigmas).
   static constexpr double kPriorTieNats = 2.0;
-
- private:
   static constexpr double kConfirmExplained = 0.9;     // a match explaining this much confirms its start
   static constexpr double kEarlierWithOdometry = 0.8;  // see frontEndMatch's `earlier`
   // A prior wider than this (sigma) is beyond ICP's basin of convergence: the correlative search
