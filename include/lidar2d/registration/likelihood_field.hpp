@@ -108,8 +108,9 @@ class LikelihoodField {
       // The negated comparison also rejects NaN.
       if (!(ux >= 0.0 && uy >= 0.0 && ux < width - 1 && uy < height - 1)) return {};
       const int i = static_cast<int>(ux), j = static_cast<int>(uy);
-      return {values.data() + static_cast<std::size_t>(j) * static_cast<std::size_t>(width) + static_cast<std::size_t>(i),
-              ux - i, uy - j};
+      return {
+          values.data() + static_cast<std::size_t>(j) * static_cast<std::size_t>(width) + static_cast<std::size_t>(i),
+          ux - i, uy - j};
     }
     /// The bilinear interpolation of the cell's four nodes (c.row0 not null).
     double interpolate(const Cell& c) const {
