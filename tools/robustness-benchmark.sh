@@ -11,6 +11,10 @@
 #              stamps repeat (`lidar2d info`: time_repeats > 0) get --synthesize-times 1 (they hold
 #              keyframes 0.5-3 m apart: 1 Hz is a robot at walking pace). Error: ATE against the
 #              log's truth.
+#   floor      every log in ../shared/data/corrected, dense, its odometry the truth itself (perturb
+#              --odom-noise 0,0,0): what SLAM's scan matching and loop closures make of perfect
+#              odometry, i.e. how far its scan-consistent answer lies from the log's truth (itself the
+#              output of another SLAM system). Not in the default set. Error: ATE against the truth.
 #   raw        the three raw bags as they are, with a 10 s gap at their largest turn (perturb
 #              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), and with
 #              slam --no-odometry. Error: Kuemmerle relations (mean +- std).
@@ -39,7 +43,7 @@ while [ $# -gt 0 ]; do
     --quick) QUICK=1 ;;
     --part)
       shift
-      case "${1:-}" in corrected | raw | sim) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, raw, sim)" >&2; exit 2 ;; esac ;;
+      case "${1:-}" in corrected | floor | raw | sim) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, floor, raw, sim)" >&2; exit 2 ;; esac ;;
     --logs) shift; LOGS=",${1:-},";;
     -h | --help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     -*) echo "unknown option $1" >&2; exit 2 ;;
@@ -140,6 +144,20 @@ if want_part corrected; then
         run "$base $variant$tag s$seed" "$p" "$p" "$p"
       done
     done
+  done
+fi
+
+if want_part floor; then
+  mkdir -p "$OUT/logs"
+  for log in "$DATA"/corrected/*.log.gz; do
+    base=$(basename "$log" .log.gz)
+    want_log "$base" || continue
+    clock=()
+    repeats=$("$BIN" info --json "$log" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("time_repeats", 0))')
+    [ "$repeats" -gt 0 ] && clock=(--synthesize-times 1)
+    p=$OUT/logs/$base-truth-odometry.log
+    perturb "$log" --odom-noise 0,0,0 "${clock[@]}" -o "$p" || continue
+    run "$base dense${clock:+ synth1Hz}, truth as odometry" "$p" "$p" "$p"
   done
 fi
 
