@@ -191,6 +191,48 @@ TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
   EXPECT_LT(nodes, traj.size());
 }
 
+// A loop closure in a corridor holds only across it: weakDirection finds the corridor's axis
+// (acceptLoop drops the closure's information along it); a room's walls pin every direction.
+TEST(SlamLoopClosure, ACorridorCannotPinTheAxisARoomPinsEverything) {
+  Points2 corridor, room;
+  for (double x = -5.0; x <= 5.0; x += 0.05) {
+    corridor.emplace_back(x, -1.0);
+    corridor.emplace_back(x, 1.0);
+  }
+  for (double t = -2.0; t <= 2.0; t += 0.05) {
+    room.emplace_back(t, -2.0);
+    room.emplace_back(t, 2.0);
+    room.emplace_back(-2.0, t);
+    room.emplace_back(2.0, t);
+  }
+  const SE2 T(0.02, -0.01, 0.5 * kDeg);  // the scan placed almost exactly
+  const auto axis = internal::weakDirection(registration::IcpTarget(corridor), corridor, T, 0.1, 0.04);
+  ASSERT_TRUE(axis.has_value());
+  EXPECT_NEAR(std::abs(axis->x()), 1.0, 1e-3);
+  EXPECT_FALSE(internal::weakDirection(registration::IcpTarget(room), room, T, 0.1, 0.04).has_value());
+  // Nothing matched (the scan 10 m away): no direction is shown to be weak.
+  EXPECT_FALSE(internal::weakDirection(registration::IcpTarget(room), room, SE2(10.0, 0.0, 0.0), 0.1, 0.04));
+}
+
+// Keyframes a metre apart: a submap's 30 nodes span tens of metres of path, and where the office
+// route comes back to a submap's first or last nodes its centre lies far away. Loop candidates go
+// by a submap's nearest node (when they went by its centre, this run closed no loop at all).
+TEST(Slam, KeyframesRevisitingTheEndOfALongSubmapCloseLoops) {
+  sim::LogPerturbationOptions po;
+  po.odometry = sim::realisticOdometryNoise();
+  po.keyframes.min_distance_m = 1.0;
+  po.keyframes.min_turn_rad = 30.0 * kDeg;
+  const auto frames = sim::perturbLog(simulateWorld("office"), po);
+  ASSERT_GT(frames.size(), 30u);
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  EXPECT_GT(slam->stats().loop_accepted, 0u);
+  EXPECT_EQ(slam->stats().fragments, 1u);
+  const Errors e = poseErrors(est, frames), odo = poseErrors(odometryInTruthFrame(frames), frames);
+  EXPECT_LT(e.rms, odo.rms / 5) << "SLAM rms " << e.rms << " m";
+}
+
 // A log whose clock wraps once (a negative time written as an unsigned 32-bit number, as in the
 // Infinite Corridor log) and then repeats one stamp on every scan: the stamps say nothing about the
 // steps, so the odometry's own uncertainty sizes the search, as on the same log with good stamps.

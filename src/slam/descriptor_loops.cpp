@@ -107,10 +107,13 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
   const Points2& pts = s_.node_points[n];
   const Points2 coarse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
   // How well the submaps around the current estimate explain the scan where it is now: when they
-  // do, the estimate has not drifted and a hypothesis elsewhere is an aliased place.
+  // do, the estimate has not drifted and a hypothesis elsewhere is an aliased place. Only submaps
+  // as old as the ones queried: the recent ones were built since the drift, in its frame, and
+  // explain the scan however far the estimate has drifted.
   double current_explained = 0.0;
   for (std::size_t s = 0; s < s_.submaps.size(); ++s)
-    if (covered[s] && s_.submaps[s].icp)
+    if (covered[s] && s_.submaps[s].icp &&
+        s_.submaps[s].nodes.back() + static_cast<std::size_t>(opt.descriptor_min_age_nodes) <= n)
       current_explained =
           std::max(current_explained,
                    explainedFraction(*s_.submaps[s].icp, pts,
@@ -131,6 +134,15 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
     if (dup) continue;
     tried.push_back(guess_world);
     ++s_.stats.descriptor_hypotheses;
+    // Near the estimate: within the proximity search's window of it, a place that search could
+    // have found itself (a competitor only). Not "in a submap it considers": a submap's 30 nodes
+    // may span tens of metres, and its far end lies beyond that window.
+    const auto nearEstimate = [&](const SE2& T_world) {
+      return covered[h.submap] &&
+             (T_world.translation() - node.T_world_robot.translation()).norm() <= opt.loop_linear_window_m &&
+             std::abs(angleDiff(T_world.theta(), node.T_world_robot.theta())) <= opt.loop_angular_window_rad;
+    };
+    bool near = nearEstimate(guess_world);
     const auto cr =
         registration::matchCorrelative(closure_.gridOf(h.submap), coarse, h.T_anchor_node, descriptor_search);
     if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) continue;  // no candidate: nothing to record
@@ -146,6 +158,7 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
       // The correction the closure makes to the current estimate must fit the drift the front end
       // can have accumulated since it last saw that submap.
       const SE2 implied = T_world_anchor * c.T_from_to;
+      near = nearEstimate(implied);
       const double correction = (implied.translation() - node.T_world_robot.translation()).norm();
       const double turn = std::abs(angleDiff(implied.theta(), node.T_world_robot.theta()));
       const double path = s_.node_path_m[n] - s_.node_path_m[sm.nodes.back()];
@@ -159,7 +172,7 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
                  through > opt.descriptor_max_see_through) {
         c.accepted = false;
         c.reason = fmt::format("sees through the submap's walls ({:.0f}% of the beams)", 100.0 * through);
-      } else if (!covered[h.submap] && current_explained >= opt.loop_min_explained_fraction) {
+      } else if (!near && current_explained >= opt.loop_min_explained_fraction) {
         c.accepted = false;
         c.reason =
             fmt::format("the current estimate explains {:.0f}% of the points already", 100.0 * current_explained);
@@ -167,8 +180,8 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
     }
     if (c.accepted) {
       passed.push_back(std::move(c));
-      passed_covered.push_back(covered[h.submap]);
-    } else if (!covered[h.submap]) {
+      passed_covered.push_back(near);
+    } else if (!near) {
       ++s_.stats.loop_rejected;
       s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
     }

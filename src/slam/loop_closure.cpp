@@ -24,17 +24,14 @@ using registration::IcpTarget;
 void LoopClosure::finishSubmap(Submap& sm) {
   const SE2 T_anchor_local = s_.nodes[sm.anchor].T_local_robot.inverse();
   sm.points_anchor.clear();
-  Eigen::Vector2d center = Eigen::Vector2d::Zero();
   sm.nodes_min_anchor = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
   sm.nodes_max_anchor = -sm.nodes_min_anchor;
   for (std::size_t n : sm.nodes) {
     const SE2 T = T_anchor_local * s_.nodes[n].T_local_robot;
-    center += T.translation();
     sm.nodes_min_anchor = sm.nodes_min_anchor.cwiseMin(T.translation());
     sm.nodes_max_anchor = sm.nodes_max_anchor.cwiseMax(T.translation());
     for (const auto& p : s_.node_points[n]) sm.points_anchor.push_back(T * p);
   }
-  sm.center_anchor = center / static_cast<double>(sm.nodes.size());
   sm.points_anchor = voxelFilter(sm.points_anchor, opt.map_voxel_m);
   sm.icp = std::make_unique<IcpTarget>(sm.points_anchor, loop_icp);
   sm.finished = true;
@@ -47,13 +44,23 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   // Candidate submaps by distance, nearest first.
   std::vector<std::pair<double, std::size_t>> candidates;
   std::vector<char> covered(s_.submaps.size(), 0);  // submaps this search considers
+  const bool unplaced = s_.untied_since && n >= *s_.untied_since &&
+                        !(s_.restart_odometry && s_.restart_odometry->node == *s_.untied_since);
   for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
     const Submap& sm = s_.submaps[s];
     if (!sm.finished) continue;
     // Submaps still in the local map are tied to this node by the sequential chain already.
     if (sm.nodes.back() + static_cast<std::size_t>(opt.local_map_nodes) >= n) continue;
-    const Eigen::Vector2d center_world = s_.nodes[sm.anchor].T_world_robot * sm.center_anchor;
-    const double d = (center_world - node.T_world_robot.translation()).norm();
+    // A fragment not yet tied to the map before it, with no odometry across the break (a resumed
+    // session, or a lost track without odometry), lies where it was only guessed to be: its distance
+    // to that map's submaps means nothing (searchUntied and the descriptors look for its place).
+    if (unplaced && sm.nodes.back() < *s_.untied_since) continue;
+    // The distance to the submap's nearest node, not to its centre: on a log with scans metres apart
+    // a submap's nodes span tens of metres of path, and a revisit of one end lies far from the
+    // centre of an L-shaped or U-shaped stretch.
+    double d = std::numeric_limits<double>::infinity();
+    for (std::size_t k : sm.nodes)
+      d = std::min(d, (s_.nodes[k].T_world_robot.translation() - node.T_world_robot.translation()).norm());
     if (d <= opt.loop_search_radius_m) {
       candidates.emplace_back(d, s);
       covered[s] = 1;
@@ -235,7 +242,19 @@ void LoopClosure::submitSearched(Constraint c, Submap& sm, std::optional<Constra
 
 void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   ++s_.stats.loop_accepted;
-  if (!s_.last_loop_node || c.to > *s_.last_loop_node) s_.last_loop_node = c.to;
+  // Along a direction the submap cannot pin the scan (a corridor's axis) the closure holds wherever
+  // the estimate put it: it constrains only the other directions, and it does not show the
+  // estimate to be right (the descriptor search keeps looking for the drift along the corridor).
+  const std::optional<Eigen::Vector2d> weak =
+      weakDirection(*sm.icp, s_.node_points[c.to], c.T_from_to, opt.match_inlier_distance_m, opt.degeneracy_threshold);
+  Eigen::Matrix3d sqrt_info = diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad);
+  if (weak) {
+    sqrt_info.setZero();
+    sqrt_info.block<1, 2>(0, 0) = Eigen::Vector2d(-weak->y(), weak->x()).transpose() / opt.loop_sigma_m;
+    sqrt_info(2, 2) = 1.0 / opt.loop_sigma_rad;
+  } else if (!s_.last_loop_node || c.to > *s_.last_loop_node) {
+    s_.last_loop_node = c.to;
+  }
   const bool descriptor = c.descriptor;
   if (descriptor) {
     ++s_.stats.descriptor_accepted;
@@ -265,7 +284,7 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   // A descriptor closure corrects metres of drift: under the robust loss it could not pull the
   // chain of stiff front-end edges that far. It has passed the stricter tests (and a second
   // closure confirms it), so it is a plain quadratic constraint.
-  s_.addEdge(std::move(c), diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad), descriptor ? 0.0 : opt.loop_huber);
+  s_.addEdge(std::move(c), sqrt_info, descriptor ? 0.0 : opt.loop_huber);
 }
 
 void LoopClosure::dropCarriedOdometry(const Constraint& c) {

@@ -1,5 +1,6 @@
 #include "src/slam/internal/points.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <cstdint>
 #include <unordered_map>
@@ -71,6 +72,24 @@ Overlap overlapWith(const registration::IcpTarget& target, const Points2& pts, c
   o.overlap = static_cast<double>(overlapping) / n;
   o.explained_in_overlap = overlapping > 0 ? static_cast<double>(inliers) / static_cast<double>(overlapping) : 0.0;
   return o;
+}
+
+std::optional<Eigen::Vector2d> weakDirection(const registration::IcpTarget& target, const Points2& pts, const SE2& T,
+                                             double inlier_m, double threshold) {
+  const Points2& normals = target.normals();
+  Eigen::Matrix2d H = Eigen::Matrix2d::Zero();
+  std::size_t matched = 0;
+  for (const auto& p : pts) {
+    double d2 = 0.0;
+    const std::size_t i = target.nearestWithin(T * p, inlier_m * inlier_m, &d2);
+    if (i >= target.size() || normals[i].squaredNorm() < 0.5) continue;
+    H += normals[i] * normals[i].transpose();
+    ++matched;
+  }
+  if (matched == 0) return std::nullopt;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(H / static_cast<double>(matched));
+  if (es.info() != Eigen::Success || !(es.eigenvalues()(0) < threshold)) return std::nullopt;
+  return es.eigenvectors().col(0).normalized();
 }
 
 }  // namespace lidar2d::slam::internal

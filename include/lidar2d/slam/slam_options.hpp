@@ -275,7 +275,7 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "log-likelihood per point it explains, minus half its squared distance in sigmas"},
     {LIDAR2D_SLAM_FIELD(submap_nodes), "submaps", "nodes", OptionRange::atLeast(2), "nodes per submap"},
     {LIDAR2D_SLAM_FIELD(loop_search_radius_m), "loop closure", "m", OptionRange::above(0),
-     "finished submaps whose centre is nearer than this to the node are candidates"},
+     "finished submaps with a node nearer than this to the node are candidates"},
     {LIDAR2D_SLAM_FIELD(loop_search_every_nodes), "loop closure", "nodes", OptionRange::atLeast(1),
      "branch-and-bound search for one node in this many"},
     {LIDAR2D_SLAM_FIELD(loop_searches_per_node), "loop closure", "searches", OptionRange::atLeast(1),

@@ -2,6 +2,8 @@
 // Point sets of the SLAM pipeline: a scan's points in the robot frame, the voxel filter, and how
 // much of a scan a target explains.
 
+#include <optional>
+
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/registration/icp.hpp"
 
@@ -17,6 +19,14 @@ Points2 voxelFilter(const Points2& pts, double cell_m);
 /// The share of `pts` that lie within `inlier_m` of a point of `target` once moved by T; 0 for no
 /// points.
 double explainedFraction(const registration::IcpTarget& target, const Points2& pts, const SE2& T, double inlier_m);
+
+/// The direction a target cannot pin `pts` along once moved by T (a corridor's axis, target
+/// frame), or nullopt when it pins every direction: the weakest eigen-direction of the
+/// translational information per matched point (the mean of n n^T over the points within
+/// `inlier_m` of a target point with a line, n its normal), when its eigenvalue is below
+/// `threshold`; nullopt also when no point matches a line (nothing shows a direction to be weak).
+std::optional<Eigen::Vector2d> weakDirection(const registration::IcpTarget& target, const Points2& pts, const SE2& T,
+                                             double inlier_m, double threshold);
 
 /// How much of a scan a target explains where they overlap.
 struct Overlap {

@@ -39,7 +39,6 @@ struct Submap {
   std::vector<std::size_t> nodes;
   bool finished = false;
   Points2 points_anchor;
-  Eigen::Vector2d center_anchor = Eigen::Vector2d::Zero();
   Eigen::Vector2d nodes_min_anchor = Eigen::Vector2d::Zero();  // the box its nodes were in (anchor frame)
   Eigen::Vector2d nodes_max_anchor = Eigen::Vector2d::Zero();
   std::unique_ptr<registration::IcpTarget> icp;
