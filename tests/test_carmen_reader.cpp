@@ -514,6 +514,37 @@ TEST_F(CarmenSynthetic, FirstLaserTypeIsReadAndOthersSkipped) {
   EXPECT_TRUE(hasWarning(r.notes, "skipped other laser messages: 1 FLASER"));
 }
 
+// A declared range max below what the laser measured (edmonton's PARAM robot_front_laser_max 10):
+// ReaderOptions::laser_range_max replaces it, the readings below it become returns, the no-return
+// code above it stays none.
+TEST_F(CarmenSynthetic, ARangeMaxFromTheOptionsReplacesTheLogs) {
+  const std::string path =
+      write("PARAM robot_front_laser_max 10 nohost 0\nFLASER 4 2 12.5 25 51.15 0 0 0 0 0 0 1 host 1\n");
+  auto r = readWithNotes(path);
+  ASSERT_EQ(r.frames.size(), 1u);
+  EXPECT_DOUBLE_EQ(r.frames[0].scan.rangeMax(), 10.0);
+  EXPECT_EQ(r.frames[0].scan.numValid(), 1u);
+  ReaderOptions o;
+  o.laser_range_max = 50.0;
+  r = readWithNotes(path, o);
+  ASSERT_EQ(r.frames.size(), 1u);
+  const LaserScan& s = r.frames[0].scan;
+  EXPECT_DOUBLE_EQ(s.rangeMax(), 50.0);
+  EXPECT_EQ(s.validIndices(), (std::vector<std::size_t>{0, 1, 2}));
+  EXPECT_DOUBLE_EQ(s.ranges()[2], 25.0);
+  EXPECT_NE(r.notes.scan_source.find("range max 50 m given by the options"), std::string::npos) << r.notes.scan_source;
+  for (const double bad : {0.0, -1.0, std::nan(""), 2000.0}) {
+    o.laser_range_max = bad;
+    try {
+      io::openLog(path, o);
+      FAIL() << bad << ": no throw";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument) << bad;
+      EXPECT_NE(std::string(e.what()).find("laser_range_max"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST_F(CarmenSynthetic, UnknownLaserOptionIsAnInvalidArgument) {
   ReaderOptions o;
   o.carmen_laser = "LASER9";

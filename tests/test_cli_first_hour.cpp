@@ -234,6 +234,19 @@ TEST(FirstHour, InfoWarnsOfReturnsBeyondTheDeclaredRangeMax) {
   EXPECT_EQ(j["beams_beyond_range_max"].get<int>(), 6) << j.dump(2);
   EXPECT_NE(j["warnings"].dump().find("40.0% of the beams read beyond the range max (10.00 m"), std::string::npos)
       << j.dump(2);
+  // --laser-range-max reads them: below it returns, the no-return code above it none.
+  CliResult r = runCli({"info", "--json", (tmp / "short.log").string(), "--laser-range-max", "50"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["beams_beyond_range_max"].get<int>(), 0) << j.dump(2);
+  EXPECT_EQ(j["warnings"].dump().find("beyond the range max"), std::string::npos) << j.dump(2);
+  r = runCli({"info", (tmp / "short.log").string(), "--laser-range-max", "-1"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("--laser-range-max: must be a finite number > 0"), std::string::npos) << r.err;
+  r = runCli({"info", (tmp / "short.log").string(), "--laser-range-max", "2000"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("laser range max must be in (0, 1000] m"), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
   // With the default range max (80 m) they are returns, and 51.15 too.
   test::writeFile(tmp / "long.log", scans);
   j = infoJson(tmp / "long.log");

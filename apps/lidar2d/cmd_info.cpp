@@ -170,8 +170,9 @@ nlohmann::json summarise(const InfoArgs& args) {
       warnings.push_back(fmt::format(
           "{:.1f}% of the beams read beyond the range max ({:.2f} m of the first scan) and are not the log's no-return "
           "reading ({:.2f} m, the most frequent there): they count as no return; the laser may measure farther than "
-          "its declared range max (CARMEN: PARAM robot_front_laser_max, laser_front_laser_max_range)",
-          100.0 * share, range_max, code->first));
+          "its declared range max (CARMEN: PARAM robot_front_laser_max, laser_front_laser_max_range); "
+          "--laser-range-max R, R below {:.2f}, reads them as returns",
+          100.0 * share, range_max, code->first, code->first));
   }
   j["beams_beyond_range_max"] = beyond;
   j["warnings"] = warnings;

@@ -168,6 +168,12 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
          "per laser in their order (default: from the log)")
       ->allow_extra_args(false)
       ->type_name("X,Y,THETA_DEG[,flipped]|X,Y,Z,R,P,Y");
+  sub->add_option_function<double>(
+         "--laser-range-max", [&options](double r) { options.laser_range_max = r; },
+         "the laser's range max [m], replacing the log's: readings at or beyond it are no return, those below it "
+         "returns (for a log that declares less than its laser measures: `lidar2d info` warns; default: the log's)")
+      ->check(positiveNumber())
+      ->type_name("METRES");
   sub->add_option("--max-tilt", options.max_laser_tilt_deg,
                   "a scan plane tilted from the robot's plane by at most this is taken as level [deg]")
       ->check(CLI::Range(0.0, 45.0))

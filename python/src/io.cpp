@@ -53,8 +53,10 @@ class LogReader {
 };
 
 io::ReaderOptions readerOptions(const std::string& scan_topic, const std::string& odom_topic,
-                                const std::string& carmen_laser, const std::optional<SE2>& laser_pose) {
+                                const std::string& carmen_laser, const std::optional<SE2>& laser_pose,
+                                std::optional<double> laser_range_max) {
   io::ReaderOptions o;
+  o.laser_range_max = laser_range_max;
   o.scan_topic = scan_topic;
   o.odom_topic = odom_topic;
   o.carmen_laser = carmen_laser;
@@ -86,18 +88,20 @@ void bindIo(py::module_& m) {
 
   m.def("read_log",
         [](const py::object& path, const std::string& scan_topic, const std::string& odom_topic,
-           const std::string& carmen_laser, std::optional<SE2> laser_pose, bool read_ahead) {
+           const std::string& carmen_laser, std::optional<SE2> laser_pose, std::optional<double> laser_range_max,
+           bool read_ahead) {
           const std::string p = py::str(path).cast<std::string>();
-          const io::ReaderOptions o = readerOptions(scan_topic, odom_topic, carmen_laser, laser_pose);
+          const io::ReaderOptions o = readerOptions(scan_topic, odom_topic, carmen_laser, laser_pose, laser_range_max);
           py::gil_scoped_release release;
           return std::make_unique<LogReader>(p, o, read_ahead);
         },
         py::arg("path"), py::arg("scan_topic") = "", py::arg("odom_topic") = "", py::arg("carmen_laser") = "",
-        py::arg("laser_pose") = py::none(), py::arg("read_ahead") = true,
+        py::arg("laser_pose") = py::none(), py::arg("laser_range_max") = py::none(), py::arg("read_ahead") = true,
         "Opens any supported log (CARMEN, ROS1 bag, ROS2 bag, range table) and returns an iterator of\n"
         "Frame in file order. Errors (missing file, malformed content) raise lidar2d.Error naming the\n"
         "file, line and field: at open, or at the frame where they occur. laser_pose replaces the log's\n"
-        "laser mounting; read_ahead parses the next frames on a second thread.");
+        "laser mounting; laser_range_max [m] the log's range max (readings at or beyond it are no return);\n"
+        "read_ahead parses the next frames on a second thread.");
 
   m.def("read_trajectory", [](const py::object& path) {
         const std::string p = py::str(path).cast<std::string>();

@@ -96,6 +96,38 @@ class MountOverride final : public FrameSource {
   std::vector<std::string> warnings_;
 };
 
+/// `ReaderOptions::laser_range_max`: every scan rebuilt with that range max (validity recomputed
+/// from the raw readings, which the readers keep).
+class RangeMaxOverride final : public FrameSource {
+ public:
+  RangeMaxOverride(std::unique_ptr<FrameSource> inner, double range_max)
+      : inner_(std::move(inner)), range_max_(range_max) {}
+  std::optional<Frame> next() override {
+    std::optional<Frame> f = inner_->next();
+    if (!f) return f;
+    LaserScanFields fields = f->scan.fields();
+    if (!(range_max_ > fields.range_min))
+      throw invalidArgument(fmt::format("the laser range max {:g} m is not above the log's range min {:g} m",
+                                        range_max_, fields.range_min),
+                            {"ReaderOptions", 0, "laser_range_max"});
+    fields.range_max = range_max_;
+    f->scan = LaserScan::create(std::move(fields));
+    return f;
+  }
+  LogFormat format() const override { return inner_->format(); }
+  const std::string& path() const override { return inner_->path(); }
+  SourceNotes notes() const override {
+    SourceNotes n = inner_->notes();
+    n.scan_source += fmt::format(" (range max {:g} m given by the options, not the log)", range_max_);
+    return n;
+  }
+  std::optional<std::size_t> sizeHint() const override { return inner_->sizeHint(); }
+
+ private:
+  std::unique_ptr<FrameSource> inner_;
+  double range_max_;
+};
+
 std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOptions& options) {
   switch (detectFormat(path)) {
     case LogFormat::kCarmen:
@@ -169,8 +201,14 @@ std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOption
     mount = internal::applyTiltRule(*options.laser_mount, options, {"ReaderOptions", 0, "laser_mount"},
                                     "given by the options", mount_warnings);
   }
+  if (options.laser_range_max &&
+      !(*options.laser_range_max > 0.0 && *options.laser_range_max <= kMaxLaserRangeMax))
+    throw invalidArgument(fmt::format("the laser range max must be in (0, {:g}] m", kMaxLaserRangeMax),
+                          {"ReaderOptions", 0, "laser_range_max"});
   std::unique_ptr<FrameSource> source =
       options.range_table ? internal::openRangeTable(*options.range_table) : openFormat(path, options);
+  if (options.laser_range_max)
+    source = std::make_unique<RangeMaxOverride>(std::move(source), *options.laser_range_max);
   if (mount) return std::make_unique<MountOverride>(std::move(source), *mount, std::move(mount_warnings));
   return source;
 }

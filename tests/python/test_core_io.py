@@ -127,3 +127,17 @@ def test_simulate_and_worlds():
     assert len(a) == 5 and all(np.array_equal(x.ranges, y.ranges) for x, y in zip(a, b))
     with pytest.raises(lidar2d.Error, match="office"):
         lidar2d.simulate("nowhere")
+
+
+def test_read_log_laser_range_max(tmp_path):
+    # A declared range max of 10 m below what the laser read (edmonton's log): laser_range_max
+    # replaces it; the no-return code above it stays no return.
+    log = tmp_path / "declared.log"
+    log.write_text("PARAM robot_front_laser_max 10 nohost 0\n"
+                   "FLASER 4 2 12.5 25 51.15 0 0 0 0 0 0 1 host 1\n")
+    (frame,) = list(lidar2d.read_log(log))
+    assert list(frame.valid) == [True, False, False, False]
+    (frame,) = list(lidar2d.read_log(log, laser_range_max=50.0))
+    assert list(frame.valid) == [True, True, True, False]
+    with pytest.raises(lidar2d.Error, match="laser_range_max"):
+        lidar2d.read_log(log, laser_range_max=-1.0)

@@ -75,6 +75,12 @@ struct ReaderOptions {
   /// mounting), true projects its beams onto the robot's plane (`LaserMount::project`, each range
   /// shortened by the tilt) and says so in the notes' warnings.
   bool allow_tilted_laser = false;
+  /// The laser's range max [m], replacing the log's (CARMEN FLASER/RLASER: 80 m or a PARAM;
+  /// ROBOTLASER and ROS bags: each message's own): readings at or beyond it are no return, those
+  /// below it (and above range_min) valid. For a log that declares less than its laser measures
+  /// (`lidar2d info` warns, `beams_beyond_range_max`); above the log's no-return code, that code
+  /// becomes a return. Finite, in (0, kMaxLaserRangeMax]; std::nullopt keeps the log's.
+  std::optional<double> laser_range_max;
   /// A range table given file by file; when set, `openLog` reads it whatever its path argument.
   std::optional<RangeTableFiles> range_table;
 
@@ -100,6 +106,9 @@ struct ReaderOptions {
 /// The farthest a laser may be mounted from the robot's frame origin: `ReaderOptions::laser_mount`
 /// beyond it is an error (a mistyped unit, not a robot) [m].
 inline constexpr double kMaxLaserMountOffset = 100.0;
+/// The largest `ReaderOptions::laser_range_max` accepted [m]: no 2D laser measures a kilometre.
+inline constexpr double kMaxLaserRangeMax = 1000.0;
+
 /// Whether a mounting offset (x, y) [m] is within kMaxLaserMountOffset on both axes (false for NaN).
 inline bool laserMountOffsetOk(double x, double y) {
   return std::abs(x) <= kMaxLaserMountOffset && std::abs(y) <= kMaxLaserMountOffset;
