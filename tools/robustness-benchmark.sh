@@ -126,38 +126,38 @@ perturb() {
 emit "| run | scans | SLAM error | odometry error | loops accepted | fragments | wall [s] | p99 [ms/scan] | max [ms/scan] | peak MB |"
 emit "|---|---|---|---|---|---|---|---|---|---|"
 
-if want_part corrected; then
-  mkdir -p "$OUT/logs"
-  for log in "$DATA"/corrected/*.log.gz; do
-    base=$(basename "$log" .log.gz)
-    want_log "$base" || continue
-    clock=()
-    repeats=$("$BIN" info --json "$log" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("time_repeats", 0))')
-    [ "$repeats" -gt 0 ] && clock=(--synthesize-times 1)
-    tag=${clock:+ synth1Hz}
-    for seed in "${SEEDS[@]}"; do
-      for variant in dense kf; do
-        kf=()
-        [ "$variant" = kf ] && kf=(--keyframes 1,30)
-        p=$OUT/logs/$base-$variant-s$seed.log
-        perturb "$log" --odom-model realistic "${kf[@]}" "${clock[@]}" --seed "$seed" -o "$p" || continue
-        run "$base $variant$tag s$seed" "$p" "$p" "$p"
-      done
-    done
-  done
-fi
+# corrected_clock LOG: sets clock=(--synthesize-times 1) when LOG's stamps repeat, else clock=().
+corrected_clock() {
+  clock=()
+  local repeats
+  repeats=$("$BIN" info --json "$1" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("time_repeats", 0))')
+  [ "$repeats" -gt 0 ] && clock=(--synthesize-times 1)
+  return 0
+}
 
-if want_part floor; then
+if want_part corrected || want_part floor; then
   mkdir -p "$OUT/logs"
   for log in "$DATA"/corrected/*.log.gz; do
     base=$(basename "$log" .log.gz)
     want_log "$base" || continue
-    clock=()
-    repeats=$("$BIN" info --json "$log" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("time_repeats", 0))')
-    [ "$repeats" -gt 0 ] && clock=(--synthesize-times 1)
-    p=$OUT/logs/$base-truth-odometry.log
-    perturb "$log" --odom-noise 0,0,0 "${clock[@]}" -o "$p" || continue
-    run "$base dense${clock:+ synth1Hz}, truth as odometry" "$p" "$p" "$p"
+    corrected_clock "$log"
+    tag=${clock:+ synth1Hz}
+    if want_part corrected; then
+      for seed in "${SEEDS[@]}"; do
+        for variant in dense kf; do
+          kf=()
+          [ "$variant" = kf ] && kf=(--keyframes 1,30)
+          p=$OUT/logs/$base-$variant-s$seed.log
+          perturb "$log" --odom-model realistic "${kf[@]}" "${clock[@]}" --seed "$seed" -o "$p" || continue
+          run "$base $variant$tag s$seed" "$p" "$p" "$p"
+        done
+      done
+    fi
+    if want_part floor; then
+      p=$OUT/logs/$base-truth-odometry.log
+      perturb "$log" --odom-noise 0,0,0 "${clock[@]}" -o "$p" || continue
+      run "$base dense$tag, truth as odometry" "$p" "$p" "$p"
+    fi
   done
 fi
 
