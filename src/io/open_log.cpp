@@ -201,14 +201,12 @@ std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOption
     mount = internal::applyTiltRule(*options.laser_mount, options, {"ReaderOptions", 0, "laser_mount"},
                                     "given by the options", mount_warnings);
   }
-  if (options.laser_range_max &&
-      !(*options.laser_range_max > 0.0 && *options.laser_range_max <= kMaxLaserRangeMax))
+  if (options.laser_range_max && !(*options.laser_range_max > 0.0 && *options.laser_range_max <= kMaxLaserRangeMax))
     throw invalidArgument(fmt::format("the laser range max must be in (0, {:g}] m", kMaxLaserRangeMax),
                           {"ReaderOptions", 0, "laser_range_max"});
   std::unique_ptr<FrameSource> source =
       options.range_table ? internal::openRangeTable(*options.range_table) : openFormat(path, options);
-  if (options.laser_range_max)
-    source = std::make_unique<RangeMaxOverride>(std::move(source), *options.laser_range_max);
+  if (options.laser_range_max) source = std::make_unique<RangeMaxOverride>(std::move(source), *options.laser_range_max);
   if (mount) return std::make_unique<MountOverride>(std::move(source), *mount, std::move(mount_warnings));
   return source;
 }
