@@ -2,7 +2,6 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -260,11 +259,11 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
 void FrontEnd::remapDegenerate(Candidate& c, const SE2& T_pred) const {
   const registration::Result& res = c.res;
   if (res.num_inliers == 0) return;
-  const Eigen::Matrix2d Ht = res.information.topLeftCorner<2, 2>() / static_cast<double>(res.num_inliers);
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(Ht);
-  if (es.info() != Eigen::Success || !(es.eigenvalues()(0) < opt.degeneracy_threshold)) return;
+  const std::optional<Eigen::Vector2d> dir = weakestDirection(
+      res.information.topLeftCorner<2, 2>() / static_cast<double>(res.num_inliers), opt.degeneracy_threshold);
+  if (!dir) return;
   c.degenerate = true;
-  c.dir = es.eigenvectors().col(0).normalized();
+  c.dir = *dir;
   c.T = degeneracy::remapPose(T_pred, c.T, degeneracy::projectorRemovingDirection(std::atan2(c.dir.y(), c.dir.x())));
 }
 

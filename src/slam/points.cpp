@@ -87,7 +87,11 @@ std::optional<Eigen::Vector2d> weakDirection(const registration::IcpTarget& targ
     ++matched;
   }
   if (matched == 0) return std::nullopt;
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(H / static_cast<double>(matched));
+  return weakestDirection(H / static_cast<double>(matched), threshold);
+}
+
+std::optional<Eigen::Vector2d> weakestDirection(const Eigen::Matrix2d& H_per_point, double threshold) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(H_per_point);
   if (es.info() != Eigen::Success || !(es.eigenvalues()(0) < threshold)) return std::nullopt;
   return es.eigenvectors().col(0).normalized();
 }

@@ -28,6 +28,11 @@ double explainedFraction(const registration::IcpTarget& target, const Points2& p
 std::optional<Eigen::Vector2d> weakDirection(const registration::IcpTarget& target, const Points2& pts, const SE2& T,
                                              double inlier_m, double threshold);
 
+/// The eigen-direction of a translational information matrix per matched point (2x2) whose
+/// eigenvalue is the smallest, when that eigenvalue is below `threshold` (Zhang, Kaess & Singh
+/// 2016); nullopt otherwise or when the decomposition fails.
+std::optional<Eigen::Vector2d> weakestDirection(const Eigen::Matrix2d& H_per_point, double threshold);
+
 /// How much of a scan a target explains where they overlap.
 struct Overlap {
   double explained = 0.0;  ///< share of the points within `inlier_m` of the target (explainedFraction)
