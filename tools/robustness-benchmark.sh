@@ -126,21 +126,14 @@ perturb() {
 emit "| run | scans | SLAM error | odometry error | loops accepted | fragments | wall [s] | p99 [ms/scan] | max [ms/scan] | peak MB |"
 emit "|---|---|---|---|---|---|---|---|---|---|"
 
-# corrected_clock LOG: sets clock=(--synthesize-times 1) when LOG's stamps repeat, else clock=().
-corrected_clock() {
-  clock=()
-  local repeats
-  repeats=$("$BIN" info --json "$1" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("time_repeats", 0))')
-  [ "$repeats" -gt 0 ] && clock=(--synthesize-times 1)
-  return 0
-}
-
 if want_part corrected || want_part floor; then
   mkdir -p "$OUT/logs"
   for log in "$DATA"/corrected/*.log.gz; do
     base=$(basename "$log" .log.gz)
     want_log "$base" || continue
-    corrected_clock "$log"
+    clock=()
+    repeats=$("$BIN" info --json "$log" | python3 -c 'import json,sys; print(json.load(sys.stdin).get("time_repeats", 0))')
+    [ "$repeats" -gt 0 ] && clock=(--synthesize-times 1)
     tag=${clock:+ synth1Hz}
     if want_part corrected; then
       for seed in "${SEEDS[@]}"; do

@@ -25,12 +25,8 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool de
     sqrt_info = diagSqrtInfo(s.opt.odometry_sigma_m * 20.0, s.opt.odometry_sigma_rad * 20.0);
   } else if (degenerate) {
     // Along the degenerate direction the relative pose is as good as the prediction.
-    const Eigen::Vector2d v = prev.T_local_robot.rotation().transpose() * dir_local;
-    const Eigen::Vector2d p(-v.y(), v.x());
-    sqrt_info.setZero();
-    sqrt_info.block<1, 2>(0, 0) = v.transpose() / (s.opt.odometry_sigma_m * 2.0);
-    sqrt_info.block<1, 2>(1, 0) = p.transpose() / s.opt.sequential_sigma_m;
-    sqrt_info(2, 2) = 1.0 / s.opt.sequential_sigma_rad;
+    sqrt_info = directionalSqrtInfo(prev.T_local_robot.rotation().transpose() * dir_local, s.opt.odometry_sigma_m * 2.0,
+                                    s.opt.sequential_sigma_m, s.opt.sequential_sigma_rad);
   }
   s.addEdge(std::move(c), sqrt_info, 0.0);
   if (s.node_odometry[n - 1] && s.node_odometry[n]) {

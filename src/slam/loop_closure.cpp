@@ -44,8 +44,7 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   // Candidate submaps by distance, nearest first.
   std::vector<std::pair<double, std::size_t>> candidates;
   std::vector<char> covered(s_.submaps.size(), 0);  // submaps this search considers
-  const bool unplaced = s_.untied_since && n >= *s_.untied_since &&
-                        !(s_.restart_odometry && s_.restart_odometry->node == *s_.untied_since);
+  const bool unplaced = s_.untied_since && n >= *s_.untied_since && !s_.untiedHasOdometryLink();
   for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
     const Submap& sm = s_.submaps[s];
     if (!sm.finished) continue;
@@ -247,14 +246,10 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   // estimate to be right (the descriptor search keeps looking for the drift along the corridor).
   const std::optional<Eigen::Vector2d> weak =
       weakDirection(*sm.icp, s_.node_points[c.to], c.T_from_to, opt.match_inlier_distance_m, opt.degeneracy_threshold);
-  Eigen::Matrix3d sqrt_info = diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad);
-  if (weak) {
-    sqrt_info.setZero();
-    sqrt_info.block<1, 2>(0, 0) = Eigen::Vector2d(-weak->y(), weak->x()).transpose() / opt.loop_sigma_m;
-    sqrt_info(2, 2) = 1.0 / opt.loop_sigma_rad;
-  } else if (!s_.last_loop_node || c.to > *s_.last_loop_node) {
-    s_.last_loop_node = c.to;
-  }
+  const Eigen::Matrix3d sqrt_info =
+      weak ? directionalSqrtInfo(*weak, std::numeric_limits<double>::infinity(), opt.loop_sigma_m, opt.loop_sigma_rad)
+           : diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad);
+  if (!weak && (!s_.last_loop_node || c.to > *s_.last_loop_node)) s_.last_loop_node = c.to;
   const bool descriptor = c.descriptor;
   if (descriptor) {
     ++s_.stats.descriptor_accepted;
@@ -288,7 +283,7 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
 }
 
 void LoopClosure::dropCarriedOdometry(const Constraint& c) {
-  if (!s_.restart_odometry || s_.restart_odometry->node != *s_.untied_since) return;
+  if (!s_.untiedHasOdometryLink()) return;
   const SlamState::RestartOdometry ro = *s_.restart_odometry;
   s_.restart_odometry.reset();
   const std::size_t r = ro.node;

@@ -102,6 +102,11 @@ struct SlamState {
   // its `to` node), while the fragment is untied: the relocalization checks it.
   using RestartOdometry = State::RestartOdometry;
   std::optional<RestartOdometry> restart_odometry;
+  /// Whether an odometry constraint links the untied fragment to the map before it (false for a
+  /// resumed session or a lost track without odometry: the fragment's place is only a guess).
+  bool untiedHasOdometryLink() const {
+    return untied_since && restart_odometry && restart_odometry->node == *untied_since;
+  }
   std::vector<double> edge_scale;  // of `edges` at the latest optimisation (PoseGraphSummary::edge_scale)
   std::size_t nodes_since_optimization = 0;
   std::size_t loops_since_optimization = 0;
@@ -126,6 +131,17 @@ struct SlamState {
 /// The square-root information of independent x, y (sigma `sm`) and theta (sigma `sr`).
 inline Eigen::Matrix3d diagSqrtInfo(double sm, double sr) {
   return Eigen::Vector3d(1.0 / sm, 1.0 / sm, 1.0 / sr).asDiagonal();
+}
+
+/// The square-root information of a translation with sigma `s_along` along the unit direction
+/// `dir` (0 information for infinity) and `s_across` across it, and theta with sigma `sr`;
+/// `dir` in the frame of the edge's residual (its `from` node).
+inline Eigen::Matrix3d directionalSqrtInfo(const Eigen::Vector2d& dir, double s_along, double s_across, double sr) {
+  Eigen::Matrix3d sqrt_info = Eigen::Matrix3d::Zero();
+  sqrt_info.block<1, 2>(0, 0) = dir.transpose() / s_along;
+  sqrt_info.block<1, 2>(1, 0) = Eigen::Vector2d(-dir.y(), dir.x()).transpose() / s_across;
+  sqrt_info(2, 2) = 1.0 / sr;
+  return sqrt_info;
 }
 
 }  // namespace lidar2d::slam::internal
