@@ -246,7 +246,7 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   // estimate to be right (the descriptor search keeps looking for the drift along the corridor).
   const std::optional<Eigen::Vector2d> weak =
       weakDirection(*sm.icp, s_.node_points[c.to], c.T_from_to, opt.match_inlier_distance_m, opt.degeneracy_threshold);
-  const Eigen::Matrix3d sqrt_info =
+  Eigen::Matrix3d sqrt_info =
       weak ? directionalSqrtInfo(*weak, std::numeric_limits<double>::infinity(), opt.loop_sigma_m, opt.loop_sigma_rad)
            : diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad);
   if (!weak && (!s_.last_loop_node || c.to > *s_.last_loop_node)) s_.last_loop_node = c.to;
@@ -276,6 +276,25 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
     sm.last_link_T_anchor_node = c.T_from_to;
   }
   ++s_.loops_since_optimization;
+  // From the submap's node nearest the matched pose, not from its anchor: the match places the
+  // scan against the submap's points near that node, and on a log with scans metres apart the
+  // submap's far end lies tens of metres from its anchor, where the submap's own drift (a degree
+  // over 20 m is 0.35 m) would enter the closure.
+  const SE2 T_anchor_local = s_.nodes[sm.anchor].T_local_robot.inverse();
+  std::size_t nearest = sm.anchor;
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (const std::size_t k : sm.nodes) {
+    const double d = ((T_anchor_local * s_.nodes[k].T_local_robot).translation() - c.T_from_to.translation()).norm();
+    if (d < nearest_m) nearest_m = d, nearest = k;
+  }
+  if (nearest != sm.anchor) {
+    const SE2 T_anchor_nearest = T_anchor_local * s_.nodes[nearest].T_local_robot;
+    // The edge's translation error is expressed in its from-node's frame: the information's
+    // translational columns turn with it.
+    sqrt_info.leftCols<2>() = (sqrt_info.leftCols<2>() * T_anchor_nearest.rotation()).eval();
+    c.from = nearest;
+    c.T_from_to = T_anchor_nearest.inverse() * c.T_from_to;
+  }
   // A descriptor closure corrects metres of drift: under the robust loss it could not pull the
   // chain of stiff front-end edges that far. It has passed the stricter tests (and a second
   // closure confirms it), so it is a plain quadratic constraint.

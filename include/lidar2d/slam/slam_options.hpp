@@ -77,7 +77,10 @@ struct SlamOptions {
   double loop_search_radius_m = 5.0;
   int loop_search_every_nodes = 5;
   int loop_searches_per_node = 2;
-  double loop_linear_window_m = 2.0;
+  // Half-width of the proximity search's window: it must reach the revisit from where the
+  // running estimate puts it, which on long loops in corridors drifts 2-3 m before the loop closes
+  // (docs/slam.md, Loop closure).
+  double loop_linear_window_m = 3.0;
   double loop_angular_window_rad = 15.0 * kDeg;
   double loop_min_score = 0.55;
   double loop_min_explained_fraction = 0.7;
