@@ -124,6 +124,21 @@ TEST(SlamDescriptorLoops, ClosesALoopAfterDriftBeyondTheSearchRadius) {
   EXPECT_LT(with.ate, 0.8 * without.ate) << "without descriptors " << without.ate;
 }
 
+// The proximity search's window (`loop_linear_window_m`) has to reach a revisit from where the
+// running estimate puts it: back in the west room after metres of drift along the corridor,
+// the search alone (no descriptors) closes the loop with the default window, not with 2 m.
+TEST(SlamDescriptorLoops, TheProximitySearchReachesARevisitMetresOff) {
+  const auto frames = corridorThereAndBack(0.06, 1);
+  SlamOptions defaults;
+  defaults.descriptor_loops = false;
+  SlamOptions narrow = defaults;
+  narrow.loop_linear_window_m = 2.0;
+  const RunResult wide = runSlam(frames, defaults), two = runSlam(frames, narrow);
+  std::printf("end error %.2f m with the default window, %.2f m with 2 m\n", wide.end_error, two.end_error);
+  EXPECT_LT(wide.end_error, 0.5);
+  EXPECT_GT(two.end_error, 1.5);
+}
+
 TEST(SlamDescriptorLoops, CliRecordsDescriptorClosuresInGraphSummaryAndReport) {
   const auto frames = corridorThereAndBack(0.15, 1);
   test::TempDir t;
