@@ -3,7 +3,8 @@
 # not tuned on, made by `lidar2d perturb` (docs/perturb.md). Prints a markdown table, one row per run,
 # and writes it to OUT_DIR/robustness.md.
 #
-#   tools/robustness-benchmark.sh [--quick] [--part corrected|raw|sim]... [--logs NAME,...] [BUILD_DIR] [OUT_DIR]
+#   tools/robustness-benchmark.sh [--quick] [--seeds N,...] [--part corrected|floor|raw|sim]... [--logs NAME,...]
+#                                 [BUILD_DIR] [OUT_DIR]
 #
 # Parts (all by default; --part may be repeated):
 #   corrected  every log in ../shared/data/corrected, with realistic odometry (--odom-model realistic)
@@ -22,7 +23,8 @@
 #              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, and kidnapped (perturb
 #              --keep-odometry --kidnap 15: the robot carried for the 15 s in the middle of the log,
 #              its odometry unaware). Error: ATE.
-# --quick uses seed 1 only; --logs keeps only the logs / worlds named (e.g. --logs intel,orebro).
+# --quick uses seed 1 only; --seeds other seeds (e.g. --seeds 4,5,6: held-out runs for a change
+# tuned on seeds 1-3); --logs keeps only the logs / worlds named (e.g. --logs intel,orebro).
 #
 # Columns: the SLAM trajectory's error, the log's own odometry's error beside it (`lidar2d eval LOG
 # --truth T --estimate-from odometry`; "not used" for --no-odometry), loop closures accepted,
@@ -35,12 +37,17 @@
 set -euo pipefail
 
 QUICK=0
+SEED_LIST=""
 PARTS=()
 LOGS=""
 POSITIONAL=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) QUICK=1 ;;
+    --seeds)
+      shift
+      [[ "${1:-}" =~ ^[0-9]+(,[0-9]+)*$ ]] || { echo "--seeds wants a comma list of seeds, e.g. 4,5,6 (got '${1:-}')" >&2; exit 2; }
+      SEED_LIST=$1 ;;
     --part)
       shift
       case "${1:-}" in corrected | floor | raw | sim) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, floor, raw, sim)" >&2; exit 2 ;; esac ;;
@@ -58,6 +65,7 @@ DATA=${LIDAR2D_DATA_DIR:-$(cd "$(dirname "$0")/.." && pwd)/../shared/data}
 [ ${#PARTS[@]} -eq 0 ] && PARTS=(corrected raw sim)
 SEEDS=(1 2 3)
 [ "$QUICK" = 1 ] && SEEDS=(1)
+[ -n "$SEED_LIST" ] && IFS=, read -r -a SEEDS <<<"$SEED_LIST"
 [ -x "$BIN" ] || { echo "no lidar2d binary at $BIN (build the lidar2d_cli target)" >&2; exit 2; }
 mkdir -p "$OUT"
 TABLE=$OUT/robustness.md
