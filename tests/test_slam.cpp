@@ -34,6 +34,16 @@ std::vector<Frame> simulateWorld(const std::string& name, std::uint64_t seed = 1
   return sim::simulate(sc.world, sim::samplePath(sc.waypoints, po, scans), so);
 }
 
+/// The office world's route as keyframes a metre or 30 degrees apart, with realistic odometry: a
+/// submap's 30 nodes span tens of metres of path.
+std::vector<Frame> officeAsKeyframes() {
+  sim::LogPerturbationOptions po;
+  po.odometry = sim::realisticOdometryNoise();
+  po.keyframes.min_distance_m = 1.0;
+  po.keyframes.min_turn_rad = 30.0 * kDeg;
+  return sim::perturbLog(simulateWorld("office"), po);
+}
+
 struct Errors {
   double rms = 0.0, max = 0.0;
 };
@@ -196,11 +206,7 @@ TEST(Slam, OfficeWithOdometryIsAccurateAndClosesLoops) {
 // the submap's own drift over that distance would enter the closure (belgioioso's keyframes: 9
 // closures 0.4-0.55 m off the truth from 21-24 m away).
 TEST(Slam, LoopClosuresHangFromTheSubmapNodeNearestTheScan) {
-  sim::LogPerturbationOptions po;
-  po.odometry = sim::realisticOdometryNoise();
-  po.keyframes.min_distance_m = 1.0;
-  po.keyframes.min_turn_rad = 30.0 * kDeg;
-  const auto frames = sim::perturbLog(simulateWorld("office"), po);
+  const auto frames = officeAsKeyframes();
   Slam* slam = nullptr;
   runSlam(frames, {}, &slam);
   const auto& nodes = slam->nodes();
@@ -247,11 +253,7 @@ TEST(SlamLoopClosure, ACorridorCannotPinTheAxisARoomPinsEverything) {
 // route comes back to a submap's first or last nodes its centre lies far away. Loop candidates go
 // by a submap's nearest node (when they went by its centre, this run closed no loop at all).
 TEST(Slam, KeyframesRevisitingTheEndOfALongSubmapCloseLoops) {
-  sim::LogPerturbationOptions po;
-  po.odometry = sim::realisticOdometryNoise();
-  po.keyframes.min_distance_m = 1.0;
-  po.keyframes.min_turn_rad = 30.0 * kDeg;
-  const auto frames = sim::perturbLog(simulateWorld("office"), po);
+  const auto frames = officeAsKeyframes();
   ASSERT_GT(frames.size(), 30u);
   Slam* slam = nullptr;
   const auto est = runSlam(frames, {}, &slam);
