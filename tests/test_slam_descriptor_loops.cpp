@@ -139,6 +139,24 @@ TEST(SlamDescriptorLoops, TheProximitySearchReachesARevisitMetresOff) {
   EXPECT_GT(two.end_error, 1.5);
 }
 
+// The window widens with the path travelled since the latest accepted closure: after 5 m of drift
+// along the corridor (beyond the 3 m least window and the 5 m radius's margin), a window that grows
+// with the open path reaches the west room again; a fixed 3 m one does not. (The proximity search
+// alone: no descriptors.)
+TEST(SlamDescriptorLoops, TheWindowGrowsWithThePathSinceTheLastClosure) {
+  const auto frames = corridorThereAndBack(0.09, 1);
+  SlamOptions growing;
+  growing.descriptor_loops = false;
+  growing.loop_window_per_m = 0.1;
+  SlamOptions fixed = growing;
+  fixed.loop_window_per_m = 0.0;
+  const RunResult grown = runSlam(frames, growing), three = runSlam(frames, fixed);
+  std::printf("end error %.2f m with the growing window, %.2f m with a fixed 3 m one\n", grown.end_error,
+              three.end_error);
+  EXPECT_LT(grown.end_error, 0.5);
+  EXPECT_GT(three.end_error, 2.0);
+}
+
 TEST(SlamDescriptorLoops, CliRecordsDescriptorClosuresInGraphSummaryAndReport) {
   const auto frames = corridorThereAndBack(0.15, 1);
   test::TempDir t;

@@ -61,6 +61,7 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
   if (!opt.descriptor_loops || s_.node_lines[n].size() < 2) return;
   const auto t0 = Clock::now();
   const Node& node = s_.nodes[n];
+  const double window_m = s_.proximityWindowM(n);  // the proximity search's (LoopClosure::searchNear)
   // Look up one node in descriptor_every_nodes while the proximity search finds nothing, and
   // every node on from a pending descriptor closure until a second one confirms it (from a node
   // some way on: the same view from nearly the same pose confirms nothing).
@@ -138,8 +139,7 @@ void DescriptorLoops::search(std::size_t n, const std::vector<char>& covered) {
     // have found itself (a competitor only). Not "in a submap it considers": a submap's 30 nodes
     // may span tens of metres, and its far end lies beyond that window.
     const auto nearEstimate = [&](const SE2& T_world) {
-      return covered[h.submap] &&
-             (T_world.translation() - node.T_world_robot.translation()).norm() <= opt.loop_linear_window_m &&
+      return covered[h.submap] && (T_world.translation() - node.T_world_robot.translation()).norm() <= window_m &&
              std::abs(angleDiff(T_world.theta(), node.T_world_robot.theta())) <= opt.loop_angular_window_rad;
     };
     bool near = nearEstimate(guess_world);

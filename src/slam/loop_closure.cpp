@@ -44,6 +44,9 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   // Candidate submaps by distance, nearest first.
   std::vector<std::pair<double, std::size_t>> candidates;
   std::vector<char> covered(s_.submaps.size(), 0);  // submaps this search considers
+  // The window follows the estimate's drift, and a submap that far may hold the revisit.
+  const double window_m = s_.proximityWindowM(n);
+  const double radius_m = std::max(opt.loop_search_radius_m, window_m);
   const bool unplaced = s_.untied_since && n >= *s_.untied_since && !s_.untiedHasOdometryLink();
   for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
     const Submap& sm = s_.submaps[s];
@@ -60,7 +63,7 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     double d = std::numeric_limits<double>::infinity();
     for (std::size_t k : sm.nodes)
       d = std::min(d, (s_.nodes[k].T_world_robot.translation() - node.T_world_robot.translation()).norm());
-    if (d <= opt.loop_search_radius_m) {
+    if (d <= radius_m) {
       candidates.emplace_back(d, s);
       covered[s] = 1;
     }
@@ -80,14 +83,26 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     c.from = sm.anchor;
     c.to = n;
     SE2 init;
+    bool widened = false;  // found by the widened window
     if (sm.last_link_node && n - *sm.last_link_node <= static_cast<std::size_t>(opt.loop_link_memory_nodes)) {
       const std::size_t m = *sm.last_link_node;
       init = sm.last_link_T_anchor_node * (s_.nodes[m].T_local_robot.inverse() * node.T_local_robot);
     } else if (every_node && searches_left > 0) {
       --searches_left;
       const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
-      const auto cr =
-          registration::matchCorrelative(gridOf(s), voxelFilter(pts, 2.0 * opt.scan_voxel_m), guess, loop_search);
+      // The least window first: where it holds a match, the nearer place is the likelier one (a wider
+      // window in a building of look-alike rooms finds a better-scoring wrong place as often as not).
+      // Only where it holds none, the window the drift since the latest closure calls for; but not
+      // against a pending closure the least window found, which such a place would contradict.
+      const Points2 sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
+      auto cr = registration::matchCorrelative(gridOf(s), sparse, guess, loop_search);
+      widened = (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) && window_m > loop_search.linear_window_m &&
+                (!sm.pending || sm.pending_widened);
+      if (widened) {
+        registration::CorrelativeOptions wide = loop_search;
+        wide.linear_window_m = window_m;
+        cr = registration::matchCorrelative(gridOf(s), sparse, guess, wide);
+      }
       ++s_.stats.loop_searches;
       c.searched = true;
       c.score = cr.score;
@@ -107,6 +122,7 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     }
     if (c.searched) {
       submitSearched(std::move(c), sm);
+      if (sm.pending) sm.pending_widened = widened;
       continue;
     }
     acceptLoop(c, sm);

@@ -81,6 +81,11 @@ struct SlamOptions {
   // running estimate puts it, which on long loops in corridors drifts 2-3 m before the loop closes
   // (docs/slam.md, Loop closure).
   double loop_linear_window_m = 3.0;
+  // The window widens with the path travelled since the latest accepted closure (the estimate
+  // drifts with it): loop_window_per_m of that path, between loop_linear_window_m and
+  // loop_max_linear_window_m; the candidate submaps' radius widens with it.
+  double loop_window_per_m = 0.03;
+  double loop_max_linear_window_m = 8.0;
   double loop_angular_window_rad = 15.0 * kDeg;
   double loop_min_score = 0.55;
   double loop_min_explained_fraction = 0.7;
@@ -239,7 +244,10 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "along the weakest direction) below which the translation along it is taken from the prediction"},
     {LIDAR2D_SLAM_FIELD(search_max_linear_window_m), "front end", "m", OptionRange::above(0),
      "largest half-width of that window (an uncertain prior, after a gap or without odometry)"},
-    {LIDAR2D_SLAM_FIELD(search_max_angular_window_rad), "front end", "deg", {0.0, true, 180.0, false},
+    {LIDAR2D_SLAM_FIELD(search_max_angular_window_rad),
+     "front end",
+     "deg",
+     {0.0, true, 180.0, false},
      "its largest angular half-width"},
     {LIDAR2D_SLAM_FIELD(time_gap_s), "front end", "s", OptionRange::above(0),
      "scans further apart in time than this and than five times the log's usual interval are reported as "
@@ -284,7 +292,12 @@ inline constexpr SlamOption kSlamOptionTable[] = {
     {LIDAR2D_SLAM_FIELD(loop_searches_per_node), "loop closure", "searches", OptionRange::atLeast(1),
      "at most this many searches per node, nearest submaps first"},
     {LIDAR2D_SLAM_FIELD(loop_linear_window_m), "loop closure", "m", OptionRange::above(0),
-     "branch-and-bound window half-width"},
+     "branch-and-bound window half-width (the least: see loop_window_per_m)"},
+    {LIDAR2D_SLAM_FIELD(loop_window_per_m), "loop closure", "m/m", OptionRange::atLeast(0),
+     "the window widens to this share of the path travelled since the latest accepted closure (the "
+     "estimate's drift), and the candidate submaps' radius with it ..."},
+    {LIDAR2D_SLAM_FIELD(loop_max_linear_window_m), "loop closure", "m", OptionRange::above(0),
+     "... up to this half-width"},
     {LIDAR2D_SLAM_FIELD(loop_angular_window_rad), "loop closure", "deg", OptionRange::above(0),
      "its angular half-width"},
     {LIDAR2D_SLAM_FIELD(loop_min_score), "loop closure", "fraction", OptionRange::fraction(),

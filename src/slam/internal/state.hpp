@@ -4,6 +4,7 @@
 // closure, descriptor loops, pose graph), which Slam::Impl (slam.cpp) wires together.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <chrono>
 #include <cstddef>
 #include <memory>
@@ -47,6 +48,7 @@ struct Submap {
   std::optional<std::size_t> last_link_node;
   SE2 last_link_T_anchor_node;
   std::optional<Constraint> pending;           // searched closure awaiting confirmation
+  bool pending_widened = false;                // ... found by the widened window (LoopClosure::searchNear)
   std::optional<Constraint> untied_pending;    // ... found by the relocalization search (searchUntied)
   std::unique_ptr<localization::Database> db;  // line-pair descriptors of its nodes (anchor frame)
 };
@@ -94,6 +96,14 @@ struct SlamState {
   // Back end.
   SE2 T_world_local;
   std::optional<std::size_t> last_loop_node;  // latest node with an accepted closure
+  /// Half-width of the proximity search's window at node `n`: loop_window_per_m of the path
+  /// travelled since the latest accepted closure (all of it before the first), within
+  /// [loop_linear_window_m, loop_max_linear_window_m]. The estimate drifts along an unclosed path.
+  double proximityWindowM(std::size_t n) const {
+    const double open = node_path_m[n] - (last_loop_node && *last_loop_node <= n ? node_path_m[*last_loop_node] : 0.0);
+    return std::clamp(opt.loop_window_per_m * open, opt.loop_linear_window_m,
+                      std::max(opt.loop_linear_window_m, opt.loop_max_linear_window_m));
+  }
   // The first node of the current fragment (the front end lost track there) while no accepted
   // closure ties the fragment to the nodes before it: the descriptor search relocalizes its nodes
   // against every earlier submap, without the drift limits (its link is only the prediction).
