@@ -82,50 +82,55 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     c.kind = Constraint::Kind::kLoop;
     c.from = sm.anchor;
     c.to = n;
-    SE2 init;
-    bool widened = false;  // found by the widened window
     if (sm.last_link_node && n - *sm.last_link_node <= static_cast<std::size_t>(opt.loop_link_memory_nodes)) {
       const std::size_t m = *sm.last_link_node;
-      init = sm.last_link_T_anchor_node * (s_.nodes[m].T_local_robot.inverse() * node.T_local_robot);
-    } else if (every_node && searches_left > 0) {
-      --searches_left;
-      const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
-      // The least window first: where it holds a match, the nearer place is the likelier one (a wider
-      // window in a building of look-alike rooms finds a better-scoring wrong place as often as not).
-      // Only where it holds none, the window the drift since the latest closure calls for; but not
-      // against a pending closure the least window found, which such a place would contradict.
-      const Points2 sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
-      auto cr = registration::matchCorrelative(gridOf(s), sparse, guess, loop_search);
-      widened = (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) && window_m > loop_search.linear_window_m &&
-                (!sm.pending || sm.pending_widened);
-      if (widened) {
-        registration::CorrelativeOptions wide = loop_search;
-        wide.linear_window_m = window_m;
-        cr = registration::matchCorrelative(gridOf(s), sparse, guess, wide);
-      }
-      ++s_.stats.loop_searches;
-      c.searched = true;
-      c.score = cr.score;
-      if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) continue;  // no candidate: nothing to record
-      init = cr.T_search;
-    } else {
+      refine(c, sm, pts, sm.last_link_T_anchor_node * (s_.nodes[m].T_local_robot.inverse() * node.T_local_robot));
+      if (c.accepted) acceptLoop(c, sm);  // a rejected link-following closure is routine: not listed
       continue;
     }
-    refine(c, sm, pts, init);
-    if (!c.accepted) {
-      if (c.searched) {
-        // Only searched closures are worth listing when rejected; link-following ones are routine.
+    if (!every_node || searches_left <= 0) continue;
+    --searches_left;
+    ++s_.stats.loop_searches;
+    c.searched = true;
+    const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
+    const Points2 sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
+    // One branch-and-bound search and the refinement of its answer; false when nothing scored.
+    auto attempt = [&](Constraint& k, const registration::CorrelativeOptions& window) {
+      const auto cr = registration::matchCorrelative(gridOf(s), sparse, guess, window);
+      k.score = cr.score;
+      if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) return false;
+      refine(k, sm, pts, cr.T_search);
+      return true;
+    };
+    // The least window first: where it holds a match, the nearer place is the likelier one (a wider
+    // window in a building of look-alike rooms finds a better-scoring wrong place as often as not).
+    // Only where it holds none that refines, the window the drift since the latest closure calls
+    // for. Each window's closures are confirmed by the same window's: a place the wider one finds
+    // would otherwise contradict a right closure the least one left pending.
+    bool scored = attempt(c, loop_search);
+    bool widened = false;
+    if ((!scored || !c.accepted) && window_m > loop_search.linear_window_m) {
+      if (scored) {
         ++s_.stats.loop_rejected;
         s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
       }
+      c = Constraint{};
+      c.kind = Constraint::Kind::kLoop;
+      c.from = sm.anchor;
+      c.to = n;
+      c.searched = true;
+      registration::CorrelativeOptions wide = loop_search;
+      wide.linear_window_m = window_m;
+      scored = attempt(c, wide);
+      widened = true;
+    }
+    if (!scored) continue;  // no candidate: nothing to record
+    if (!c.accepted) {
+      ++s_.stats.loop_rejected;
+      s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
       continue;
     }
-    if (c.searched) {
-      submitSearched(std::move(c), sm);
-      if (sm.pending) sm.pending_widened = widened;
-      continue;
-    }
-    acceptLoop(c, sm);
+    submitSearched(std::move(c), sm, widened ? sm.wide_pending : sm.pending);
   }
   return covered;
 }
@@ -344,7 +349,7 @@ void LoopClosure::dropCarriedOdometry(const Constraint& c) {
 
 void LoopClosure::expirePending() {
   for (Submap& sm : s_.submaps)
-    for (std::optional<Constraint>* pending : {&sm.pending, &sm.untied_pending})
+    for (std::optional<Constraint>* pending : {&sm.pending, &sm.wide_pending, &sm.untied_pending})
       if (*pending) {
         Constraint old = **pending;
         old.accepted = false;

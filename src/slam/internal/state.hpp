@@ -48,7 +48,7 @@ struct Submap {
   std::optional<std::size_t> last_link_node;
   SE2 last_link_T_anchor_node;
   std::optional<Constraint> pending;           // searched closure awaiting confirmation
-  bool pending_widened = false;                // ... found by the widened window (LoopClosure::searchNear)
+  std::optional<Constraint> wide_pending;      // ... found by the widened window: only another confirms it
   std::optional<Constraint> untied_pending;    // ... found by the relocalization search (searchUntied)
   std::unique_ptr<localization::Database> db;  // line-pair descriptors of its nodes (anchor frame)
 };
