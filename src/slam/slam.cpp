@@ -63,7 +63,9 @@ MatcherSettings makeMatcherSettings(const SlamOptions& opt) {
   m.loop_search = m.fallback;
   m.loop_search.linear_window_m = opt.loop_linear_window_m;
   m.loop_search.angular_window_rad = opt.loop_angular_window_rad;
-  m.loop_search.min_score = 0.0;
+  // A best under loop_min_score is discarded anyway: starting the search from it prunes every branch
+  // that cannot reach it, with the same answers (registration::CorrelativeOptions::min_score).
+  m.loop_search.min_score = opt.loop_min_score;
   m.descriptor_search = m.loop_search;
   m.descriptor_search.linear_window_m = opt.descriptor_linear_window_m;
   m.descriptor_search.angular_window_rad = opt.descriptor_angular_window_rad;
