@@ -74,32 +74,40 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   // node of a revisit is a chance to tie it (and to confirm a pending closure).
   const bool every_node = n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 ||
                           (s_.untied_since && n >= *s_.untied_since);
+  // Listed when rejected: a searched closure (link-following ones are routine).
+  auto listRejected = [&](Constraint&& c) {
+    ++s_.stats.loop_rejected;
+    s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+  };
+  std::optional<Points2> sparse;  // the scan for the searches, filtered at the first one
   for (const auto& [dist, s] : candidates) {
     Submap& sm = s_.submaps[s];
     const SE2& T_world_anchor = s_.nodes[sm.anchor].T_world_robot;
 
-    Constraint c;
-    c.kind = Constraint::Kind::kLoop;
-    c.from = sm.anchor;
-    c.to = n;
+    Constraint blank;
+    blank.kind = Constraint::Kind::kLoop;
+    blank.from = sm.anchor;
+    blank.to = n;
+    Constraint c = blank;
     if (sm.last_link_node && n - *sm.last_link_node <= static_cast<std::size_t>(opt.loop_link_memory_nodes)) {
       const std::size_t m = *sm.last_link_node;
       refine(c, sm, pts, sm.last_link_T_anchor_node * (s_.nodes[m].T_local_robot.inverse() * node.T_local_robot));
-      if (c.accepted) acceptLoop(c, sm);  // a rejected link-following closure is routine: not listed
+      if (c.accepted) acceptLoop(c, sm);
       continue;
     }
     if (!every_node || searches_left <= 0) continue;
     --searches_left;
     ++s_.stats.loop_searches;
-    c.searched = true;
+    blank.searched = true;
     const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
-    const Points2 sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
-    // One branch-and-bound search and the refinement of its answer; false when nothing scored.
-    auto attempt = [&](Constraint& k, const registration::CorrelativeOptions& window) {
-      const auto cr = registration::matchCorrelative(gridOf(s), sparse, guess, window);
-      k.score = cr.score;
+    if (!sparse) sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
+    // One branch-and-bound search and the refinement of its answer into c; false when nothing scored.
+    auto attempt = [&](const registration::CorrelativeOptions& window) {
+      c = blank;
+      const auto cr = registration::matchCorrelative(gridOf(s), *sparse, guess, window);
+      c.score = cr.score;
       if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) return false;
-      refine(k, sm, pts, cr.T_search);
+      refine(c, sm, pts, cr.T_search);
       return true;
     };
     // The least window first: where it holds a match, the nearer place is the likelier one (a wider
@@ -107,27 +115,17 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     // Only where it holds none that refines, the window the drift since the latest closure calls
     // for. Each window's closures are confirmed by the same window's: a place the wider one finds
     // would otherwise contradict a right closure the least one left pending.
-    bool scored = attempt(c, loop_search);
-    bool widened = false;
-    if ((!scored || !c.accepted) && window_m > loop_search.linear_window_m) {
-      if (scored) {
-        ++s_.stats.loop_rejected;
-        s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
-      }
-      c = Constraint{};
-      c.kind = Constraint::Kind::kLoop;
-      c.from = sm.anchor;
-      c.to = n;
-      c.searched = true;
+    bool scored = attempt(loop_search);
+    const bool widened = (!scored || !c.accepted) && window_m > loop_search.linear_window_m;
+    if (widened) {
+      if (scored) listRejected(std::move(c));
       registration::CorrelativeOptions wide = loop_search;
       wide.linear_window_m = window_m;
-      scored = attempt(c, wide);
-      widened = true;
+      scored = attempt(wide);
     }
     if (!scored) continue;  // no candidate: nothing to record
     if (!c.accepted) {
-      ++s_.stats.loop_rejected;
-      s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+      listRejected(std::move(c));
       continue;
     }
     submitSearched(std::move(c), sm, widened ? sm.wide_pending : sm.pending);
