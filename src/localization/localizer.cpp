@@ -12,6 +12,7 @@
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "lidar2d/registration/likelihood_field.hpp"
+#include "src/core/parallel_for.hpp"
 #include "src/localization/internal/database_index.hpp"
 #include "src/localization/internal/region_search.hpp"
 
@@ -281,8 +282,9 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   std::sort(stage_b.begin(), stage_b.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
   // Stage C: refine the best against the likelihood field and score them on every point. (The
   // branch-and-bound stages below add their poses the same way.)
+  // Each refinement is its own: they run on the query's threads, and join `cands` in their order.
   std::vector<Candidate> cands;
-  auto addRefined = [&](const SE2& guess, double votes) {
+  auto refined = [&](const SE2& guess, double votes) {
     const registration::Result r = registration::matchLikelihoodField(s_->field, pts, guess, s_->lf_options);
     SE2 T = r.T_target_source;
     if (!T.isFinite() || (T.translation() - guess.translation()).norm() > 0.5) T = guess;
@@ -292,9 +294,14 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
       T = guess;
       sc = sc_guess;
     }
-    cands.push_back({T, sc.score(), votes, sc.fit()});
+    return Candidate{T, sc.score(), votes, sc.fit()};
   };
-  for (std::size_t c = 0; c < stage_b.size() && c < o.max_refined; ++c) addRefined(stage_b[c].guess, stage_b[c].votes);
+  {
+    const std::size_t n = std::min(stage_b.size(), o.max_refined);
+    std::vector<Candidate> found(n);
+    parallelFor(n, o.threads, [&](std::size_t c) { found[c] = refined(stage_b[c].guess, stage_b[c].votes); });
+    cands = std::move(found);
+  }
   res.num_candidates = cands.size();
 
   auto bestOf = [&] {
@@ -341,10 +348,14 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
       if (!any) break;
     }
     disc = std::make_unique<internal::DiscretisedScan>(*s_->grid, sub);
-    for (const Eigen::Vector2d& c : regions) {
-      const internal::GridPose g = disc->searchWindow(c, o.region_half_window_m, Clock::time_point::max());
-      if (g.score > 0) addRefined(g.T_world_robot, 0.0);
-    }
+    // Each region's search is its own (the regions are searched in parallel; the result is the same).
+    std::vector<std::optional<Candidate>> found(regions.size());
+    parallelFor(regions.size(), o.threads, [&](std::size_t r) {
+      const internal::GridPose g = disc->searchWindow(regions[r], o.region_half_window_m, Clock::time_point::max());
+      if (g.score > 0) found[r] = refined(g.T_world_robot, 0.0);
+    });
+    for (auto& c : found)
+      if (c) cands.push_back(*c);
     res.num_regions = regions.size();
     bestOf();
   }
@@ -359,7 +370,7 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
       const internal::GridPose g = disc->searchAll(deadline);
       res.used_fallback = true;
       res.fallback_complete = g.complete;
-      if (g.score > 0) addRefined(g.T_world_robot, 0.0);
+      if (g.score > 0) cands.push_back(refined(g.T_world_robot, 0.0));
       bestOf();
     }
   }

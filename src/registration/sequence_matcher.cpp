@@ -3,16 +3,14 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <ctime>
-#include <exception>
-#include <mutex>
 #include <thread>
 #include <utility>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
+#include "src/core/parallel_for.hpp"
 
 namespace lidar2d::registration {
 
@@ -25,29 +23,6 @@ SE2 odometryGuess(const Frame& prev, const Frame& cur) {
 SE2 identityGuess(const Frame& /*prev*/, const Frame& /*cur*/) { return SE2(); }
 
 namespace {
-
-// Calls f(i) for i in [0, n) on `threads` threads (the caller's included); rethrows the first
-// exception after all have finished.
-template <typename F>
-void parallelFor(std::size_t n, unsigned threads, F&& f) {
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr error;
-  std::mutex error_mutex;
-  auto work = [&] {
-    try {
-      for (std::size_t i; (i = next.fetch_add(1)) < n;) f(i);
-    } catch (...) {
-      const std::lock_guard<std::mutex> lock(error_mutex);
-      if (!error) error = std::current_exception();
-      next = n;
-    }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads && t < n; ++t) pool.emplace_back(work);
-  work();
-  for (auto& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
-}
 
 // Wall and CPU time of the calling thread since construction [s].
 class Stopwatch {
