@@ -157,24 +157,42 @@ TEST(Localization, OfficeScansLocalizeCorrectly) {
 // as on one: the same poses, scores and candidates, bit for bit.
 TEST(Localization, TwoThreadsAnswerAsOne) {
   const SimMap& s = office();
-  LocalizerOptions one;
-  one.threads = 1;
-  LocalizerOptions two;
-  two.threads = 2;
-  const Localizer a(s.map, one, fastDb());
-  const Localizer b(s.map, two, fastDb());
-  for (std::size_t i = 1; i < s.frames.size(); i += 7) {
-    const Frame& f = s.frames[i];
-    const auto ra = a.localize(f.scan, f.T_robot_laser);
-    const auto rb = b.localize(f.scan, f.T_robot_laser);
-    EXPECT_EQ(ra.declined, rb.declined) << "scan " << i;
-    EXPECT_EQ(ra.reason, rb.reason) << "scan " << i;
-    EXPECT_EQ(ra.score, rb.score) << "scan " << i;
-    EXPECT_EQ(ra.num_candidates, rb.num_candidates) << "scan " << i;
-    EXPECT_EQ(ra.num_profile_candidates, rb.num_profile_candidates) << "scan " << i;
-    if (!ra.declined) {
-      EXPECT_EQ(ra.T_world_robot.x(), rb.T_world_robot.x()) << "scan " << i;
-      EXPECT_EQ(ra.T_world_robot.theta(), rb.T_world_robot.theta()) << "scan " << i;
+  // Also with every query searching its candidate regions (no answer is confident enough to skip
+  // them): the regions and the refinements run on the query's threads.
+  for (const double confident : {LocalizerOptions{}.confident_score, 1.0}) {
+    LocalizerOptions one;
+    one.threads = 1;
+    one.confident_score = confident;
+    LocalizerOptions two = one;
+    two.threads = 2;
+    const Localizer a(s.map, one, fastDb());
+    const Localizer b(s.map, two, fastDb());
+    std::size_t with_regions = 0;
+    for (std::size_t i = 1; i < s.frames.size(); i += 7) {
+      const Frame& f = s.frames[i];
+      const auto ra = a.localize(f.scan, f.T_robot_laser);
+      const auto rb = b.localize(f.scan, f.T_robot_laser);
+      EXPECT_EQ(ra.declined, rb.declined) << "scan " << i;
+      EXPECT_EQ(ra.reason, rb.reason) << "scan " << i;
+      EXPECT_EQ(ra.score, rb.score) << "scan " << i;
+      EXPECT_EQ(ra.num_candidates, rb.num_candidates) << "scan " << i;
+      EXPECT_EQ(ra.num_profile_candidates, rb.num_profile_candidates) << "scan " << i;
+      EXPECT_EQ(ra.num_regions, rb.num_regions) << "scan " << i;
+      with_regions += ra.num_regions > 0;
+      ASSERT_EQ(ra.candidates.size(), rb.candidates.size()) << "scan " << i;
+      for (std::size_t c = 0; c < ra.candidates.size(); ++c) {
+        EXPECT_EQ(ra.candidates[c].T_world_robot.x(), rb.candidates[c].T_world_robot.x()) << "scan " << i;
+        EXPECT_EQ(ra.candidates[c].T_world_robot.y(), rb.candidates[c].T_world_robot.y()) << "scan " << i;
+        EXPECT_EQ(ra.candidates[c].T_world_robot.theta(), rb.candidates[c].T_world_robot.theta()) << "scan " << i;
+        EXPECT_EQ(ra.candidates[c].fit, rb.candidates[c].fit) << "scan " << i;
+      }
+      if (!ra.declined) {
+        EXPECT_EQ(ra.T_world_robot.x(), rb.T_world_robot.x()) << "scan " << i;
+        EXPECT_EQ(ra.T_world_robot.theta(), rb.T_world_robot.theta()) << "scan " << i;
+      }
+    }
+    if (confident == 1.0) {
+      EXPECT_GT(with_regions, 0u);
     }
   }
   LocalizerOptions bad;

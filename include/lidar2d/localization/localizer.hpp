@@ -194,8 +194,8 @@ struct LocalizerOptions {
   /// scan on a building-sized map).
   bool fallback_branch_and_bound = false;
   /// Threads of one query, >= 1: with 2 or more, the range profiles' candidates are found beside
-  /// the line votes and the first scoring of the candidates is split (the answer is the same; a
-  /// query takes about a fifth less time on an idle machine); 1: all on the calling thread.
+  /// the line votes, and the candidates' scoring, their refinements and the region searches are
+  /// shared between the threads (the answer is the same); 1: all on the calling thread.
   std::size_t threads = 2;
   void validate() const;
 };
