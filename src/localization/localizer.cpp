@@ -280,10 +280,9 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     stage_b.push_back({guess, score(sub, guess, sensor_robot) + 1e-3 * pre[c].pre, pre[c].votes});
   }
   std::sort(stage_b.begin(), stage_b.end(), [](const Pre& a, const Pre& b) { return a.pre > b.pre; });
-  // Stage C: refine the best against the likelihood field and score them on every point. (The
-  // branch-and-bound stages below add their poses the same way.)
-  // Each refinement is its own: they run on the query's threads, and join `cands` in their order.
-  std::vector<Candidate> cands;
+  // Stage C: refine the best against the likelihood field and score them on every point (the
+  // branch-and-bound stages below add their poses the same way). Each refinement is its own: they
+  // run on the query's threads, each into its own slot, so `cands` keeps their order.
   auto refined = [&](const SE2& guess, double votes) {
     const registration::Result r = registration::matchLikelihoodField(s_->field, pts, guess, s_->lf_options);
     SE2 T = r.T_target_source;
@@ -296,12 +295,8 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
     }
     return Candidate{T, sc.score(), votes, sc.fit()};
   };
-  {
-    const std::size_t n = std::min(stage_b.size(), o.max_refined);
-    std::vector<Candidate> found(n);
-    parallelFor(n, o.threads, [&](std::size_t c) { found[c] = refined(stage_b[c].guess, stage_b[c].votes); });
-    cands = std::move(found);
-  }
+  std::vector<Candidate> cands(std::min(stage_b.size(), o.max_refined));
+  parallelFor(cands.size(), o.threads, [&](std::size_t c) { cands[c] = refined(stage_b[c].guess, stage_b[c].votes); });
   res.num_candidates = cands.size();
 
   auto bestOf = [&] {
