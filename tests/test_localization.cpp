@@ -383,6 +383,34 @@ TEST(Localization, SymmetricWorldDeclinesOrListsEverySymmetricPose) {
   EXPECT_GE(declined, n * 3 / 4);
 }
 
+TEST(Localization, PointsInKnownFreeSpaceCountAgainstAPoseAndUnknownSpaceDoesNot) {
+  // A 10 m square room walled on its border; its left half seen free, its right half unknown. The
+  // robot stands in the left half. Two scans explain the same 50 points on the left wall and leave
+  // 10 unexplained: in known free space 1 m in front of the robot (something the map saw through),
+  // or in the unknown half (nothing the map contradicts). Only the first costs score and fit.
+  auto map = OccupancyImage::filled(200, 200, 0.05, SE2(), OccupancyImage::kUnknown);
+  for (int r = 0; r < 200; ++r)
+    for (int c = 0; c < 200; ++c) {
+      if (r == 0 || c == 0 || r == 199 || c == 199)
+        map.set(c, r, OccupancyImage::kOccupied);
+      else if (c < 100)
+        map.set(c, r, OccupancyImage::kFree);
+    }
+  const Localizer loc(map, {}, fastDb());
+  const SE2 T_world_robot(2.5, 5.0, 0.0);
+  Points2 wall;
+  for (int i = 0; i < 50; ++i) wall.push_back(T_world_robot.inverse() * Eigen::Vector2d(0.025, 3.0 + 0.08 * i));
+  Points2 in_free = wall, in_unknown = wall;
+  for (int i = 0; i < 10; ++i) {
+    in_free.push_back(T_world_robot.inverse() * Eigen::Vector2d(1.5, 4.6 + 0.08 * i));
+    in_unknown.push_back(T_world_robot.inverse() * Eigen::Vector2d(7.5, 4.6 + 0.08 * i));
+  }
+  const double unknown_score = loc.score(in_unknown, T_world_robot);
+  EXPECT_NEAR(unknown_score, 50.0 / 60.0, 1e-9);
+  EXPECT_NEAR(loc.score(wall, T_world_robot), 1.0, 1e-9);
+  EXPECT_LT(loc.score(in_free, T_world_robot), unknown_score - 0.05);
+}
+
 TEST(Localization, ScanWithNoValidBeamsIsUnknown) {
   const SimMap& s = office();
   const Localizer loc(s.map, {}, fastDb());

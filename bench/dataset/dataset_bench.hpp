@@ -95,6 +95,12 @@ struct LocalizeBenchOptions {
   std::size_t baseline_stride = 20;  ///< branch-and-bound baseline on every n-th odd scan (0: skip)
   std::string save_maps;             ///< folder to write the even-scan maps to (empty: none)
   bool verbose = false;              ///< print every failure on stderr
+  /// A tab-separated file with one line per query (every map): the outcome, the best candidate's
+  /// score and fit, and the fits of the distinct alternatives (empty: none).
+  std::string queries;
+  /// The map from the even scans of the first half of each log only; every odd scan is still
+  /// queried, so the second half holds scans in unmapped places (the answer there must be "unknown").
+  bool half = false;
   bool extras = true;                ///< also the symmetric world and the ROS2 bag
   /// Also the calibration curve of each map: for score thresholds, the share of queries answered
   /// with a score at least the threshold, the success rate and the precision among those answers.

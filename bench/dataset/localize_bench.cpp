@@ -15,10 +15,12 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <limits>
 #include <map>
 #include <numbers>
+#include <stdexcept>
 
 #include "dataset_bench.hpp"
 #include "lidar2d/eval/metrics.hpp"
@@ -109,6 +111,14 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
                "| database |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|---|\n";
   std::string curves;
+  std::ofstream queries;
+  if (!bo.queries.empty()) {
+    queries.open(bo.queries);
+    if (!queries) throw std::runtime_error(fmt::format("{}: cannot write", bo.queries));
+    queries
+        << "map\tscan\tmapped\toutcome\treason\tscore\tfit\trunner_up_score\trunner_up_fit\ttruth_fit\tcandidate_near_"
+           "truth\talternative_fits\n";
+  }
   for (const std::string& log : bo.logs) {
     const std::string path = (std::filesystem::path(data_dir) / log).string();
     if (!std::filesystem::exists(path)) {
@@ -117,7 +127,15 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     }
     const std::vector<Frame> frames = loadFrames(path);
     const std::string name = std::filesystem::path(log).stem().stem().string();
-    const OccupancyImage map = mapping::toOccupancyImage(*evenFramesMap(frames, path));
+    const std::vector<Frame> mapped(
+        frames.begin(), frames.begin() + static_cast<std::ptrdiff_t>(bo.half ? frames.size() / 2 : frames.size()));
+    const OccupancyImage map = mapping::toOccupancyImage(*evenFramesMap(mapped, path));
+    // A query is in a mapped place when a mapping scan was taken within 1 m of it.
+    const auto inMappedPlace = [&](const SE2& T) {
+      for (std::size_t i = 0; i < mapped.size(); i += 2)
+        if ((mapped[i].T_world_robot->translation() - T.translation()).norm() < 1.0) return true;
+      return false;
+    };
     if (!bo.save_maps.empty()) {
       std::filesystem::create_directories(bo.save_maps);
       io::writeMap((std::filesystem::path(bo.save_maps) / (name + "-even.yaml")).string(), map);
@@ -129,6 +147,8 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
                                             db.memoryBytes() / 1e6, db.positions().size(), 100.0 * db.coverage());
     localization::Localizer loc(map, std::move(db), bo.loc);
     std::size_t n = 0, ok = 0, answered = 0, declined = 0;
+    // With --half: queries in unmapped places, their answers, and the right ones among them.
+    std::size_t unmapped = 0, unmapped_answered = 0, unmapped_ok = 0;
     // Failure modes: no verified candidate near the truth; one near it but not ranked first;
     // ranked first but declined (by reason).
     std::size_t f_missing = 0, f_misranked = 0;
@@ -161,6 +181,11 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         ok += near(*f.T_world_robot, r.T_world_robot);
       }
       answers.push_back({!r.declined, r.score, !r.declined && near(*f.T_world_robot, r.T_world_robot)});
+      if (bo.half && !inMappedPlace(*f.T_world_robot)) {
+        ++unmapped;
+        unmapped_answered += !r.declined;
+        unmapped_ok += !r.declined && near(*f.T_world_robot, r.T_world_robot);
+      }
       if (r.declined || !near(*f.T_world_robot, r.T_world_robot)) {
         const bool any = std::any_of(r.candidates.begin(), r.candidates.end(), [&](const localization::Candidate& c) {
           return near(*f.T_world_robot, c.T_world_robot);
@@ -171,6 +196,22 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
           ++f_misranked;
         else
           ++f_declined[r.reason];
+      }
+      if (queries.is_open()) {
+        const bool right = near(*f.T_world_robot, r.T_world_robot);
+        const auto truth =
+            std::find_if(r.candidates.begin(), r.candidates.end(),
+                         [&](const localization::Candidate& c) { return near(*f.T_world_robot, c.T_world_robot); });
+        std::string alts;
+        for (const auto& a : r.alternatives) alts += fmt::format("{}{:.4f}", alts.empty() ? "" : ",", a.fit);
+        const bool two = r.candidates.size() > 1;
+        queries << fmt::format(
+            "{}\t{}\t{}\t{}\t{}\t{:.4f}\t{:.4f}\t{:.4f}\t{:.4f}\t{}\t{}\t{}\n", name, odd[k],
+            int(inMappedPlace(*f.T_world_robot)), r.declined ? "declined" : (right ? "right" : "wrong"),
+            r.reason.empty() ? "-" : r.reason, r.score, r.candidates.empty() ? 0.0 : r.candidates.front().fit,
+            two ? r.candidates[1].score : 0.0, two ? r.candidates[1].fit : 0.0,
+            truth == r.candidates.end() ? std::string("-") : fmt::format("{:.4f}", truth->fit),
+            truth == r.candidates.end() ? -1 : truth - r.candidates.begin(), alts.empty() ? "-" : alts);
       }
       if (bo.verbose && (r.declined || !near(*f.T_world_robot, r.T_world_robot)))
         std::cerr << fmt::format(
@@ -184,6 +225,9 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
             f.T_world_robot->theta() / kDeg, r.num_regions, r.used_fallback ? " whole-map" : "");
     }
     row(name, "cascade", n, ok, answered, declined, ms, cpu_ms, db_desc);
+    if (bo.half)
+      std::cout << fmt::format("{}: {} queries more than 1 m from every mapping scan: {} answered, {} of them right\n",
+                               name, unmapped, unmapped_answered, unmapped_ok);
     if (bo.calibration) curves += calibrationCurve(name, answers);
     {
       std::string dec;
