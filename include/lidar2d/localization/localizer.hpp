@@ -223,8 +223,9 @@ struct Candidate {
   double score = 0.0;  ///< Localizer::score of the pose, in [0, 1]
   double votes = 0.0;  ///< descriptor votes of its bin (0 for the branch-and-bound stages)
   /// How closely the points lie on the walls: mean of 1 - (d / hit_distance)^2 over the points
-  /// (0 beyond hit_distance) minus the share of beams through walls, in [0, 1]. Candidates are
-  /// ranked by it and the ambiguity test compares it (it separates poses with equal `score`).
+  /// (0 beyond hit_distance) minus the share of beams through walls and the share of points in
+  /// known free space (Localizer::score), in [0, 1]. Candidates are ranked by it and the ambiguity
+  /// test compares it (it separates poses with equal `score`).
   double fit = 0.0;
 };
 
@@ -276,9 +277,12 @@ class Localizer {
   LocalizationResult localize(const LaserScan& scan, const SE2& T_robot_laser = {}) const;
 
   /// Score of a pose without refinement: (points within hit_distance of an obstacle - beams that
-  /// cross an obstacle cell more than free_margin before their endpoint) / points, clamped to [0, 1].
-  /// The second term rejects poses that explain the walls but see through other walls (a mirror
-  /// image of the room, a partial view that fits elsewhere).
+  /// cross an obstacle cell more than free_margin before their endpoint - 0.5 x the other points
+  /// lying in known free space (map cells 0..free_max) at least free_margin from any obstacle) /
+  /// points, clamped to [0, 1]. The second term rejects poses that explain the walls but see
+  /// through other walls (a mirror image of the room, a partial view that fits elsewhere); the
+  /// third, a scan from a place the map lacks put in a mapped room like it. Points in unknown
+  /// space cost nothing (docs/localization.md).
   double score(const Points2& points_robot, const SE2& T_world_robot,
                const Eigen::Vector2d& sensor_robot = Eigen::Vector2d::Zero()) const;
 
