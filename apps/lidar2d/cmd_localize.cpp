@@ -270,7 +270,8 @@ void addLocalizeCommands(CLI::App& app) {
   addChoice<Scans>(sub, "--scans", a->scans, {{"all", Scans::kAll}, {"even", Scans::kEven}, {"odd", Scans::kOdd}},
                    "which scans to localize: all, even or odd (0-based index in the log)")
       ->default_str("all");
-  sub->add_option("--min-score", a->options.min_score, "decline below this score (fraction of points on obstacles)")
+  sub->add_option("--min-score", a->options.min_score,
+                  "decline below this score (share of points on obstacles less contradictions: docs/localization.md)")
       ->capture_default_str();
   sub->add_option("--ambiguity", a->options.ambiguity_ratio,
                   "decline when a distinct alternative scores at least this fraction of the best")
