@@ -72,6 +72,7 @@ TEST_F(CliTrack, WritesOneLinePerScanAndTheSummary) {
   EXPECT_EQ(j["eval"]["wrong_while_tracking"], 0);
   EXPECT_GE(j["eval"]["tracking_within_share"].get<double>(), 0.9);
   EXPECT_TRUE(j["time_to_first_fix_s"].is_number());
+  EXPECT_TRUE(j["scans_to_first_fix"].is_number());
   EXPECT_TRUE(j["tracked_scan_ms"]["median"].is_number());
   // global_fix_ms: the queries that placed a scan (status global); global_query_ms: every query.
   const auto fixes = j["global_fix_ms"]["count"].get<std::size_t>();
@@ -79,6 +80,42 @@ TEST_F(CliTrack, WritesOneLinePerScanAndTheSummary) {
   EXPECT_GE(j["global_query_ms"]["count"].get<std::size_t>(), fixes);
   EXPECT_TRUE(j["global_fix_ms"]["median"].is_number());
   EXPECT_TRUE(j.contains("relocalizations"));
+}
+
+TEST_F(CliTrack, TimesGoingBackwardsBeforeTheFirstFixGiveNoTimeToIt) {
+  // The run's first three scans see nothing (every beam at the range limit: lost) and are stamped
+  // 100 s later than the rest, as logs with broken clocks are: the first fix is then "earlier"
+  // than the first scan. The summary must not print a negative time, only the scans before it.
+  std::ifstream in(path("run.log"));
+  std::ofstream out(path("backwards.log"));
+  std::string line;
+  int scan = 0;
+  while (std::getline(in, line)) {
+    std::istringstream ss(line);
+    std::vector<std::string> f;
+    for (std::string w; ss >> w;) f.push_back(w);
+    if (!f.empty() && f[0] == "ROBOTLASER1") {
+      if (scan < 3)
+        for (int i = 0; i < std::stoi(f[8]); ++i) f[9 + static_cast<std::size_t>(i)] = f[5];  // range max
+      ++scan;
+    }
+    if (scan <= 3 && !f.empty() && (f[0] == "ROBOTLASER1" || f[0] == "ODOM" || f[0] == "TRUEPOS")) {
+      f[f.size() - 3] = std::to_string(std::stod(f[f.size() - 3]) + 100.0);
+      f[f.size() - 1] = std::to_string(std::stod(f[f.size() - 1]) + 100.0);
+    }
+    for (std::size_t i = 0; i < f.size(); ++i) out << (i ? " " : "") << f[i];
+    out << "\n";
+  }
+  out.close();
+  ASSERT_EQ(scan, 60);
+  auto r = runCli({"track", path("office.yaml"), path("backwards.log"), "-o", path("backwards.txt"), "--json",
+                   path("backwards.json"), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(test::readFile(path("backwards.json")));
+  EXPECT_EQ(j["status_counts"]["lost"].get<int>(), 3);
+  EXPECT_TRUE(j["time_to_first_fix_s"].is_null()) << j["time_to_first_fix_s"];
+  EXPECT_EQ(j["scans_to_first_fix"].get<int>(), 3);
+  EXPECT_NE(r.err.find("timestamps repeat or go backwards"), std::string::npos) << r.err;
 }
 
 TEST_F(CliTrack, WithoutOdometryAndWithADatabase) {

@@ -106,7 +106,11 @@ void runTrack(const TrackArgs& a) {
   out.stream() << "# lidar2d track: t x y theta status score (status global|tracking|lost; nan pose when lost)\n";
   std::size_t scans = 0, counts[3] = {0, 0, 0}, relocalizations = 0;
   std::size_t within = 0, tracking_within = 0, wrong_tracking = 0, wrong_global = 0;
-  std::optional<double> first_time, first_fix_time;
+  std::optional<double> first_time, first_fix_time, previous_time;
+  // Scans before the first fix; and whether the log's time advanced at every scan up to it (a
+  // log whose timestamps repeat or go backwards gives no meaningful time to the first fix).
+  std::optional<std::size_t> scans_to_first_fix;
+  bool time_advances = true;
   std::vector<double> track_ms, global_ms, fix_ms, scan_ms;
   RateProgress progress(a.quiet, "tracking", "scans", source->sizeHint());
   while (auto f = source->next()) {
@@ -120,7 +124,12 @@ void runTrack(const TrackArgs& a) {
     ++scans;
     ++counts[static_cast<int>(r.status)];
     if (!first_time) first_time = f->time;
-    if (!first_fix_time && r.status != localization::TrackStatus::kLost) first_fix_time = f->time;
+    if (!scans_to_first_fix && previous_time && !(f->time > *previous_time)) time_advances = false;
+    previous_time = f->time;
+    if (!first_fix_time && r.status != localization::TrackStatus::kLost) {
+      first_fix_time = f->time;
+      scans_to_first_fix = scans - 1;
+    }
     relocalizations += r.relocalized ? 1 : 0;
     if (r.status == localization::TrackStatus::kTracking) track_ms.push_back(r.track_ms);
     if (r.global_ms > 0) global_ms.push_back(r.global_ms);
@@ -157,7 +166,14 @@ void runTrack(const TrackArgs& a) {
   j["scans"] = scans;
   j["status"] = {{"global", share(counts[0])}, {"tracking", share(counts[1])}, {"lost", share(counts[2])}};
   j["status_counts"] = {{"global", counts[0]}, {"tracking", counts[1]}, {"lost", counts[2]}};
-  j["time_to_first_fix_s"] = first_fix_time ? nlohmann::json(*first_fix_time - *first_time) : nlohmann::json(nullptr);
+  j["time_to_first_fix_s"] =
+      first_fix_time && time_advances ? nlohmann::json(*first_fix_time - *first_time) : nlohmann::json(nullptr);
+  j["scans_to_first_fix"] = scans_to_first_fix ? nlohmann::json(*scans_to_first_fix) : nlohmann::json(nullptr);
+  if (first_fix_time && !time_advances)
+    std::cerr << fmt::format(
+        "lidar2d: warning: {}: the log's timestamps repeat or go backwards before the first fix; the summary gives "
+        "no time to it (time_to_first_fix_s null), only the {} scans before it (scans_to_first_fix)\n",
+        a.log, *scans_to_first_fix);
   j["relocalizations"] = relocalizations;
   j["tracked_scan_ms"] = timing(track_ms);
   j["global_fix_ms"] = timing(fix_ms);
