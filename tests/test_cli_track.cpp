@@ -86,20 +86,15 @@ TEST_F(CliTrack, TimesGoingBackwardsBeforeTheFirstFixGiveNoTimeToIt) {
   // The run's first three scans see nothing (every beam at the range limit: lost) and are stamped
   // 100 s later than the rest, as logs with broken clocks are: the first fix is then "earlier"
   // than the first scan. The summary must not print a negative time, only the scans before it.
-  std::ifstream in(path("run.log"));
   std::ofstream out(path("backwards.log"));
-  std::string line;
   int scan = 0;
-  while (std::getline(in, line)) {
-    std::istringstream ss(line);
-    std::vector<std::string> f;
-    for (std::string w; ss >> w;) f.push_back(w);
-    if (!f.empty() && f[0] == "ROBOTLASER1") {
+  for (auto f : rows(path("run.log"))) {
+    if (f[0] == "ROBOTLASER1") {
       if (scan < 3)
         for (int i = 0; i < std::stoi(f[8]); ++i) f[9 + static_cast<std::size_t>(i)] = f[5];  // range max
       ++scan;
     }
-    if (scan <= 3 && !f.empty() && (f[0] == "ROBOTLASER1" || f[0] == "ODOM" || f[0] == "TRUEPOS")) {
+    if (scan <= 3 && (f[0] == "ROBOTLASER1" || f[0] == "ODOM" || f[0] == "TRUEPOS")) {
       f[f.size() - 3] = std::to_string(std::stod(f[f.size() - 3]) + 100.0);
       f[f.size() - 1] = std::to_string(std::stod(f[f.size() - 1]) + 100.0);
     }

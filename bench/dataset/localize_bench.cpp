@@ -174,46 +174,46 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
       t_ver += r.verify_ms;
       with_regions += r.num_regions > 0;
       with_fallback += r.used_fallback;
+      // Whether the best pose is at the truth (declined or not), and the first candidate that is.
+      const bool at_truth = near(*f.T_world_robot, r.T_world_robot);
+      const auto truth = std::find_if(r.candidates.begin(), r.candidates.end(), [&](const localization::Candidate& c) {
+        return near(*f.T_world_robot, c.T_world_robot);
+      });
+      const bool right = !r.declined && at_truth;
       if (r.declined) {
         ++declined;
       } else {
         ++answered;
-        ok += near(*f.T_world_robot, r.T_world_robot);
+        ok += right;
       }
-      answers.push_back({!r.declined, r.score, !r.declined && near(*f.T_world_robot, r.T_world_robot)});
-      if (bo.half && !inMappedPlace(*f.T_world_robot)) {
+      answers.push_back({!r.declined, r.score, right});
+      const bool mapped_place = (bo.half || queries.is_open()) && inMappedPlace(*f.T_world_robot);
+      if (bo.half && !mapped_place) {
         ++unmapped;
         unmapped_answered += !r.declined;
-        unmapped_ok += !r.declined && near(*f.T_world_robot, r.T_world_robot);
+        unmapped_ok += right;
       }
-      if (r.declined || !near(*f.T_world_robot, r.T_world_robot)) {
-        const bool any = std::any_of(r.candidates.begin(), r.candidates.end(), [&](const localization::Candidate& c) {
-          return near(*f.T_world_robot, c.T_world_robot);
-        });
-        if (!any)
+      if (!right) {
+        if (truth == r.candidates.end())
           ++f_missing;
-        else if (!r.candidates.empty() && !near(*f.T_world_robot, r.candidates.front().T_world_robot))
+        else if (truth != r.candidates.begin())
           ++f_misranked;
         else
           ++f_declined[r.reason];
       }
       if (queries.is_open()) {
-        const bool right = near(*f.T_world_robot, r.T_world_robot);
-        const auto truth =
-            std::find_if(r.candidates.begin(), r.candidates.end(),
-                         [&](const localization::Candidate& c) { return near(*f.T_world_robot, c.T_world_robot); });
         std::string alts;
         for (const auto& a : r.alternatives) alts += fmt::format("{}{:.4f}", alts.empty() ? "" : ",", a.fit);
         const bool two = r.candidates.size() > 1;
         queries << fmt::format(
-            "{}\t{}\t{}\t{}\t{}\t{:.4f}\t{:.4f}\t{:.4f}\t{:.4f}\t{}\t{}\t{}\n", name, odd[k],
-            int(inMappedPlace(*f.T_world_robot)), r.declined ? "declined" : (right ? "right" : "wrong"),
-            r.reason.empty() ? "-" : r.reason, r.score, r.candidates.empty() ? 0.0 : r.candidates.front().fit,
-            two ? r.candidates[1].score : 0.0, two ? r.candidates[1].fit : 0.0,
+            "{}\t{}\t{}\t{}\t{}\t{:.4f}\t{:.4f}\t{:.4f}\t{:.4f}\t{}\t{}\t{}\n", name, odd[k], int(mapped_place),
+            r.declined ? "declined" : (at_truth ? "right" : "wrong"), r.reason.empty() ? "-" : r.reason, r.score,
+            r.candidates.empty() ? 0.0 : r.candidates.front().fit, two ? r.candidates[1].score : 0.0,
+            two ? r.candidates[1].fit : 0.0,
             truth == r.candidates.end() ? std::string("-") : fmt::format("{:.4f}", truth->fit),
             truth == r.candidates.end() ? -1 : truth - r.candidates.begin(), alts.empty() ? "-" : alts);
       }
-      if (bo.verbose && (r.declined || !near(*f.T_world_robot, r.T_world_robot)))
+      if (bo.verbose && !right)
         std::cerr << fmt::format(
             "{} scan {}: {} {} truth score {:.3f} score {:.3f} lines {} cands {} alt {} alt0/best fit {:.3f} ({:.3f} {:.3f} "
             "{:.1f}) truth ({:.3f} {:.3f} {:.1f}) regions {}{}\n",

@@ -173,7 +173,10 @@ ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, co
     // A point counts against the pose once: its beam crossed a wall, or else it lies in known free space.
     if (!crossed && d >= far) {
       const int ex = static_cast<int>(std::floor(e.x())), ey = static_cast<int>(std::floor(e.y()));
-      in_free += map.contains(ex, ey) && map.at(ex, ey) >= 0 && map.at(ex, ey) <= free_max;
+      if (map.contains(ex, ey)) {
+        const int v = map.at(ex, ey);
+        in_free += v >= 0 && v <= free_max;
+      }
     }
   }
   ScoreParts out;
