@@ -18,6 +18,7 @@
 #include "lidar2d/slam/slam.hpp"
 #include "src/slam/internal/front_end.hpp"
 #include "src/slam/internal/loop_closure.hpp"
+#include "src/slam/internal/motion_prior.hpp"
 #include "support/test_support.hpp"
 
 namespace lidar2d::slam {
@@ -310,6 +311,85 @@ TEST(Slam, OfficeWithoutOdometry) {
   EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.08);
   EXPECT_EQ(slam->stats().unmatched, 0u);
   EXPECT_GT(slam->stats().loop_accepted, 0u);
+}
+
+/// A world's route as keyframes a metre or 30 degrees apart (times kept: one to a few seconds
+/// between scans), for a run without odometry.
+std::vector<Frame> keyframesOf(const std::string& world) {
+  sim::LogPerturbationOptions po;
+  po.keyframes.min_distance_m = 1.0;
+  po.keyframes.min_turn_rad = 30.0 * kDeg;
+  return sim::perturbLog(simulateWorld(world), po);
+}
+
+// Without odometry the constant-velocity prior grows with time: on keyframes seconds apart it is
+// metres and hundreds of degrees wide, flat, and a scan matched backwards or half a circle round
+// wins whenever it explains a few more points. The spread of the robot's own recent steps bounds it
+// (the corrected logs without odometry: intel 15.9 -> 0.70 m ATE, BENCHMARK.md).
+TEST(Slam, KeyframesWithoutOdometryFollowTheRobotsOwnMotion) {
+  for (const char* world : {"office", "corridor"}) {
+    const auto frames = keyframesOf(world);
+    SlamOptions o;
+    o.use_odometry = false;
+    Slam* slam = nullptr;
+    const double spread = ateAgainstTruth(runSlam(frames, o, &slam), frames).trans_m.rmse;
+    EXPECT_EQ(slam->stats().unmatched, 0u) << world;
+    EXPECT_EQ(slam->stats().fragments, 1u) << world;
+    o.prior_velocity_spread_sigmas = 0.0;
+    const double time_only = ateAgainstTruth(runSlam(frames, o), frames).trans_m.rmse;
+    EXPECT_LT(spread, 0.5 * time_only) << world << ": ATE " << spread << " m, with the time-grown prior " << time_only;
+  }
+}
+
+// The open world's keyframes drive straight for twenty steps and then turn 37 degrees: a prior as
+// narrow as that straight drive's spread loses the turn (13 m ATE, three fragments); at least half
+// the smallest correlative window keeps it.
+TEST(Slam, KeyframesWithoutOdometryTurnAfterAStraightDrive) {
+  const auto frames = keyframesOf("open");
+  SlamOptions o;
+  o.use_odometry = false;
+  Slam* slam = nullptr;
+  EXPECT_LT(ateAgainstTruth(runSlam(frames, o, &slam), frames).trans_m.rmse, 0.1);
+  EXPECT_EQ(slam->stats().fragments, 1u);
+}
+
+TEST(SlamMotionPrior, WithoutOdometryKeyframesAreBoundByTheirOwnStepsDenseLogsByTime) {
+  SlamOptions o;
+  o.use_odometry = false;
+  auto run = [&](double interval, std::size_t steps, double gap_at_end) {
+    internal::MotionPrior prior(o);
+    Frame f;
+    for (std::size_t i = 0; i <= steps; ++i) {
+      f.time = static_cast<double>(i) * interval + (i == steps ? gap_at_end : 0.0);
+      const internal::MotionPrediction p = prior.predict(f, [](std::string) {});
+      if (i == steps) return p;
+      // Steps of 0.9 and 1.1 m in turn, turning 0, +10 or -10 degrees in turn: over the last 20, a
+      // spread of 0.1 m and sqrt(65) degrees (13 of them 10 degrees from the median, 0).
+      const double turn = (static_cast<double>(i % 3) - 1.0) * 10.0 * kDeg;
+      prior.remember(f, SE2(1.0 + 0.1 * (static_cast<double>(i % 2) * 2.0 - 1.0), 0.0, turn), i == 0, p.time_ok);
+    }
+    return internal::MotionPrediction{};
+  };
+  // Keyframes a second apart: the time would give 1.1 m and 105 degrees.
+  const internal::MotionPrediction kf = run(1.0, 30, 0.0);
+  EXPECT_TRUE(kf.from_spread);
+  EXPECT_NEAR(kf.sigma_m, 0.5, 1e-9);  // half the smallest window: 2 x 0.1 m is less
+  EXPECT_NEAR(kf.sigma_rad / kDeg, 2.0 * std::sqrt(65.0), 1e-9);
+  EXPECT_NEAR(kf.delta.x(), 1.1, 1e-9);  // the median of the last five steps: 1.1 m, no turn
+  // Too few steps yet: the time decides.
+  const internal::MotionPrediction early = run(1.0, 5, 0.0);
+  EXPECT_FALSE(early.from_spread);
+  EXPECT_NEAR(early.sigma_m, 1.1, 1e-9);
+  // Five scans a second: the time's sigmas fit in the search; a pause keeps them.
+  const internal::MotionPrediction dense = run(0.2, 30, 1.0);
+  EXPECT_FALSE(dense.from_spread);
+  EXPECT_NEAR(dense.sigma_m, 0.1 + 1.2, 1e-9);
+  // After a gap the history is gone: as wide as the time makes it.
+  const internal::MotionPrediction gap = run(1.0, 30, 9.0);
+  EXPECT_FALSE(gap.time_ok);
+  EXPECT_FALSE(gap.from_spread);
+  o.prior_velocity_spread_sigmas = 0.0;
+  EXPECT_FALSE(run(1.0, 30, 0.0).from_spread);
 }
 
 // The optimisations while running move finished submaps as rigid bodies (one pose each, not one

@@ -15,7 +15,9 @@
 #   floor      every log in ../shared/data/corrected, dense, its odometry the truth itself (perturb
 #              --odom-noise 0,0,0): what SLAM's scan matching and loop closures make of perfect
 #              odometry, i.e. how far its scan-consistent answer lies from the log's truth (itself the
-#              output of another SLAM system). Not in the default set. Error: ATE against the truth.
+#              output of another SLAM system); and the same log with slam --no-odometry (keyframe logs
+#              without odometry: the constant-velocity prior alone). Not in the default set. Error: ATE
+#              against the truth.
 #   raw        the three raw bags as they are, with a 10 s gap at their largest turn (perturb
 #              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), and with
 #              slam --no-odometry. Error: Kuemmerle relations (mean +- std).
@@ -158,6 +160,7 @@ if want_part corrected || want_part floor; then
       p=$OUT/logs/$base-truth-odometry.log
       perturb "$log" --odom-noise 0,0,0 "${clock[@]}" -o "$p" || continue
       run "$base dense$tag, truth as odometry" "$p" "$p" "$p"
+      run "$base dense$tag, no odometry" "$p" "$p" - --no-odometry
     fi
   done
 fi

@@ -227,12 +227,13 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   }
   out.explained_in_gate = bestExplained();
   const Candidate* win = nullptr;
-  // Within the gate of a prior narrower than ICP's basin, the prior vouches for the match where the
-  // scan sees new ground (a keyframe log): the share explained counts only the points that overlap
-  // the local map, as long as enough of them do. Not under a wide prior (without odometry), nor
+  // Within the gate of a prior narrower than ICP's basin, or of one drawn from the robot's own
+  // recent steps (a keyframe log without odometry), the prior vouches for the match where the scan
+  // sees new ground (keyframes metres apart): the share explained counts only the points that
+  // overlap the local map, as long as enough of them do. Not under a prior that only time widened, nor
   // after a gap: there a partial match may be another place (a robot carried while nothing was
   // logged, whose odometry does not know, matched a look-alike part of the old place).
-  const bool vouched = in_gate && !wide && p.time_ok && in_gate->overlap.overlap >= kMinOverlap &&
+  const bool vouched = in_gate && (!wide || p.from_spread) && p.time_ok && in_gate->overlap.overlap >= kMinOverlap &&
                        in_gate->overlap.explained_in_overlap >= opt.min_explained_fraction;
   if (in_gate && (in_gate->explained >= opt.min_explained_fraction || vouched))
     win = &*in_gate;

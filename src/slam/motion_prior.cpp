@@ -113,6 +113,7 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     const double t = p.dt > 0.0 ? p.dt : 1.0;
     p.sigma_m = opt_.prior_velocity_sigma_m + opt_.prior_velocity_sigma_m_per_s * t;
     p.sigma_rad = opt_.prior_velocity_sigma_rad + opt_.prior_velocity_sigma_rad_per_s * t;
+    narrowToSpread(p);
   }
   return p;
 }
@@ -122,6 +123,9 @@ void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool tim
     if (!time_ok) recent_steps_.clear();
     recent_steps_.push_back(time_ok ? step : SE2());
     if (recent_steps_.size() > kVelocitySteps) recent_steps_.pop_front();
+    if (!time_ok) spread_steps_.clear();
+    if (time_ok) spread_steps_.push_back(step);
+    if (spread_steps_.size() > kSpreadSteps) spread_steps_.pop_front();
     // Repeated stamps count (as 0): in a log whose stamps mostly repeat they do not say how long a
     // step took, and one absurd interval among them (a clock wrapping) must not become the usual one.
     const double dt = f.time - time_prev_;
@@ -133,6 +137,56 @@ void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool tim
   have_prev_ = true;
   time_prev_ = f.time;
   if (f.T_odom_robot) odom_prev_ = f.T_odom_robot;
+}
+
+/// Without odometry, sigmas that grow with time are honest for a log of a few scans per second, but
+/// on a keyframe log (a second or more between scans) they reach metres and hundreds of degrees: a
+/// flat prior, under which a scan matched backwards along a corridor or turned half a circle wins
+/// whenever it explains a few points more than the right match (measured on the corrected logs
+/// without odometry: steps of 1 m and 30 degrees, matches 2-3 m back and 180 degrees off chosen).
+/// The robot's own recent steps say how much the next one may differ from the prediction: in a log
+/// whose usual interval grows the sigmas beyond the correlative search's largest window, each sigma
+/// is at most `prior_velocity_spread_sigmas` times the root-mean-square deviation of the last
+/// kSpreadSteps steps from their component-wise median (per axis). In a keyframe log the time
+/// between scans says little of the motion (the keyframing's thresholds do). Across a gap, and until
+/// the history fills again, the prior is as wide as the time makes it.
+void MotionPrior::narrowToSpread(MotionPrediction& p) const {
+  const double k = opt_.prior_velocity_spread_sigmas;
+  if (k <= 0.0 || !p.time_ok || spread_steps_.size() < kMinSpreadSteps) return;
+  // The log's usual interval (a second when the stamps do not say) decides, not this step's: in a
+  // log of several scans per second a pause keeps the prior that time gives it.
+  const double usual = usualInterval() > 0.0 ? usualInterval() : 1.0;
+  if (3.0 * (opt_.prior_velocity_sigma_m + opt_.prior_velocity_sigma_m_per_s * usual) <=
+          opt_.search_max_linear_window_m &&
+      3.0 * (opt_.prior_velocity_sigma_rad + opt_.prior_velocity_sigma_rad_per_s * usual) <=
+          opt_.search_max_angular_window_rad)
+    return;
+  const std::size_t n = spread_steps_.size();
+  std::vector<double> x(n), y(n), th(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    x[i] = spread_steps_[i].x();
+    y[i] = spread_steps_[i].y();
+    th[i] = spread_steps_[i].theta();
+  }
+  auto median = [](std::vector<double> v) {
+    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  const double mx = median(x), my = median(y), mth = median(th);
+  double ss_m = 0.0, ss_rad = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    ss_m += (x[i] - mx) * (x[i] - mx) + (y[i] - my) * (y[i] - my);
+    ss_rad += angleDiff(th[i], mth) * angleDiff(th[i], mth);
+  }
+  const double spread_m = std::sqrt(ss_m / (2.0 * static_cast<double>(n)));
+  const double spread_rad = std::sqrt(ss_rad / static_cast<double>(n));
+  // At least half the smallest correlative window: a robot that drove straight for twenty steps
+  // may still turn by a keyframe's threshold on the next (the simulated open world's keyframes: a
+  // 37 degree turn after twenty straight steps was lost under the spread alone).
+  p.sigma_m = std::min(p.sigma_m, std::max(0.5 * opt_.fallback_linear_window_m, k * spread_m));
+  p.sigma_rad = std::min(p.sigma_rad, std::max(0.5 * opt_.fallback_angular_window_rad, k * spread_rad));
+  p.from_spread = true;
 }
 
 /// The constant-velocity step: the component-wise median (x, y, theta) of the last

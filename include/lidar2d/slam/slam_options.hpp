@@ -65,6 +65,7 @@ struct SlamOptions {
   double prior_velocity_sigma_m_per_s = 1.0;
   double prior_velocity_sigma_rad = 5.0 * kDeg;
   double prior_velocity_sigma_rad_per_s = 100.0 * kDeg;
+  double prior_velocity_spread_sigmas = 2.0;
   double max_speed_m_per_s = 5.0;
   double max_turn_rate_rad_per_s = 360.0 * kDeg;
   double prior_gate_sigmas = 4.0;
@@ -273,6 +274,10 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "sigma of its rotation: this ..."},
     {LIDAR2D_SLAM_FIELD(prior_velocity_sigma_rad_per_s), "motion prior", "deg/s", OptionRange::atLeast(0),
      "... plus this much per second since the previous scan"},
+    {LIDAR2D_SLAM_FIELD(prior_velocity_spread_sigmas), "motion prior", "factor", OptionRange::atLeast(0),
+     "in a log whose usual interval widens those sigmas beyond the correlative search's largest window "
+     "(scans a second or more apart), they are at most this many times the spread of the last 20 steps "
+     "about their median (the robot's own recent motion; at least half the smallest window); 0: off"},
     {LIDAR2D_SLAM_FIELD(max_speed_m_per_s), "motion prior", "m/s", OptionRange::above(0),
      "an odometry step faster than this over the time it took is not plausible: the constant-velocity "
      "prior replaces it, and the scan decides between the two"},

@@ -35,6 +35,9 @@ struct MotionPrediction {
   /// Odometry's step when it was present but not plausible over the time it took (a start the
   /// front end also tries, so the scan can decide); `source` is then constant velocity.
   std::optional<SE2> implausible_odometry;
+  /// Constant velocity only: the sigmas come from the spread of the robot's recent steps, not from
+  /// the time since the previous scan (SlamOptions::prior_velocity_spread_sigmas).
+  bool from_spread = false;
   bool time_ok = true;  ///< time moved forward, without a gap, since the previous scan
   double dt = 0.0;      ///< the time the step took as used for the sigma [s] (the usual interval when unknown)
 
@@ -67,9 +70,12 @@ class MotionPrior {
  private:
   MotionPrediction predictImpl(const Frame& f);
   SE2 velocityStep() const;
+  void narrowToSpread(MotionPrediction& p) const;
 
   static constexpr std::size_t kVelocitySteps = 5;  // steps behind the constant-velocity prediction
   static constexpr std::size_t kIntervals = 21;     // intervals behind the usual interval
+  static constexpr std::size_t kSpreadSteps = 20;   // steps behind the spread of the robot's motion
+  static constexpr std::size_t kMinSpreadSteps = 10;
 
   const SlamOptions& opt_;
   std::vector<std::string> notes_;
@@ -81,6 +87,8 @@ class MotionPrior {
   // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
   // constant-velocity prediction is their component-wise median (`velocityStep`).
   std::deque<SE2> recent_steps_;
+  // The last kSpreadSteps steps since the latest gap (robot frame), oldest first.
+  std::deque<SE2> spread_steps_;
   std::deque<double> recent_intervals_;  // intervals between scans (>= 0) [s], oldest first
 };
 
