@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <numbers>
 
 #include "lidar2d/core/error.hpp"
@@ -409,6 +410,72 @@ TEST(Localization, PointsInKnownFreeSpaceCountAgainstAPoseAndUnknownSpaceDoesNot
   EXPECT_NEAR(unknown_score, 50.0 / 60.0, 1e-9);
   EXPECT_NEAR(loc.score(wall, T_world_robot), 1.0, 1e-9);
   EXPECT_LT(loc.score(in_free, T_world_robot), unknown_score - 0.05);
+}
+
+// Ten identical closed square rooms in a row; the first also holds a pillar 0.3 m wide. A 180-beam
+// scan from the first room sees the pillar: every look-alike pose (the other rooms, and each room
+// turned half a circle about its centre) explains 6% less of it than the true pose (fit 0.92
+// against 0.98), so the single-alternative ratio test (0.95) answers, but the 24 of them together
+// are more likely than the true pose (odds 24 x exp(-0.12 x 180 x 0.06) = 6): one scan cannot tell
+// the rooms apart with confidence. A pillar 0.7 m wide (each look-alike 16% worse) tells them apart.
+TEST(Localization, ManyLookAlikesEachALittleWorseTogetherDecline) {
+  auto answer = [](double pillar_radius_m, double nats) {
+    constexpr int kRooms = 10;
+    constexpr double kSide = 4.0, kPitch = 5.0;
+    std::vector<sim::Segment> walls;
+    for (int k = 0; k < kRooms; ++k) {
+      const double x0 = 1.0 + k * kPitch, y0 = 1.0;
+      const Eigen::Vector2d c[4] = {{x0, y0}, {x0 + kSide, y0}, {x0 + kSide, y0 + kSide}, {x0, y0 + kSide}};
+      for (int i = 0; i < 4; ++i) walls.push_back({c[i], c[(i + 1) % 4]});
+    }
+    const Eigen::Vector2d pillar(1.0 + 3.0, 1.0 + 2.0);
+    const sim::World world(walls, {sim::Arc::circle(pillar, pillar_radius_m)});
+    // The map: walls and pillar occupied, the rooms' insides free, the rest unknown (5 cm cells).
+    const double res = 0.05;
+    auto map = OccupancyImage::filled(1060, 120, res, SE2(), OccupancyImage::kUnknown);
+    for (int r = 0; r < 120; ++r)
+      for (int col = 0; col < 1060; ++col) {
+        const Eigen::Vector2d p((col + 0.5) * res, (r + 0.5) * res);
+        const double u = std::fmod(p.x() - 1.0, kPitch), v = p.y() - 1.0;
+        if (p.x() < 1.0 - res || p.x() > 1.0 + (kRooms - 1) * kPitch + kSide + res || v < -res || v > kSide + res ||
+            u > kSide + res)
+          continue;
+        const bool wall = u < res || u > kSide - res || v < res || v > kSide - res;
+        const bool in_pillar = (p - pillar).norm() < pillar_radius_m + 0.5 * res;
+        map.set(col, r, wall || in_pillar ? OccupancyImage::kOccupied : OccupancyImage::kFree);
+      }
+    sim::SimulatorOptions so;
+    so.laser.beams = 180;
+    so.laser.fov_rad = 2.0 * std::numbers::pi;
+    const SE2 T_world_robot(1.0 + 1.5, 1.0 + 2.0, 0.3);
+    const auto frames = sim::simulate(world, {{0.0, T_world_robot}}, so.noiseFree());
+    LocalizerOptions o;
+    o.ambiguity_nats_per_point = nats;
+    DatabaseOptions db = fastDb();
+    db.step_m = 0.25;
+    const Localizer loc(map, o, db);
+    const auto r = loc.localize(frames[0].scan, frames[0].T_robot_laser);
+    std::size_t near_truth = 0;
+    for (const auto& c : r.candidates) near_truth += near(c.T_world_robot, T_world_robot);
+    EXPECT_EQ(near_truth, 1u) << "the first room is a candidate";
+    return r;
+  };
+  const auto ratio_only = answer(0.15, 0.0);
+  ASSERT_FALSE(ratio_only.declined) << ratio_only.reason;
+  EXPECT_TRUE(near(ratio_only.T_world_robot, SE2(2.5, 3.0, 0.3)));
+  ASSERT_GE(ratio_only.alternatives.size(), 5u);
+  EXPECT_LT(ratio_only.alternatives.front().fit, 0.95 * ratio_only.candidates.front().fit);
+  const auto together = answer(0.15, LocalizerOptions{}.ambiguity_nats_per_point);
+  EXPECT_TRUE(together.declined);
+  EXPECT_EQ(together.reason, "ambiguous");
+  const auto wide = answer(0.35, LocalizerOptions{}.ambiguity_nats_per_point);
+  EXPECT_FALSE(wide.declined) << wide.reason;
+  EXPECT_TRUE(near(wide.T_world_robot, SE2(2.5, 3.0, 0.3)));
+  for (const double bad : {-0.1, std::numeric_limits<double>::infinity()}) {
+    LocalizerOptions o;
+    o.ambiguity_nats_per_point = bad;
+    EXPECT_TRUE(test::throwsError([&] { o.validate(); }, ErrorKind::kInvalidArgument, {"ambiguity_nats_per_point"}));
+  }
 }
 
 TEST(Localization, ScanWithNoValidBeamsIsUnknown) {

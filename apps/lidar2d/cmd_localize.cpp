@@ -276,6 +276,11 @@ void addLocalizeCommands(CLI::App& app) {
   sub->add_option("--ambiguity", a->options.ambiguity_ratio,
                   "decline when a distinct alternative scores at least this fraction of the best")
       ->capture_default_str();
+  sub->add_option("--ambiguity-nats", a->options.ambiguity_nats_per_point,
+                  "decline when the distinct alternatives together are as likely as the best: each one's odds are "
+                  "exp(-NATS x points scored x its fit gap to the best), summed (docs/localization.md); 0: off")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   sub->add_option("--candidates", a->candidates,
                   "also write the best K distinct candidate poses of every scan, whatever their score, to OUTPUT.candidates "
                   "('t rank x y theta score fit' per line, ranked by fit; 0: none)")
