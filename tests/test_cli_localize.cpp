@@ -161,6 +161,11 @@ TEST_F(CliLocalize, BadInputIsOneLineAndExitOne) {
   EXPECT_NE(r.err.find("step: the map spans"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("use a step of at least"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(path("h.db")));
+  // A negative weight for the look-alikes' odds.
+  r = runCli({"localize", path("office.yaml"), path("query.log"), "--ambiguity-nats", "-1", "-o", path("a.txt")});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("--ambiguity-nats"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(path("a.txt")));
 }
 
 // A bare PNG/PGM map (no YAML) with its resolution and origin on the command line reads as the

@@ -279,7 +279,7 @@ void addLocalizeCommands(CLI::App& app) {
   sub->add_option("--ambiguity-nats", a->options.ambiguity_nats_per_point,
                   "decline when the distinct alternatives together are as likely as the best: each one's odds are "
                   "exp(-NATS x points scored x its fit gap to the best), summed (docs/localization.md); 0: off")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   sub->add_option("--candidates", a->candidates,
                   "also write the best K distinct candidate poses of every scan, whatever their score, to OUTPUT.candidates "
