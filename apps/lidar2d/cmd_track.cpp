@@ -231,6 +231,11 @@ void addTrackCommand(CLI::App& app) {
                   "with odometry, a tracked match must explain min-score + this x its correction from the prior "
                   "(a share of 0.5 m / 15 deg)")
       ->capture_default_str();
+  sub->add_option("--slide-score-margin", a->options.slide_score_margin,
+                  "without odometry, a tracked match fails when matched again from 0.5 or 1 m along its weakest "
+                  "direction it settles elsewhere scoring within this of it (0: off)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   sub->add_option("--min-global-score", a->options.min_global_score,
                   "a global fix scoring below this is not taken (the scan stays lost)")
       ->capture_default_str();

@@ -1,6 +1,7 @@
 #include "lidar2d/localization/tracker.hpp"
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -28,6 +29,7 @@ void TrackerOptions::validate() const {
   if (!(min_global_score >= 0 && min_global_score <= 1)) throw badOption("min_global_score", min_global_score);
   if (!(correction_score_slope >= 0 && correction_score_slope <= 1))
     throw badOption("correction_score_slope", correction_score_slope);
+  if (!(slide_score_margin >= 0 && slide_score_margin <= 1)) throw badOption("slide_score_margin", slide_score_margin);
   if (confirm_fixes < 1) throw badOption("confirm_fixes", static_cast<double>(confirm_fixes));
   if (confirm_fixes_against_odometry < 1)
     throw badOption("confirm_fixes_against_odometry", static_cast<double>(confirm_fixes_against_odometry));
@@ -178,6 +180,23 @@ TrackResult Tracker::add(const Frame& frame) {
     // (a corridor: the match slides along it and still explains the scan), so a degenerate scan
     // (degeneracy::analyze) is not tracked; with odometry the prior holds that direction.
     const bool unconstrained = !with_odometry && degeneracy::analyze(points).degenerate();
+    // Without odometry a match the scan's own lines pin may still have a rival along the map (a
+    // corridor with a few doors): matched again from the pose moved 0.5 or 1 m either way along the
+    // match's weakest direction, it settles elsewhere and explains the scan nearly as well.
+    auto slides = [&](const Points2& pts, const registration::Result& match, double score, const Eigen::Vector2d& at) {
+      if (o.slide_score_margin <= 0.0 || !match.information.allFinite()) return false;
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(match.information.topLeftCorner<2, 2>());
+      const Eigen::Vector2d dir = eig.eigenvectors().col(0);  // eigenvalues ascending: the weakest
+      const SE2& T = match.T_target_source;
+      for (const double d : {-1.0, -0.5, 0.5, 1.0}) {
+        const SE2 moved(T.x() + d * dir.x(), T.y() + d * dir.y(), T.theta());
+        const registration::Result rival = registration::matchLikelihoodField(s.field, pts, moved, o.field);
+        if (!rival.T_target_source.isFinite() || (rival.T_target_source.translation() - T.translation()).norm() < 0.25)
+          continue;  // back to the match itself
+        if (s.loc->score(pts, rival.T_target_source, at) >= score - o.slide_score_margin) return true;
+      }
+      return false;
+    };
     for (const SE2& init : priors) {
       m = registration::matchLikelihoodField(s.field, sub, init, o.field);
       r.iterations += m.iterations;
@@ -200,6 +219,7 @@ TrackResult Tracker::add(const Frame& frame) {
                                       std::abs(correction.theta()) / o.max_correction_rad);
         const double needed = o.min_track_score + (with_odometry ? o.correction_score_slope * moved : 0.0);
         why = r.score < o.min_track_score ? "low score" : r.score < needed ? "low score for its correction" : "";
+        if (why.empty() && !with_odometry && slides(sub, m, r.score, sensor)) why = "slides";
       }
       if (why.empty()) break;
     }

@@ -52,6 +52,13 @@ struct TrackerOptions {
   /// larger of the distance and the turn from the prior, each as a share of max_correction_m /
   /// max_correction_rad): a match that moved far from a good prior needs more evidence, in [0, 1]
   double correction_score_slope = 0.3;
+  /// Without odometry, a tracked match must have no rival along its weakest direction (the smallest
+  /// eigenvector of the match's translational information): matched again from the pose moved 0.5
+  /// or 1 m either way along it, a result 0.25 m or more from the match that scores within this of
+  /// it fails the match ("slides"), and the scan goes to global localization. A keyframe log's prior
+  /// after a fix is the fix itself, a metre behind, and along a corridor with a few doors the match
+  /// settles there. In [0, 1]; 0: off
+  double slide_score_margin = 0.05;
   /// A global fix scoring below this is not taken (the scan stays `lost`): stricter than the
   /// localizer's own min_score, because the scans after a fix are tracked from it, and a wrong fix
   /// in a part of the building the map lacks (a room like a mapped one) would be tracked on, in [0, 1]
