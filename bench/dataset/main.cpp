@@ -117,7 +117,8 @@ int main(int argc, char** argv) {
   loc->add_flag("--half", loc_options.half,
                 "map from the first half of each log only: the second half's queries are in unmapped places");
   loc->add_option("--queries", loc_options.queries,
-                  "write one tab-separated line per query (outcome, score, fit, the alternatives' fits, the points scored) to this file");
+                  "write one tab-separated line per query (outcome, score, fit, the alternatives' fits, the points "
+                  "scored) to this file");
   loc->add_flag("--calibration", loc_options.calibration,
                 "also the score-threshold curve per map (answered, success, precision)");
   loc->add_flag("!--no-extras", loc_options.extras, "only the logs (not the symmetric world and the ROS2 bag)");
