@@ -157,6 +157,24 @@ TEST(Tracker, WithoutOdometryAMatchWithARivalAlongTheMapIsNotTracked) {
   EXPECT_GT(wrong_tracking, 0u) << "the case no longer arises without the check";
 }
 
+// Without odometry nothing vouches for a global answer (there is no dead reckoning to hold it
+// against): unless it is sure, a fix needs confirm_fixes_against_odometry (6) agreeing answers, where
+// with odometry three make the first fix (ASureAnswerIsAFixOnTheFirstScan).
+TEST(Tracker, WithoutOdometryAFixNeedsTheLongerConfirmation) {
+  const Office& o = office();
+  std::vector<Frame> first(o.frames.begin(), o.frames.begin() + 8);
+  for (Frame& f : first) f.T_odom_robot.reset();
+  TrackerOptions opt = fastOptions();
+  opt.sure_fix_score = 1.5;  // never at once
+  Tracker tracker(o.map, std::nullopt, opt);
+  const auto res = trackAll(tracker, first);
+  for (std::size_t i = 0; i + 1 < opt.confirm_fixes_against_odometry; ++i)
+    EXPECT_EQ(res[i].status, TrackStatus::kLost) << "scan " << i << ": " << res[i].reason;
+  EXPECT_EQ(res[opt.confirm_fixes_against_odometry - 1].status, TrackStatus::kGlobal)
+      << res[opt.confirm_fixes_against_odometry - 1].reason;
+  EXPECT_NE(res[2].reason.find("no odometry"), std::string::npos) << res[2].reason;
+}
+
 /// Stretches B, A, C of the office run, with the cuts' indexes. `carried`: the robot is carried
 /// from the end of B to the start of A and from the end of A to the start of C while its odometry
 /// reads no motion, as a robot lifted and put down elsewhere (odometry continuous: the original

@@ -244,7 +244,7 @@ void addTrackCommand(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--confirm-fixes-against-odometry", a->options.confirm_fixes_against_odometry,
                   "... for an answer away from where the odometry since the last placed scan puts the robot "
-                  "(no sure fix then)")
+                  "(no sure fix then), and for every answer without odometry")
       ->capture_default_str();
   sub->add_option("--sure-fix-score", a->options.sure_fix_score,
                   "a global answer scoring at least this is a fix at once (above 1: never)")

@@ -255,9 +255,13 @@ TrackResult Tracker::add(const Frame& frame) {
     s.candidate.reset();
     s.confirmations = 0;
   }
-  const bool expected = answered && s.withinDeadReckoning(g.T_world_robot);
+  // Without odometry no dead reckoning vouches for an answer: like one that contradicts it, it needs
+  // confirm_fixes_against_odometry answers (freiburg-079's half map without odometry: three wrong
+  // fixes in the half the map lacks, each found three times in a row, and 61 scans tracked from them).
+  const bool expected = answered && odom_ok && s.withinDeadReckoning(g.T_world_robot);
+  const bool sure = answered && (expected || !odom_ok) && g.score >= o.sure_fix_score;
   const std::size_t needed = expected ? o.confirm_fixes : std::max(o.confirm_fixes, o.confirm_fixes_against_odometry);
-  if (answered && (s.confirmations >= needed || (expected && g.score >= o.sure_fix_score))) {
+  if (answered && (s.confirmations >= needed || sure)) {
     r.status = TrackStatus::kGlobal;
     r.T_world_robot = g.T_world_robot;
     r.score = g.score;
@@ -273,7 +277,9 @@ TrackResult Tracker::add(const Frame& frame) {
     s.confirmations = 0;
     return r;
   }
-  const std::string why = answered     ? (expected ? "unconfirmed" : "unconfirmed, away from dead reckoning")
+  const std::string why = answered     ? (expected  ? "unconfirmed"
+                                          : odom_ok ? "unconfirmed, away from dead reckoning"
+                                                    : "unconfirmed, no odometry")
                           : g.declined ? g.reason
                                        : "low score";
   return fail(prior ? r.reason + ", global " + why : (s.fixed_once ? "global " : "no fix yet, global ") + why);

@@ -77,8 +77,10 @@ struct TrackerOptions {
   /// and `dead_reckoning_drift_rad_per_m` per metre of odometry path) needs this many agreeing
   /// answers in a row, and is never taken at once on its score: a place the map lacks that looks
   /// like a mapped one tens of metres away gave three consistent answers on freiburg-079, while a
-  /// robot really carried elsewhere (kidnapped) goes on giving them. Without odometry, or before
-  /// the first fix, confirm_fixes applies; never fewer than confirm_fixes. >= 1
+  /// robot really carried elsewhere (kidnapped) goes on giving them. Without odometry every answer
+  /// needs this many (no dead reckoning vouches for it; one scoring sure_fix_score is still taken at
+  /// once); with odometry before the first fix, confirm_fixes applies; never fewer than
+  /// confirm_fixes. >= 1
   std::size_t confirm_fixes_against_odometry = 6;
   double dead_reckoning_drift_per_m = 0.2;                                 ///< [m/m], >= 0
   double dead_reckoning_drift_rad_per_m = 5.0 * std::numbers::pi / 180.0;  ///< [rad/m], >= 0
