@@ -50,15 +50,21 @@ py::dict resultDict(const localization::LocalizationResult& r) {
   py::list alternatives;
   for (const auto& c : r.alternatives) alternatives.append(py::make_tuple(poseOrNone(c.T_world_robot), c.score));
   d["alternatives"] = alternatives;
+  py::list candidates;
+  for (const auto& c : r.candidates) candidates.append(py::make_tuple(poseOrNone(c.T_world_robot), c.score, c.fit));
+  d["candidates"] = candidates;
   d["num_points"] = r.num_points;
   d["num_lines"] = r.num_lines;
   d["num_candidates"] = r.num_candidates;
+  d["num_regions"] = r.num_regions;
+  d["used_fallback"] = r.used_fallback;
   d["seconds"] = r.total_ms / 1e3;
   return d;
 }
 }  // namespace
 
 void bindLocalization(py::module_& m) {
+  const localization::LocalizerOptions loc_defaults;
   py::class_<PyDatabase>(m, "LocalizationDatabase",
                          "Descriptors (line pairs, range profiles) of virtual scans over a map's free space.")
       .def_property_readonly("positions", [](const PyDatabase& d) { return d.get().positions().size(); })
@@ -85,15 +91,41 @@ void bindLocalization(py::module_& m) {
 
   py::class_<localization::Localizer>(m, "Localizer",
                                       "Global localization of single scans in a map, no initial pose.")
-      .def(py::init([](const OccupancyImage& map, const py::handle& database) {
+      .def(py::init([](const OccupancyImage& map, const py::handle& database, double min_score, double ambiguity_ratio,
+                       double ambiguity_nats_per_point, double budget_ms, std::size_t max_regions,
+                       std::size_t profile_candidates, std::size_t max_candidates, bool fallback_branch_and_bound,
+                       std::size_t threads) {
+             localization::LocalizerOptions o;
+             o.min_score = min_score;
+             o.ambiguity_ratio = ambiguity_ratio;
+             o.ambiguity_nats_per_point = ambiguity_nats_per_point;
+             o.budget_ms = budget_ms;
+             o.max_regions = max_regions;
+             o.profile_candidates = profile_candidates;
+             o.max_candidates = max_candidates;
+             o.fallback_branch_and_bound = fallback_branch_and_bound;
+             o.threads = threads;
+             o.validate();  // before the database is taken over, so a bad option leaves it usable
              std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
-             return db ? std::make_unique<localization::Localizer>(map, std::move(*db))
-                       : std::make_unique<localization::Localizer>(map);
+             return db ? std::make_unique<localization::Localizer>(map, std::move(*db), o)
+                       : std::make_unique<localization::Localizer>(map, o);
            }),
-           py::arg("map"), py::arg("database") = py::none(),
+           py::arg("map"), py::arg("database") = py::none(), py::kw_only(),
+           py::arg("min_score") = loc_defaults.min_score, py::arg("ambiguity_ratio") = loc_defaults.ambiguity_ratio,
+           py::arg("ambiguity_nats_per_point") = loc_defaults.ambiguity_nats_per_point,
+           py::arg("budget_ms") = loc_defaults.budget_ms, py::arg("max_regions") = loc_defaults.max_regions,
+           py::arg("profile_candidates") = loc_defaults.profile_candidates,
+           py::arg("max_candidates") = loc_defaults.max_candidates,
+           py::arg("fallback_branch_and_bound") = loc_defaults.fallback_branch_and_bound,
+           py::arg("threads") = loc_defaults.threads,
            "map: a MapImage; database: None (built here), a LocalizationDatabase (which the localizer\n"
-           "takes over) or a database file path. A database of another map raises lidar2d.Error.")
+           "takes over) or a database file path. A database of another map raises lidar2d.Error.\n"
+           "Options as `lidar2d localize` (docs/localization.md): min_score (--min-score), ambiguity_ratio\n"
+           "(--ambiguity), ambiguity_nats_per_point (--ambiguity-nats), budget_ms (--budget-ms), max_regions\n"
+           "(--regions), profile_candidates (--profile-candidates), max_candidates (--prescored),\n"
+           "fallback_branch_and_bound (--fallback), threads (1: all on the calling thread); a bad one raises\n"
+           "lidar2d.Error naming it.")
       .def("localize", [](const localization::Localizer& self, const py::handle& scan) {
             localization::LocalizationResult r;
             if (py::isinstance<Frame>(scan)) {
@@ -108,8 +140,10 @@ void bindLocalization(py::module_& m) {
             return resultDict(r);
           }, py::arg("scan"),
           "Localizes one scan (a Frame, or (N, 2) points in the robot frame) on its own. Returns a dict:\n"
-          "declined, reason, pose (SE2 T_world_robot or None), score in [0, 1], alternatives [(SE2, score)],\n"
-          "num_points, num_lines, num_candidates, seconds.");
+          "declined, reason, pose (SE2 T_world_robot or None), score in [0, 1], alternatives [(SE2, score)]\n"
+          "(distinct poses scoring at least min_score), candidates [(SE2, score, fit)] (every verified distinct\n"
+          "pose, ranked by fit, whatever its score: `localize --candidates`), num_points, num_lines,\n"
+          "num_candidates, num_regions, used_fallback, seconds.");
 
   const localization::TrackerOptions defaults;
   py::class_<localization::Tracker>(
@@ -119,7 +153,8 @@ void bindLocalization(py::module_& m) {
       "constant velocity) and checked against the map; a robot carried elsewhere is found again.")
       .def(py::init([](const OccupancyImage& map, const py::handle& database, double min_track_score,
                        double min_global_score, std::size_t confirm_fixes, double sure_fix_score,
-                       std::size_t max_lost_scans, std::size_t confirm_fixes_against_odometry) {
+                       std::size_t max_lost_scans, std::size_t confirm_fixes_against_odometry,
+                       double correction_score_slope, double slide_score_margin) {
              localization::TrackerOptions o;
              o.min_track_score = min_track_score;
              o.min_global_score = min_global_score;
@@ -127,6 +162,9 @@ void bindLocalization(py::module_& m) {
              o.sure_fix_score = sure_fix_score;
              o.max_lost_scans = max_lost_scans;
              o.confirm_fixes_against_odometry = confirm_fixes_against_odometry;
+             o.correction_score_slope = correction_score_slope;
+             o.slide_score_margin = slide_score_margin;
+             o.validate();  // before the database is taken over, so a bad option leaves it usable
              std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
              return std::make_unique<localization::Tracker>(map, std::move(db), o);
@@ -137,6 +175,8 @@ void bindLocalization(py::module_& m) {
            py::arg("confirm_fixes") = defaults.confirm_fixes, py::arg("sure_fix_score") = defaults.sure_fix_score,
            py::arg("max_lost_scans") = defaults.max_lost_scans,
            py::arg("confirm_fixes_against_odometry") = defaults.confirm_fixes_against_odometry,
+           py::arg("correction_score_slope") = defaults.correction_score_slope,
+           py::arg("slide_score_margin") = defaults.slide_score_margin,
            "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md);\n"
            "bad options or a database of another map raise lidar2d.Error.")
       .def("add", [](localization::Tracker& self, const Frame& frame) {

@@ -106,6 +106,17 @@ def test_global_localization(tmp_path, office_frames, office_map):
             err = r["pose"].inverse() * f.truth
             good += math.hypot(err.x, err.y) < 0.3 and abs(err.theta) < math.radians(5)
     assert good >= 4
+    r = localizer.localize(office_frames[21])
+    assert r["candidates"] and r["candidates"][0][0].is_approx(r["pose"]), r
+    assert all(len(c) == 3 and 0.0 <= c[1] <= 1.0 for c in r["candidates"])
+    # the command line's options reach the localizer: no pose explains every point perfectly
+    strict = lidar2d.Localizer(office_map, tmp_path / "office.l2ddb", min_score=1.0, threads=1)
+    assert all(strict.localize(f)["declined"] for f in office_frames[1::20])
+    with pytest.raises(lidar2d.Error, match="min_score"):
+        lidar2d.Localizer(office_map, db, min_score=1.5)
+    with pytest.raises(lidar2d.Error, match="budget_ms"):
+        lidar2d.Localizer(office_map, db, budget_ms=-1.0)
+    assert db.positions > 10  # a bad option does not take the database
     taken = lidar2d.Localizer(office_map, db)  # takes the database over
     assert not taken.localize(office_frames[3])["declined"]
     with pytest.raises(ValueError, match="already"):
@@ -144,6 +155,10 @@ def test_tracker(office_frames, office_map):
         lidar2d.Tracker(office_map, sure_fix_score=float("nan"))
     with pytest.raises(lidar2d.Error, match="confirm_fixes_against_odometry"):
         lidar2d.Tracker(office_map, confirm_fixes_against_odometry=0)
+    with pytest.raises(lidar2d.Error, match="slide_score_margin"):
+        lidar2d.Tracker(office_map, slide_score_margin=-0.1)
+    with pytest.raises(lidar2d.Error, match="correction_score_slope"):
+        lidar2d.Tracker(office_map, correction_score_slope=2.0)
     with pytest.raises(TypeError):
         tracker.add(np.zeros((10, 2)))
 
