@@ -86,6 +86,20 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     consecutive_failures = 0;
     ++s_.stats.matched;
     if (out.degenerate) ++s_.stats.degenerate;
+  } else if (seesOnlyNewGround(pts, p, T_pred, m)) {
+    // Keyframes metres apart with a short-range laser: after a turn the scan may overlap nothing
+    // of the local map (edmonton's keyframes, 10 m range: 0-11% of the scan within 0.5 m of it at
+    // the odometry's pose, for five scans in a row). Nothing contradicts the odometry there, and a
+    // lost track would restart the local map and leave a fragment tied only by the prediction;
+    // the scan is placed by the odometry and extends the local map instead. Not after a gap (the
+    // robot may have been carried), nor when a match elsewhere was refused (the scan contradicts
+    // the prior), nor without odometry (the prediction is only a guess).
+    ++s_.stats.unmatched;
+    consecutive_failures = 0;
+    out.new_ground = true;
+    s_.event(f,
+             "the scan sees only new ground (it overlaps almost nothing of the local map at the odometry's "
+             "pose): placed by odometry");
   } else {
     ++s_.stats.unmatched;
     ++consecutive_failures;
@@ -99,6 +113,14 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     }
   }
   return out;
+}
+
+bool FrontEnd::seesOnlyNewGround(const Points2& pts, const Prediction& p, const SE2& T_pred,
+                                 const MatchOutcome& m) const {
+  if (m.T || m.rejected || p.source != PriorSource::kOdometry || !p.time_ok || since_gap_unmatched ||
+      p.implausible_odometry || pts.size() < opt.min_points || !local_target || local_target->size() < opt.min_points)
+    return false;
+  return overlapWith(*local_target, pts, T_pred, opt.match_inlier_distance_m, kOverlapM).overlap < kNewGroundOverlap;
 }
 
 void FrontEnd::addNode(const SE2& T_local, const Points2& pts, bool restart) {

@@ -11,7 +11,7 @@
 
 namespace lidar2d::slam::internal {
 
-void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool degenerate,
+void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool predicted, bool degenerate,
                               const Eigen::Vector2d& dir_local) {
   const Node& prev = s.nodes[n - 1];
   Constraint c;
@@ -20,8 +20,9 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool de
   c.to = n;
   c.T_from_to = prev.T_local_robot.inverse() * s.nodes[n].T_local_robot;
   Eigen::Matrix3d sqrt_info = diagSqrtInfo(s.opt.sequential_sigma_m, s.opt.sequential_sigma_rad);
-  if (restart) {
-    // Tracking was lost: the link is only the prediction.
+  if (restart || predicted) {
+    // Tracking was lost, or the scan was placed by odometry alone: the link is only the prediction
+    // (the odometry constraint below holds the information).
     sqrt_info = diagSqrtInfo(s.opt.odometry_sigma_m * 20.0, s.opt.odometry_sigma_rad * 20.0);
   } else if (degenerate) {
     // Along the degenerate direction the relative pose is as good as the prediction.

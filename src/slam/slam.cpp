@@ -407,12 +407,12 @@ struct Slam::Impl {
       const bool moved = rel.translation().norm() >= opt.node_min_translation_m ||
                          std::abs(rel.theta()) >= opt.node_min_rotation_rad ||
                          f.time - last_node_time >= opt.node_max_interval_s;
-      if (t.restart || (rec.matched && moved && pts.size() >= opt.min_points)) {
+      if (t.restart || ((rec.matched || t.new_ground) && moved && pts.size() >= opt.min_points)) {
         rec.node = nodes_added;
         rec.is_node = true;
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
-                prediction.source == internal::PriorSource::kOdometry);
+                prediction.source == internal::PriorSource::kOdometry, t.new_ground);
       } else {
         rec.node = nodes_added - 1;
         rec.T_node_scan = rel;
@@ -431,14 +431,15 @@ struct Slam::Impl {
   /// end. The front end never reads what the back end computes, so the back end may be several
   /// nodes behind and the run is the same as without its thread.
   void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
-               bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
+               bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted,
+               bool predicted = false) {
     ++nodes_added;
     last_node_time = f.time;
     last_node_T_local = T_local;
     front_end.addNode(T_local, pts, restart);
-    auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart,
-                 odom_trusted]() mutable {
-      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odom_trusted);
+    auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart, odom_trusted,
+                 predicted]() mutable {
+      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odom_trusted, predicted);
       publish();
     };
     if (back_end)
@@ -450,7 +451,7 @@ struct Slam::Impl {
   /// The graph's part of a new node: the node, its submap, its data, its sequential constraints,
   /// then the back end's searches and optimisation (backEnd).
   void graphNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
-                 bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted) {
+                 bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted, bool predicted) {
     const SlamOptions& opt = state.opt;
     const std::size_t n = state.nodes.size();
     Node node;
@@ -482,7 +483,7 @@ struct Slam::Impl {
       state.restarts.push_back(n);
       state.untied_since = n;
     }
-    if (n > 0) internal::addSequentialConstraints(state, n, restart, degenerate, dir_local);
+    if (n > 0) internal::addSequentialConstraints(state, n, restart, predicted, degenerate, dir_local);
     backEnd(n, static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes);
   }
 };

@@ -41,6 +41,9 @@ class FrontEnd {
     bool degenerate = false;
     Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
     bool restart = false;                           ///< tracking lost: the local map restarts at this scan
+    /// Unmatched, but at the odometry's prediction the scan overlaps almost nothing of the local map
+    /// (it sees only new ground): it is placed there and becomes a node, not a failure.
+    bool new_ground = false;
     bool overrode_prior = false;                    ///< the match contradicts the prior (strong scan evidence)
   };
 
@@ -97,6 +100,9 @@ class FrontEnd {
   // kMinOverlap of the scan overlaps.
   static constexpr double kOverlapM = 0.5;
   static constexpr double kMinOverlap = 0.3;
+  // An unmatched scan under an odometry prior of which less than this overlaps the local map at the
+  // prediction sees only new ground (FrontEnd::track).
+  static constexpr double kNewGroundOverlap = 0.1;
   // Which earlier scans' poses are starting points (scans back, ascending).
   static constexpr std::array<std::size_t, 4> kEarlierBack{2, 4, 8, 16};
 
@@ -114,6 +120,8 @@ class FrontEnd {
 
   void rebuildLocalMap();
   void remapDegenerate(Candidate& c, const SE2& T_pred) const;
+  /// Whether an unmatched scan sees only new ground (Tracked::new_ground).
+  bool seesOnlyNewGround(const Points2& pts, const Prediction& p, const SE2& T_pred, const MatchOutcome& m) const;
   MatchOutcome frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
                              const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
                              double earlier_below);
