@@ -120,7 +120,11 @@ class FrontEnd {
 
   void rebuildLocalMap();
   void remapDegenerate(Candidate& c, const SE2& T_pred) const;
-  /// Whether an unmatched scan sees only new ground (Tracked::new_ground).
+  /// Whether, under an odometry prior with no gap since the last match, under kNewGroundOverlap
+  /// of the scan at the prediction overlaps the local map.
+  bool onlyNewGroundAt(const Points2& pts, const Prediction& p, const SE2& T_pred) const;
+  /// Whether an unmatched scan sees only new ground (Tracked::new_ground): onlyNewGroundAt, and no
+  /// match elsewhere was refused.
   bool seesOnlyNewGround(const Points2& pts, const Prediction& p, const SE2& T_pred, const MatchOutcome& m) const;
   MatchOutcome frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
                              const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
