@@ -254,6 +254,37 @@ TEST(FirstHour, InfoWarnsOfReturnsBeyondTheDeclaredRangeMax) {
   EXPECT_EQ(j["warnings"].dump().find("beyond the range max"), std::string::npos) << j.dump(2);
 }
 
+// The commands that process a log say what info would: a user who runs slam first still learns
+// that the log's declared range max drops real returns, or that its timestamps repeat.
+TEST(FirstHour, CommandsThatReadALogWarnAsInfoDoes) {
+  TempDir tmp;
+  auto scan = [](const std::string& t) {
+    return "FLASER 5 2 12.5 15 51.15 51.15 0 0 0 0 0 0 " + t + " host " + t + "\n";
+  };
+  const std::string log = (tmp / "short.log").string();
+  test::writeFile(log, "PARAM robot_front_laser_max 10 nohost 0\n" + scan("1") + scan("2") + scan("2"));
+  const std::string beyond = "lidar2d: warning: " + log + ": 40.0% of the beams read beyond the range max (10.00 m";
+  const std::string repeats = "lidar2d: warning: " + log + ": timestamps repeat 1 times";  // the CARMEN reader's words
+  const std::vector<std::vector<std::string>> commands = {
+      {"map", log, "-o", (tmp / "m").string(), "-q"},
+      {"slam", log, "-o", (tmp / "s").string(), "-q"},
+      {"match", log, "-o", (tmp / "p.txt").string(), "-q"},
+  };
+  for (const auto& args : commands) {
+    const CliResult r = runCli(args);
+    ASSERT_EQ(r.exit_code, 0) << args[0] << ": " << r.err;
+    EXPECT_NE(r.err.find(beyond), std::string::npos) << args[0] << ": " << r.err;
+    EXPECT_NE(r.err.find(repeats), std::string::npos) << args[0] << ": " << r.err;
+  }
+  const nlohmann::json summary = nlohmann::json::parse(test::readFile(tmp / "s" / "summary.json"));
+  EXPECT_NE(summary["log_warnings"].dump().find("40.0% of the beams read beyond"), std::string::npos)
+      << summary["log_warnings"].dump();
+  // Read with a range max that takes the returns: no warning about them.
+  const CliResult r = runCli({"map", log, "-o", (tmp / "m2").string(), "-q", "--laser-range-max", "50"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err.find("beyond the range max"), std::string::npos) << r.err;
+}
+
 TEST(FirstHour, InfoOnTheInfiniteCorridorSaysWhyItHasNoDuration) {
   LIDAR2D_REQUIRE_DATA("corrected/infinite-corridor.log.gz");
   const nlohmann::json j = infoJson(test::dataFile("corrected/infinite-corridor.log.gz"));

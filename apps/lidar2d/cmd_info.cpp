@@ -6,7 +6,6 @@
 #include <cmath>
 #include <iostream>
 #include <limits>
-#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -29,9 +28,6 @@ double deg(double rad) { return rad * 180.0 / std::numbers::pi; }
 
 /// Consecutive scans farther apart in time than this make the log's duration unknown [s].
 constexpr double kMaxScanStepS = 86400.0;
-// Distinct readings beyond the range max kept by value: a bound on memory for a log whose
-// over-range readings are noise (every value once); the counts stay exact for the values kept.
-constexpr std::size_t kMaxOverMaxValues = 100000;
 
 nlohmann::json summarise(const InfoArgs& args) {
   // A tilted laser is reported, not refused: info reads it as --allow-tilted would and warns.
@@ -51,9 +47,6 @@ nlohmann::json summarise(const InfoArgs& args) {
   SE2 T_robot_laser;
   bool upside_down = false;
   double tilt = 0.0;
-  // Finite readings at or beyond their scan's range max, by value: the most frequent one is the
-  // laser's "no return" code; many others mean real returns the declared range max discards.
-  std::map<double, std::size_t> over_max;
   while (auto f = source->next()) {
     const std::size_t n = f->scan.size();
     if (scans == 0) {
@@ -84,9 +77,6 @@ nlohmann::json summarise(const InfoArgs& args) {
     beams_max = std::max(beams_max, n);
     valid_beams += f->scan.numValid();
     total_beams += n;
-    for (const double r : f->scan.ranges())
-      if (std::isfinite(r) && r >= f->scan.rangeMax() && (over_max.size() < kMaxOverMaxValues || over_max.contains(r)))
-        ++over_max[r];
     if (f->T_odom_robot) {
       ++with_odom;
       if (prev_odom) odom_len += (f->T_odom_robot->translation() - prev_odom->translation()).norm();
@@ -144,37 +134,14 @@ nlohmann::json summarise(const InfoArgs& args) {
   j["lasers"] = notes.lasers;
   j["odometry_source"] = notes.odom_source;
   j["truth_source"] = notes.truth_source;
+  // The reader's warnings, with openLog's: timestamps that repeat or go backwards, readings beyond
+  // the range max that are not the no-return code.
   nlohmann::json warnings = notes.warnings;
-  // Readers that already reported timestamp problems keep their wording; otherwise say it here.
-  const bool reader_told = std::any_of(notes.warnings.begin(), notes.warnings.end(),
-                                       [](const std::string& w) { return w.find("timestamp") != std::string::npos; });
-  if (!reader_told && time_repeats)
-    warnings.push_back(std::to_string(time_repeats) + " scans repeat the previous scan's timestamp");
-  if (!reader_told && time_backwards)
-    warnings.push_back(std::to_string(time_backwards) + " scans have a timestamp earlier than the previous scan's");
   if (tilt > 0.0 && !args.reader.allow_tilted_laser)
     warnings.push_back(fmt::format("the laser is tilted by {:.1f} deg: the other commands refuse this log unless "
                                    "--allow-tilted (or a --max-tilt above the tilt) is given",
                                    deg(tilt)));
-  // Readings beyond the range max other than the no-return code (within 1% of the most frequent
-  // reading there): a declared range max below what the laser measures (edmonton's PARAM
-  // robot_front_laser_max 10 while its SICK reads walls at 25 m) silently drops real returns.
-  std::size_t beyond = 0;
-  if (!over_max.empty()) {
-    const auto code = std::max_element(over_max.begin(), over_max.end(),
-                                       [](const auto& a, const auto& b) { return a.second < b.second; });
-    for (const auto& [r, count] : over_max)
-      if (std::abs(r - code->first) > 0.01 * code->first) beyond += count;
-    const double share = total_beams ? static_cast<double>(beyond) / static_cast<double>(total_beams) : 0.0;
-    if (share >= 0.01)
-      warnings.push_back(fmt::format(
-          "{:.1f}% of the beams read beyond the range max ({:.2f} m of the first scan) and are not the log's no-return "
-          "reading ({:.2f} m, the most frequent there): they count as no return; the laser may measure farther than "
-          "its declared range max (CARMEN: PARAM robot_front_laser_max, laser_front_laser_max_range); "
-          "--laser-range-max R, R below {:.2f}, reads them as returns",
-          100.0 * share, range_max, code->first, code->first));
-  }
-  j["beams_beyond_range_max"] = beyond;
+  j["beams_beyond_range_max"] = notes.beams_beyond_range_max;
   j["warnings"] = warnings;
   return j;
 }

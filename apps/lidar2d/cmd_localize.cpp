@@ -182,6 +182,7 @@ void runLocalize(const LocArgs& a) {
   const std::size_t scans = tally.scans;
   if (scans == 0) throw badInput("the log has no scan to localize", ErrorLocation(a.log));
   out.commit();
+  warnAboutLog(a.log, *source);
   if (cand_out) cand_out->commit();
   const double total_s = seconds(t0);
   nlohmann::json j;

@@ -112,6 +112,7 @@ void run(const MapArgs& a) {
       builder.insert([&] { return source->next(); }, [&progress](std::size_t done) { progress.update(done); });
   progress.clear();
   if (scans == 0) throw badInput("log has no scans", ErrorLocation(a.log));
+  warnAboutLog(a.log, *source);
   OccupancyImage image = mapping::toOccupancyImage(*map);
   std::size_t overridden = 0;
   if (prior) image = overrideWithPrior(*prior, a.prior, image, overridden);

@@ -113,6 +113,7 @@ void run(const MatchArgs& a) {
   if (summary.frames < 2)
     throw badInput(fmt::format("log has {} scan(s); matching needs at least 2", summary.frames), ErrorLocation(a.log));
   out.commit();
+  warnAboutLog(a.log, *source);
   const double total_s = std::chrono::duration<double>(Clock::now() - t_start).count();
   const double per_pair_ms = 1e3 * summary.wall_s / static_cast<double>(pairs.size());  // on one core
   if (a.eval) {

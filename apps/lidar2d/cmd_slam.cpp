@@ -181,6 +181,7 @@ void run(const SlamArgs& a) {
     slam.add(*f);
     bar.update(T_robot_laser.size(), slam);
   }
+  const std::vector<std::string> log_warnings = source->notes().warnings;
   source.reset();
   const std::size_t num_scans = T_robot_laser.size();
   if (num_scans == 0)
@@ -189,6 +190,7 @@ void run(const SlamArgs& a) {
   slam.finish();
   bar.update(num_scans, slam, true);
   bar.done();
+  for (const std::string& w : log_warnings) std::cerr << fmt::format("lidar2d: warning: {}: {}\n", a.log, w);
   const double slam_seconds = secondsSince(t_slam);
   const auto all_scans = slam.trajectory();
   const slam::State state = slam.state();
@@ -304,6 +306,7 @@ void run(const SlamArgs& a) {
   Json ev = Json::array();
   for (const auto& e : slam.events()) ev.push_back({{"scan", e.frame_index}, {"time", e.time}, {"what", e.what}});
   j["events"] = ev;
+  j["log_warnings"] = log_warnings;
 
   ReportInput report{a.log, slam, all_scans, image, j};
   {

@@ -156,6 +156,7 @@ void runTrack(const TrackArgs& a) {
   progress.clear();
   if (scans == 0) throw badInput("the log has no scan to track", ErrorLocation(a.log));
   out.commit();
+  warnAboutLog(a.log, *source);
 
   const auto share = [&](std::size_t n) { return static_cast<double>(n) / static_cast<double>(scans); };
   nlohmann::json j;

@@ -3,6 +3,7 @@
 #include <charconv>
 #include <cmath>
 #include <functional>
+#include <iostream>
 #include <map>
 #include <memory>
 #include <numbers>
@@ -171,7 +172,8 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
   sub->add_option_function<double>(
          "--laser-range-max", [&options](double r) { options.laser_range_max = r; },
          "the laser's range max [m], replacing the log's: readings at or beyond it are no return, those below it "
-         "returns (for a log that declares less than its laser measures: `lidar2d info` warns; default: the log's)")
+         "returns (for a log that declares less than its laser measures: every command that reads the log warns; "
+         "default: the log's)")
       ->check(positiveNumber())
       ->type_name("METRES");
   sub->add_option("--max-tilt", options.max_laser_tilt_deg,
@@ -186,6 +188,10 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
     lasers->resolve(options);
     if (range_table) range_table();
   });
+}
+
+void warnAboutLog(const std::string& log, const io::FrameSource& source) {
+  for (const std::string& w : source.notes().warnings) std::cerr << fmt::format("lidar2d: warning: {}: {}\n", log, w);
 }
 
 }  // namespace lidar2d::cli

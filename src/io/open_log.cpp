@@ -1,9 +1,12 @@
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <numbers>
 #include <vector>
 
@@ -128,6 +131,70 @@ class RangeMaxOverride final : public FrameSource {
   double range_max_;
 };
 
+/// What every log's frames say about the log, whatever its format: readings beyond the range max
+/// that are not its no-return code (a declared range max below what the laser measures: edmonton's
+/// PARAM robot_front_laser_max 10 while its SICK reads walls at 45 m, silently dropping real
+/// returns), and timestamps that repeat or go backwards. Added to the notes' warnings (complete once
+/// the stream is exhausted), so that every command can tell the user, not only `info`.
+class LogWatch final : public FrameSource {
+ public:
+  explicit LogWatch(std::unique_ptr<FrameSource> inner) : inner_(std::move(inner)) {}
+  std::optional<Frame> next() override {
+    std::optional<Frame> f = inner_->next();
+    if (!f) return f;
+    if (frames_ == 0) range_max_ = f->scan.rangeMax();
+    if (frames_ > 0 && f->time == prev_time_) ++time_repeats_;
+    if (frames_ > 0 && f->time < prev_time_) ++time_backwards_;
+    prev_time_ = f->time;
+    ++frames_;
+    beams_ += f->scan.size();
+    const double range_max = f->scan.rangeMax();
+    for (const double r : f->scan.ranges())
+      if (std::isfinite(r) && r >= range_max && (over_max_.size() < kMaxValues || over_max_.contains(r)))
+        ++over_max_[r];
+    return f;
+  }
+  LogFormat format() const override { return inner_->format(); }
+  const std::string& path() const override { return inner_->path(); }
+  SourceNotes notes() const override {
+    SourceNotes n = inner_->notes();
+    // Readers that already reported timestamp problems keep their wording.
+    const bool told = std::any_of(n.warnings.begin(), n.warnings.end(),
+                                  [](const std::string& w) { return w.find("timestamp") != std::string::npos; });
+    if (!told && time_repeats_)
+      n.warnings.push_back(fmt::format("{} scans repeat the previous scan's timestamp", time_repeats_));
+    if (!told && time_backwards_)
+      n.warnings.push_back(fmt::format("{} scans have a timestamp earlier than the previous scan's", time_backwards_));
+    // The most frequent reading at or beyond the range max is the no-return code; the others
+    // (beyond 1% of it) are returns the range max discards.
+    if (!over_max_.empty()) {
+      const auto code = std::max_element(over_max_.begin(), over_max_.end(),
+                                         [](const auto& a, const auto& b) { return a.second < b.second; });
+      for (const auto& [r, count] : over_max_)
+        if (std::abs(r - code->first) > 0.01 * code->first) n.beams_beyond_range_max += count;
+      const double share = static_cast<double>(n.beams_beyond_range_max) / static_cast<double>(beams_);
+      if (share >= 0.01)
+        n.warnings.push_back(fmt::format(
+            "{:.1f}% of the beams read beyond the range max ({:.2f} m of the first scan) and are not the log's "
+            "no-return reading ({:.2f} m, the most frequent there): they count as no return; the laser may measure "
+            "farther than its declared range max (CARMEN: PARAM robot_front_laser_max, laser_front_laser_max_range); "
+            "--laser-range-max R, R below {:.2f}, reads them as returns",
+            100.0 * share, range_max_, code->first, code->first));
+    }
+    return n;
+  }
+  std::optional<std::size_t> sizeHint() const override { return inner_->sizeHint(); }
+
+ private:
+  // Distinct readings beyond the range max kept (a no-return code is one value; returns beyond a
+  // declared maximum spread over many): bounds the memory on any log.
+  static constexpr std::size_t kMaxValues = 100000;
+  std::unique_ptr<FrameSource> inner_;
+  std::size_t frames_ = 0, beams_ = 0, time_repeats_ = 0, time_backwards_ = 0;
+  double prev_time_ = 0.0, range_max_ = 0.0;
+  std::map<double, std::size_t> over_max_;
+};
+
 std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOptions& options) {
   switch (detectFormat(path)) {
     case LogFormat::kCarmen:
@@ -207,8 +274,8 @@ std::unique_ptr<FrameSource> openLog(const std::string& path, const ReaderOption
   std::unique_ptr<FrameSource> source =
       options.range_table ? internal::openRangeTable(*options.range_table) : openFormat(path, options);
   if (options.laser_range_max) source = std::make_unique<RangeMaxOverride>(std::move(source), *options.laser_range_max);
-  if (mount) return std::make_unique<MountOverride>(std::move(source), *mount, std::move(mount_warnings));
-  return source;
+  if (mount) source = std::make_unique<MountOverride>(std::move(source), *mount, std::move(mount_warnings));
+  return std::make_unique<LogWatch>(std::move(source));
 }
 
 }  // namespace lidar2d::io

@@ -78,7 +78,7 @@ struct ReaderOptions {
   /// The laser's range max [m], replacing the log's (CARMEN FLASER/RLASER: 80 m or a PARAM;
   /// ROBOTLASER and ROS bags: each message's own): readings at or beyond it are no return, those
   /// below it (and above range_min) valid. For a log that declares less than its laser measures
-  /// (`lidar2d info` warns, `beams_beyond_range_max`); above the log's no-return code, that code
+  /// (SourceNotes: a warning, `beams_beyond_range_max`); above the log's no-return code, that code
   /// becomes a return. Finite, in (0, kMaxLaserRangeMax]; std::nullopt keeps the log's.
   std::optional<double> laser_range_max;
   /// A range table given file by file; when set, `openLog` reads it whatever its path argument.
@@ -120,7 +120,12 @@ struct SourceNotes {
   std::string odom_source;   ///< e.g. "ODOM lines (interpolated)", "/odom", or empty if none
   std::string truth_source;  ///< e.g. "FLASER pose (corrected log)", "TRUEPOS", or empty if none
   std::string container;     ///< how the log is stored when there is a choice, e.g. "mcap storage, 2 files"
-  std::vector<std::string> warnings;  ///< e.g. "timestamps repeat (12 times)"
+  /// e.g. "timestamps repeat (12 times)"; openLog adds readings beyond the range max that are not
+  /// the no-return code (1% of the beams or more) and timestamps that repeat or go backwards
+  std::vector<std::string> warnings;
+  /// Readings at or beyond their scan's range max other than the log's no-return code (the most
+  /// frequent reading there): returns a declared range max too low discards (counted by openLog).
+  std::size_t beams_beyond_range_max = 0;
   /// Every laser the log holds, with its message count, e.g. "/scan_front (120 messages)" (ROS bags:
   /// the LaserScan topics; CARMEN logs: the laser message types, complete once the log is read).
   std::vector<std::string> lasers;
