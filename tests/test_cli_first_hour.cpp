@@ -279,6 +279,10 @@ TEST(FirstHour, CommandsThatReadALogWarnAsInfoDoes) {
   const nlohmann::json summary = nlohmann::json::parse(test::readFile(tmp / "s" / "summary.json"));
   EXPECT_NE(summary["log_warnings"].dump().find("40.0% of the beams read beyond"), std::string::npos)
       << summary["log_warnings"].dump();
+  const std::string report = test::readFile(tmp / "s" / "report.html");
+  const std::size_t list = report.find("<ul id=\"log-warnings\">");
+  EXPECT_NE(list, std::string::npos);
+  EXPECT_NE(report.find("<li>40.0% of the beams read beyond", list), std::string::npos);
   // Read with a range max that takes the returns: no warning about them.
   const CliResult r = runCli({"map", log, "-o", (tmp / "m2").string(), "-q", "--laser-range-max", "50"});
   ASSERT_EQ(r.exit_code, 0) << r.err;

@@ -195,6 +195,13 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
   html << "<div class=\"mapbox\"><img id=\"map\" alt=\"occupancy map\" src=\"data:image/png;base64," << base64(png)
        << "\">" << svg.str() << "</div>\n";
   html << "<h2>Time per scan</h2>\n" << plot.str() << "\n";
+  // What the log's reader warned of (summary.json's log_warnings, also on stderr): a user who only
+  // opens the report still learns that the log drops returns or repeats its timestamps.
+  if (const auto w = j.find("log_warnings"); w != j.end() && w->is_array() && !w->empty()) {
+    html << "<h2>Log warnings</h2>\n<ul id=\"log-warnings\">\n";
+    for (const auto& line : *w) html << "<li>" << escape(line.get<std::string>()) << "</li>\n";
+    html << "</ul>\n";
+  }
   html << "<h2>Events</h2>\n";
   const auto& events = in.slam.events();
   if (events.empty()) {
