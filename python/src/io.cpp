@@ -83,8 +83,12 @@ void bindIo(py::module_& m) {
         d["truth_source"] = n.truth_source;
         d["container"] = n.container;
         d["warnings"] = n.warnings;
+        d["lasers"] = n.lasers;
+        d["beams_beyond_range_max"] = n.beams_beyond_range_max;
         return d;
-      }, "what the reader learned about the log (complete once the iteration has ended)");
+      }, "what the reader learned about the log (complete once the iteration has ended): scan_source,\n"
+         "odom_source, truth_source, container, warnings (as `lidar2d info` gives them: repeated timestamps,\n"
+         "returns beyond a declared range max, ...), lasers, beams_beyond_range_max.");
 
   m.def("read_log",
         [](const py::object& path, const std::string& scan_topic, const std::string& odom_topic,

@@ -139,5 +139,16 @@ def test_read_log_laser_range_max(tmp_path):
     assert list(frame.valid) == [True, False, False, False]
     (frame,) = list(lidar2d.read_log(log, laser_range_max=50.0))
     assert list(frame.valid) == [True, True, True, False]
+    # The reader says so, as `lidar2d info` does: beyond 10 m, 12.5 and 25 m are returns, 51.15 (the
+    # most frequent reading there) the no-return code: 2 of 8 beams.
+    with log.open("a") as f:
+        f.write("FLASER 4 2 51.15 51.15 51.15 0 0 0 0 0 0 2 host 2\n")
+    reader = lidar2d.read_log(log)
+    list(reader)
+    assert reader.notes()["beams_beyond_range_max"] == 2
+    assert any("25.0% of the beams read beyond the range max" in w for w in reader.notes()["warnings"])
+    reader = lidar2d.read_log(log, laser_range_max=50.0)
+    list(reader)
+    assert reader.notes()["beams_beyond_range_max"] == 0
     with pytest.raises(lidar2d.Error, match="laser_range_max"):
         lidar2d.read_log(log, laser_range_max=-1.0)
