@@ -111,6 +111,14 @@ TEST_F(CliTrack, TimesGoingBackwardsBeforeTheFirstFixGiveNoTimeToIt) {
   EXPECT_TRUE(j["time_to_first_fix_s"].is_null()) << j["time_to_first_fix_s"];
   EXPECT_EQ(j["scans_to_first_fix"].get<int>(), 3);
   EXPECT_NE(r.err.find("timestamps repeat or go backwards"), std::string::npos) << r.err;
+  // The log's own warnings, as every command that reads a log gives them (docs/file-formats.md).
+  EXPECT_NE(r.err.find("lidar2d: warning: " + path("backwards.log") + ": timestamps"), std::string::npos) << r.err;
+  EXPECT_NE(j["log_warnings"].dump().find("go backwards 1 times"), std::string::npos) << j["log_warnings"];
+  r = runCli({"localize", path("office.yaml"), path("backwards.log"), "-o", path("l.txt"), "--json", path("l.json"),
+              "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto l = nlohmann::json::parse(test::readFile(path("l.json")));
+  EXPECT_NE(l["log_warnings"].dump().find("go backwards 1 times"), std::string::npos) << l["log_warnings"];
 }
 
 TEST_F(CliTrack, WithoutOdometryAndWithADatabase) {

@@ -182,7 +182,7 @@ void runLocalize(const LocArgs& a) {
   const std::size_t scans = tally.scans;
   if (scans == 0) throw badInput("the log has no scan to localize", ErrorLocation(a.log));
   out.commit();
-  warnAboutLog(a.log, *source);
+  const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
   if (cand_out) cand_out->commit();
   const double total_s = seconds(t0);
   nlohmann::json j;
@@ -195,6 +195,7 @@ void runLocalize(const LocArgs& a) {
   j["database_pairs"] = loc->database().numPairs();
   j["database_mb"] = loc->database().memoryBytes() / 1e6;
   j["scans"] = scans;
+  j["log_warnings"] = log_warnings;
   j["answered"] = tally.answered;
   j["declined"] = tally.declined;
   j["decline_rate"] = static_cast<double>(tally.declined) / static_cast<double>(scans);

@@ -156,7 +156,7 @@ void runTrack(const TrackArgs& a) {
   progress.clear();
   if (scans == 0) throw badInput("the log has no scan to track", ErrorLocation(a.log));
   out.commit();
-  warnAboutLog(a.log, *source);
+  const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
 
   const auto share = [&](std::size_t n) { return static_cast<double>(n) / static_cast<double>(scans); };
   nlohmann::json j;
@@ -165,6 +165,7 @@ void runTrack(const TrackArgs& a) {
   j["database"] = a.db.empty() ? nlohmann::json("built in memory") : nlohmann::json(a.db);
   j["setup_s"] = setup_s;
   j["scans"] = scans;
+  j["log_warnings"] = log_warnings;
   j["status"] = {{"global", share(counts[0])}, {"tracking", share(counts[1])}, {"lost", share(counts[2])}};
   j["status_counts"] = {{"global", counts[0]}, {"tracking", counts[1]}, {"lost", counts[2]}};
   j["time_to_first_fix_s"] =

@@ -34,8 +34,9 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options);
 /// Prints the warnings a log's reader gathered (`source.notes()`: timestamps that repeat, returns
 /// beyond a declared range max, a tilted laser projected, ...), one line each on stderr as
 /// "lidar2d: warning: LOG: ...", once the log has been read: a command that processes a log tells
-/// the user what `lidar2d info` would, whatever -q says.
-void warnAboutLog(const std::string& log, const io::FrameSource& source);
+/// the user what `lidar2d info` would, whatever -q says. Returns them (for a JSON summary's
+/// `log_warnings`).
+std::vector<std::string> warnAboutLog(const std::string& log, const io::FrameSource& source);
 
 /// The output folders a command created; removed again (those still empty) when the object is
 /// destroyed during a failure (an exception in flight), so that a failed command leaves nothing.

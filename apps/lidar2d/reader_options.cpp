@@ -190,8 +190,10 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
   });
 }
 
-void warnAboutLog(const std::string& log, const io::FrameSource& source) {
-  for (const std::string& w : source.notes().warnings) std::cerr << fmt::format("lidar2d: warning: {}: {}\n", log, w);
+std::vector<std::string> warnAboutLog(const std::string& log, const io::FrameSource& source) {
+  std::vector<std::string> warnings = source.notes().warnings;
+  for (const std::string& w : warnings) std::cerr << fmt::format("lidar2d: warning: {}: {}\n", log, w);
+  return warnings;
 }
 
 }  // namespace lidar2d::cli
