@@ -114,8 +114,8 @@ TEST_F(CliTrack, TimesGoingBackwardsBeforeTheFirstFixGiveNoTimeToIt) {
   // The log's own warnings, as every command that reads a log gives them (docs/file-formats.md).
   EXPECT_NE(r.err.find("lidar2d: warning: " + path("backwards.log") + ": timestamps"), std::string::npos) << r.err;
   EXPECT_NE(j["log_warnings"].dump().find("go backwards 1 times"), std::string::npos) << j["log_warnings"];
-  r = runCli({"localize", path("office.yaml"), path("backwards.log"), "-o", path("l.txt"), "--json", path("l.json"),
-              "-q"});
+  r = runCli(
+      {"localize", path("office.yaml"), path("backwards.log"), "-o", path("l.txt"), "--json", path("l.json"), "-q"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto l = nlohmann::json::parse(test::readFile(path("l.json")));
   EXPECT_NE(l["log_warnings"].dump().find("go backwards 1 times"), std::string::npos) << l["log_warnings"];
