@@ -190,7 +190,7 @@ void run(const SlamArgs& a) {
   slam.finish();
   bar.update(num_scans, slam, true);
   bar.done();
-  for (const std::string& w : log_warnings) std::cerr << fmt::format("lidar2d: warning: {}: {}\n", a.log, w);
+  printLogWarnings(a.log, log_warnings);  // once the progress line is done: it would overwrite them
   const double slam_seconds = secondsSince(t_slam);
   const auto all_scans = slam.trajectory();
   const slam::State state = slam.state();

@@ -37,6 +37,8 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options);
 /// the user what `lidar2d info` would, whatever -q says. Returns them (for a JSON summary's
 /// `log_warnings`).
 std::vector<std::string> warnAboutLog(const std::string& log, const io::FrameSource& source);
+/// The printing half of warnAboutLog, for warnings taken from the source earlier.
+void printLogWarnings(const std::string& log, const std::vector<std::string>& warnings);
 
 /// The output folders a command created; removed again (those still empty) when the object is
 /// destroyed during a failure (an exception in flight), so that a failed command leaves nothing.

@@ -190,9 +190,13 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
   });
 }
 
+void printLogWarnings(const std::string& log, const std::vector<std::string>& warnings) {
+  for (const std::string& w : warnings) std::cerr << fmt::format("lidar2d: warning: {}: {}\n", log, w);
+}
+
 std::vector<std::string> warnAboutLog(const std::string& log, const io::FrameSource& source) {
   std::vector<std::string> warnings = source.notes().warnings;
-  for (const std::string& w : warnings) std::cerr << fmt::format("lidar2d: warning: {}: {}\n", log, w);
+  printLogWarnings(log, warnings);
   return warnings;
 }
 

@@ -86,7 +86,7 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     consecutive_failures = 0;
     ++s_.stats.matched;
     if (out.degenerate) ++s_.stats.degenerate;
-  } else if (seesOnlyNewGround(pts, p, T_pred, m)) {
+  } else if (m.only_new_ground) {
     // Keyframes metres apart with a short-range laser: after a turn the scan may overlap nothing
     // of the local map (edmonton's keyframes, 10 m range: 0-11% of the scan within 0.5 m of it at
     // the odometry's pose, for five scans in a row). Nothing contradicts the odometry there, and a
@@ -120,11 +120,6 @@ bool FrontEnd::onlyNewGroundAt(const Points2& pts, const Prediction& p, const SE
       pts.size() < opt.min_points || !local_target || local_target->size() < opt.min_points)
     return false;
   return overlapWith(*local_target, pts, T_pred, opt.match_inlier_distance_m, kOverlapM).overlap < kNewGroundOverlap;
-}
-
-bool FrontEnd::seesOnlyNewGround(const Points2& pts, const Prediction& p, const SE2& T_pred,
-                                 const MatchOutcome& m) const {
-  return !m.T && !m.rejected && onlyNewGroundAt(pts, p, T_pred);
 }
 
 void FrontEnd::addNode(const SE2& T_local, const Points2& pts, bool restart) {
@@ -266,16 +261,16 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // A match beyond the gate wins when the evidence outweighs the prior: a higher log-posterior
   // than the best match within the gate (or than the prediction itself, explaining nothing).
   // Not where nothing within the gate matched and the scan at the prediction sees only new ground
-  // (seesOnlyNewGround): nothing there contradicts the odometry, and the match beyond the gate is
+  // (onlyNewGroundAt): nothing there contradicts the odometry, and the match beyond the gate is
   // a look-alike part of the local map (the simulator's identical rooms, a 4 m laser: 56% explained
   // 2.8 m and 10 sigmas from the odometry's pose), not evidence against it.
-  if (beyond_gate && beyond_gate->explained >= opt.min_explained_fraction &&
-      logPosterior(*beyond_gate) > (in_gate ? logPosterior(*in_gate) : 0.0)) {
-    if (win || !onlyNewGroundAt(pts, p, T_pred)) {
-      win = &*beyond_gate;
-      out.overrode_prior = true;
-    }
-  } else if (beyond_gate && beyond_gate->explained >= opt.min_explained_fraction && !win) {
+  const bool beyond_counts = beyond_gate && beyond_gate->explained >= opt.min_explained_fraction;
+  const bool beyond_wins = beyond_counts && logPosterior(*beyond_gate) > (in_gate ? logPosterior(*in_gate) : 0.0);
+  if (!win && (beyond_wins || !beyond_counts)) out.only_new_ground = onlyNewGroundAt(pts, p, T_pred);
+  if (beyond_wins && (win || !out.only_new_ground)) {
+    win = &*beyond_gate;
+    out.overrode_prior = true;
+  } else if (beyond_counts && !beyond_wins && !win) {
     out.rejected = beyond_gate;
   }
   if (!win) return out;

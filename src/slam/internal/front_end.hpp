@@ -116,6 +116,9 @@ class FrontEnd {
     std::optional<Candidate> rejected;              ///< a match contradicting the prior, without the evidence
     double explained = 0.0;                         ///< the share of the scan T explains
     double explained_in_gate = 0.0;                 ///< the best match within the prior's gate explained this
+    /// Nothing within the gate matched, no match beyond it was refused, and the scan at the
+    /// prediction sees only new ground (onlyNewGroundAt): Tracked::new_ground when unmatched.
+    bool only_new_ground = false;
   };
 
   void rebuildLocalMap();
@@ -123,9 +126,6 @@ class FrontEnd {
   /// Whether, under an odometry prior with no gap since the last match, under kNewGroundOverlap
   /// of the scan at the prediction overlaps the local map.
   bool onlyNewGroundAt(const Points2& pts, const Prediction& p, const SE2& T_pred) const;
-  /// Whether an unmatched scan sees only new ground (Tracked::new_ground): onlyNewGroundAt, and no
-  /// match elsewhere was refused.
-  bool seesOnlyNewGround(const Points2& pts, const Prediction& p, const SE2& T_pred, const MatchOutcome& m) const;
   MatchOutcome frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
                              const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
                              double earlier_below);
