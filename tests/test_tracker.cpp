@@ -2,11 +2,13 @@
 // the noise-free run, then a noisy-odometry run tracked (first fix, accuracy, never wrong while
 // `tracking`), the same without odometry (constant velocity), a kidnapped run (stretches B, A, C
 // with continuous odometry across the cuts: recovers within 10 scans each time; answers away from
-// dead reckoning need more confirmations), the run tracked
-// three times in a row by one tracker, scans without beams, bad options, a database of another map.
+// dead reckoning need more confirmations), a stretch of the route the map lacks (tracked on the
+// recent scans), the run tracked three times in a row by one tracker, scans without beams, bad
+// options, a database of another map.
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -307,6 +309,52 @@ TEST(Tracker, AMatchFarFromTheOdometryPriorNeedsMoreOfTheScanExplained) {
   EXPECT_EQ(off.status, TrackStatus::kTracking) << off.reason;
 }
 
+// A part of the building the map lacks: the office's map with every cell within 2 m of a stretch of
+// the route made unknown. With odometry, the scans there (the map explains too little of them) are
+// tracked on the recent scans, none wrong (trackAll), most within 10 cm and 2 degrees; with
+// recent_scans 0, or max_beyond_map_m too short to reach into the stretch, they are lost.
+TEST(Tracker, WhereTheMapLacksThePlaceTheRecentScansTrack) {
+  const Office& o = office();
+  OccupancyImage map = o.map;
+  const std::size_t from = 160, to = 190;
+  for (int row = 0; row < map.height(); ++row)
+    for (int col = 0; col < map.width(); ++col)
+      for (std::size_t k = from; k < to; ++k)
+        if ((map.cellCenter(col, row) - o.frames[k].T_world_robot->translation()).norm() < 2.0) {
+          map.set(col, row, OccupancyImage::kUnknown);
+          break;
+        }
+  const std::vector<Frame> frames(o.frames.begin(), o.frames.begin() + static_cast<std::ptrdiff_t>(to + 10));
+  auto run = [&](std::size_t recent, double max_beyond_m) {
+    TrackerOptions opt = fastOptions();
+    opt.recent_scans = recent;
+    opt.max_beyond_map_m = max_beyond_m;
+    Tracker tracker(map, std::nullopt, opt);
+    return trackAll(tracker, frames);
+  };
+  auto count = [&](const std::vector<TrackResult>& res) {
+    std::size_t tracked = 0, beyond = 0, within = 0;
+    for (std::size_t k = from; k < to; ++k) {
+      tracked += res[k].status == TrackStatus::kTracking;
+      beyond += res[k].beyond_map;
+      within +=
+          res[k].status == TrackStatus::kTracking && near(*frames[k].T_world_robot, res[k].T_world_robot, 0.1, 2.0);
+    }
+    return std::array<std::size_t, 3>{tracked, beyond, within};
+  };
+  const std::size_t n = to - from;
+  const auto with = count(run(fastOptions().recent_scans, fastOptions().max_beyond_map_m));
+  EXPECT_GE(with[0], n * 9 / 10) << "tracked";
+  EXPECT_GE(with[1], n * 8 / 10) << "beyond the map";
+  EXPECT_GE(with[2], n * 8 / 10) << "within 10 cm and 2 degrees";
+  const auto without = count(run(0, fastOptions().max_beyond_map_m));
+  EXPECT_LE(without[0], n / 5) << "tracked without the recent scans";
+  EXPECT_EQ(without[1], 0u);
+  const auto short_reach = count(run(fastOptions().recent_scans, 0.05));  // less than one step
+  EXPECT_LE(short_reach[0], n / 5) << "tracked beyond max_beyond_map_m";
+  EXPECT_EQ(short_reach[1], 0u);
+}
+
 TEST(Tracker, ScanWithoutBeamsIsLostAndTrackingResumes) {
   const Office& o = office();
   Tracker tracker(o.map, std::nullopt, fastOptions());
@@ -338,6 +386,10 @@ TEST(Tracker, BadOptionsAndAnotherMapsDatabaseAreRefused) {
   bad.dead_reckoning_drift_per_m = -0.1;
   EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
                                 {"dead_reckoning_drift_per_m"}));
+  bad = fastOptions();
+  bad.max_beyond_map_m = 0.0;
+  EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
+                                {"max_beyond_map_m"}));
   bad = fastOptions();
   bad.slide_score_margin = -0.1;
   EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,

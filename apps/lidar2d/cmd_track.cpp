@@ -106,6 +106,7 @@ void runTrack(const TrackArgs& a) {
   out.stream() << "# lidar2d track: t x y theta status score (status global|tracking|lost; nan pose when lost)\n";
   std::size_t scans = 0, counts[3] = {0, 0, 0}, relocalizations = 0;
   std::size_t within = 0, tracking_within = 0, wrong_tracking = 0, wrong_global = 0;
+  std::size_t beyond_map = 0, beyond_map_within = 0;
   std::optional<double> first_time, first_fix_time, previous_time;
   // Scans before the first fix; and whether the log's time advanced at every scan up to it (a
   // log whose timestamps repeat or go backwards gives no meaningful time to the first fix).
@@ -131,6 +132,7 @@ void runTrack(const TrackArgs& a) {
       scans_to_first_fix = scans - 1;
     }
     relocalizations += r.relocalized ? 1 : 0;
+    beyond_map += r.beyond_map ? 1 : 0;
     if (r.status == localization::TrackStatus::kTracking) track_ms.push_back(r.track_ms);
     if (r.global_ms > 0) global_ms.push_back(r.global_ms);
     if (r.status == localization::TrackStatus::kGlobal) fix_ms.push_back(r.global_ms);
@@ -149,6 +151,7 @@ void runTrack(const TrackArgs& a) {
       within += ok;
       const bool tracking = r.status == localization::TrackStatus::kTracking;
       tracking_within += ok && tracking;
+      beyond_map_within += ok && r.beyond_map;
       wrong_tracking += wrong && tracking;
       wrong_global += wrong && !tracking;
     }
@@ -177,6 +180,7 @@ void runTrack(const TrackArgs& a) {
         "no time to it (time_to_first_fix_s null), only the {} scans before it (scans_to_first_fix)\n",
         a.log, *scans_to_first_fix);
   j["relocalizations"] = relocalizations;
+  j["tracking_beyond_map"] = {{"scans", beyond_map}, {"share", share(beyond_map)}};
   j["tracked_scan_ms"] = timing(track_ms);
   j["global_fix_ms"] = timing(fix_ms);
   j["global_query_ms"] = timing(global_ms);
@@ -184,6 +188,7 @@ void runTrack(const TrackArgs& a) {
   j["total_s"] = std::chrono::duration<double>(Clock::now() - t0).count();
   if (a.eval) {
     j["eval"] = {{"tracking_within_share", share(tracking_within)},
+                 {"beyond_map_within_share", share(beyond_map_within)},
                  {"within_share", share(within)},
                  {"wrong_while_tracking", wrong_tracking},
                  {"wrong_global", wrong_global},
@@ -192,9 +197,10 @@ void runTrack(const TrackArgs& a) {
   }
   if (!a.json.empty()) io::writeFileAtomically(a.json, j.dump(2) + "\n");
   if (!a.quiet) {
-    std::cerr << fmt::format("tracked {} scans: {:.1f}% tracking, {:.1f}% global, {:.1f}% lost; {} relocalizations",
-                             scans, 100 * share(counts[1]), 100 * share(counts[0]), 100 * share(counts[2]),
-                             relocalizations);
+    std::cerr << fmt::format(
+        "tracked {} scans: {:.1f}% tracking ({:.1f}% beyond the map), {:.1f}% global, {:.1f}% lost; {} relocalizations",
+        scans, 100 * share(counts[1]), 100 * share(beyond_map), 100 * share(counts[0]), 100 * share(counts[2]),
+        relocalizations);
     if (!track_ms.empty()) std::cerr << fmt::format("; median {:.2f} ms per tracked scan", eval::percentile(track_ms, 0.5));
     if (a.eval)
       std::cerr << fmt::format("; {:.1f}% tracking within 10 cm / 2 deg, {} wrong while tracking",
@@ -253,6 +259,14 @@ void addTrackCommand(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--max-lost", a->options.max_lost_scans,
                   "failed scans in a row after which the prior is dropped (global localization only)")
+      ->capture_default_str();
+  sub->add_option("--recent-scans", a->options.recent_scans,
+                  "with odometry, where the map explains too little of a scan, it is matched against this many "
+                  "last placed scans too and tracked when both together explain it (0: off)")
+      ->capture_default_str();
+  sub->add_option("--max-beyond-map", a->options.max_beyond_map_m,
+                  "odometry path since the map alone last explained a scan beyond which the recent scans no longer "
+                  "track one [m]")
       ->capture_default_str();
   sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
   addReaderOptions(sub, a->reader);

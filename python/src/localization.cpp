@@ -154,7 +154,8 @@ void bindLocalization(py::module_& m) {
       .def(py::init([](const OccupancyImage& map, const py::handle& database, double min_track_score,
                        double min_global_score, std::size_t confirm_fixes, double sure_fix_score,
                        std::size_t max_lost_scans, std::size_t confirm_fixes_against_odometry,
-                       double correction_score_slope, double slide_score_margin) {
+                       double correction_score_slope, double slide_score_margin, std::size_t recent_scans,
+                       double max_beyond_map_m) {
              localization::TrackerOptions o;
              o.min_track_score = min_track_score;
              o.min_global_score = min_global_score;
@@ -164,6 +165,8 @@ void bindLocalization(py::module_& m) {
              o.confirm_fixes_against_odometry = confirm_fixes_against_odometry;
              o.correction_score_slope = correction_score_slope;
              o.slide_score_margin = slide_score_margin;
+             o.recent_scans = recent_scans;
+             o.max_beyond_map_m = max_beyond_map_m;
              o.validate();  // before the database is taken over, so a bad option leaves it usable
              std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
@@ -177,7 +180,9 @@ void bindLocalization(py::module_& m) {
            py::arg("confirm_fixes_against_odometry") = defaults.confirm_fixes_against_odometry,
            py::arg("correction_score_slope") = defaults.correction_score_slope,
            py::arg("slide_score_margin") = defaults.slide_score_margin,
-           "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md);\n"
+           py::arg("recent_scans") = defaults.recent_scans, py::arg("max_beyond_map_m") = defaults.max_beyond_map_m,
+           "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md;\n"
+           "recent_scans: --recent-scans, max_beyond_map_m: --max-beyond-map);\n"
            "bad options or a database of another map raise lidar2d.Error.")
       .def("add", [](localization::Tracker& self, const Frame& frame) {
             localization::TrackResult r;
@@ -190,6 +195,7 @@ void bindLocalization(py::module_& m) {
             d["pose"] = r.status == localization::TrackStatus::kLost ? py::none() : poseOrNone(r.T_world_robot);
             d["score"] = r.score;
             d["relocalized"] = r.relocalized;
+            d["beyond_map"] = r.beyond_map;
             d["reason"] = r.reason;
             d["iterations"] = r.iterations;
             d["track_seconds"] = r.track_ms / 1e3;
@@ -199,7 +205,7 @@ void bindLocalization(py::module_& m) {
           "Places the next scan (its odometry, when this and the previous frame have it, gives the\n"
           "prior's step; its truth is ignored). Returns a dict: status ('global', 'tracking' or 'lost'),\n"
           "pose (SE2 T_world_robot, None when lost), score in [0, 1], relocalized (a global fix after an\n"
-          "earlier one), reason (why a scan was not tracked), iterations, track_seconds, global_seconds.")
+          "earlier one), beyond_map (tracked on the recent scans where the map explains too little), reason (why a scan was not tracked), iterations, track_seconds, global_seconds.")
       .def("reset", &localization::Tracker::reset, "Forgets the pose: the next scan is placed by global localization.");
 }
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <future>
 #include <optional>
 #include <utility>
@@ -137,8 +138,11 @@ struct ScoreParts {
   double fit() const { return std::clamp(kernel - through - in_free, 0.0, 1.0); }
 };
 
+// `also_explained` (optional): a point it holds for (world frame) counts as on an obstacle too
+// (Localizer::score's overload); in the map's known free space it still counts against the pose.
 ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, const SE2& T_world_robot,
-                      const Eigen::Vector2d& sensor_robot) {
+                      const Eigen::Vector2d& sensor_robot,
+                      const std::function<bool(const Eigen::Vector2d&)>* also_explained = nullptr) {
   const OccupancyImage& map = s.map;
   const double res = map.resolution();
   const int occ = s.db.options().occupied_min;
@@ -154,11 +158,14 @@ ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, co
   for (const auto& p : points_robot) {
     if (!p.allFinite()) continue;
     ++n;
-    const double d = s.field.value(T_world_robot * p);
-    hit += d < hd;
+    const Eigen::Vector2d w = T_world_robot * p;
+    const double d = s.field.value(w);
+    const Eigen::Vector2d e = (T_map_robot * p) / res;
+    const int ex = static_cast<int>(std::floor(e.x())), ey = static_cast<int>(std::floor(e.y()));
+    const bool also = d >= hd && also_explained && (*also_explained)(w);
+    hit += d < hd || also;
     if (d < hd) kernel += 1.0 - (d / hd) * (d / hd);
     // Free-space check: walk the beam cell by cell up to free_margin before the endpoint.
-    const Eigen::Vector2d e = (T_map_robot * p) / res;
     bool crossed = false;
     const double len = (e - o).norm() - s.options.free_margin_m / res;
     if (len > 0) {
@@ -174,7 +181,6 @@ ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, co
     through += crossed;
     // A point counts against the pose once: its beam crossed a wall, or else it lies in known free space.
     if (!crossed && d >= far) {
-      const int ex = static_cast<int>(std::floor(e.x())), ey = static_cast<int>(std::floor(e.y()));
       if (map.contains(ex, ey)) {
         const int v = map.at(ex, ey);
         in_free += v >= 0 && v <= free_max;
@@ -196,6 +202,11 @@ ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, co
 double Localizer::score(const Points2& points_robot, const SE2& T_world_robot,
                         const Eigen::Vector2d& sensor_robot) const {
   return scoreParts(*s_, points_robot, T_world_robot, sensor_robot).score();
+}
+
+double Localizer::score(const Points2& points_robot, const SE2& T_world_robot, const Eigen::Vector2d& sensor_robot,
+                        const std::function<bool(const Eigen::Vector2d&)>& also_explained) const {
+  return scoreParts(*s_, points_robot, T_world_robot, sensor_robot, &also_explained).score();
 }
 
 LocalizationResult Localizer::localize(const LaserScan& scan, const SE2& T_robot_laser) const {

@@ -5,12 +5,16 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <deque>
+#include <functional>
 #include <limits>
+#include <memory>
 #include <utility>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/degeneracy/degeneracy.hpp"
+#include "lidar2d/registration/icp.hpp"
 #include "src/localization/internal/database_index.hpp"
 
 namespace lidar2d::localization {
@@ -39,6 +43,8 @@ void TrackerOptions::validate() const {
     throw badOption("dead_reckoning_drift_rad_per_m", dead_reckoning_drift_rad_per_m);
   if (!(sure_fix_score >= 0) || std::isnan(sure_fix_score)) throw badOption("sure_fix_score", sure_fix_score);
   if (max_lost_scans < 1) throw badOption("max_lost_scans", static_cast<double>(max_lost_scans));
+  if (!(max_beyond_map_m > 0) || !std::isfinite(max_beyond_map_m))
+    throw badOption("max_beyond_map_m", max_beyond_map_m);
 }
 
 const char* toString(TrackStatus status) {
@@ -92,6 +98,36 @@ struct Tracker::State {
   /// path since [m]; none before the first fix or after a scan without odometry.
   std::optional<SE2> dead_reckoned;
   double dead_reckoned_path_m = 0.0;
+  /// The points (world frame) of the last recent_scans placed scans, oldest first, and their ICP
+  /// target, built when a scan the map does not explain needs it.
+  std::deque<Points2> recent;
+  std::unique_ptr<registration::IcpTarget> recent_target;
+  /// Odometry path since the map alone last explained a scan (a fix or a map match) [m].
+  double beyond_map_path_m = 0.0;
+
+  /// Remembers the points (robot frame) of a scan placed at `T`.
+  void remember(const Points2& points, const SE2& T) {
+    if (o.recent_scans == 0) return;
+    Points2 world;
+    world.reserve(points.size());
+    for (const auto& p : points) world.push_back(T * p);
+    recent.push_back(std::move(world));
+    while (recent.size() > o.recent_scans) recent.pop_front();
+    recent_target.reset();
+  }
+  const registration::IcpTarget& recentTarget() {
+    if (!recent_target) {
+      Points2 all;
+      for (const auto& pts : recent) all.insert(all.end(), pts.begin(), pts.end());
+      recent_target = std::make_unique<registration::IcpTarget>(all, registration::IcpOptions{});
+    }
+    return *recent_target;
+  }
+  void forgetRecent() {
+    recent.clear();
+    recent_target.reset();
+    beyond_map_path_m = 0.0;
+  }
 
   /// A checked pose: the new pose and the new start of dead reckoning.
   void placed(const SE2& T) {
@@ -122,6 +158,7 @@ void Tracker::reset() {
   s_->step.reset();
   s_->lost = 0;
   s_->dead_reckoned.reset();
+  s_->forgetRecent();
 }
 
 TrackResult Tracker::add(const Frame& frame) {
@@ -137,6 +174,7 @@ TrackResult Tracker::add(const Frame& frame) {
   const bool had_odom = s.last_odom.has_value();
   if (odom_ok && s.last_odom) {
     step = s.last_odom->inverse() * *frame.T_odom_robot;
+    s.beyond_map_path_m += step.translation().norm();
     if (s.dead_reckoned) {
       s.dead_reckoned = *s.dead_reckoned * step;
       s.dead_reckoned_path_m += step.translation().norm();
@@ -160,6 +198,7 @@ TrackResult Tracker::add(const Frame& frame) {
     } else {
       s.pose.reset();
       s.step.reset();
+      s.forgetRecent();
     }
     return r;
   };
@@ -221,12 +260,44 @@ TrackResult Tracker::add(const Frame& frame) {
         why = r.score < o.min_track_score ? "low score" : r.score < needed ? "low score for its correction" : "";
         if (why.empty() && !with_odometry && slides(sub, m, r.score, sensor)) why = "slides";
       }
+      // Where the map explains too little, the map and the recent scans together, with odometry
+      // (without it the prior may be metres off along a corridor, and the recent scans would hold
+      // the match wherever it slid). Intel's half map: most lost scans were a robot turning in place
+      // 1-3 m from mapped ground, facing a room the map lacks.
+      if (!why.empty() && with_odometry && !s.recent.empty() && s.beyond_map_path_m <= o.max_beyond_map_m &&
+          !degeneracy::analyze(points).degenerate()) {
+        const registration::IcpTarget& target = s.recentTarget();
+        const registration::Result b = registration::alignIcp(target, sub, init);
+        const SE2 c = init.inverse() * b.T_target_source;
+        const bool ok =
+            (b.status == registration::Status::kConverged || b.status == registration::Status::kMaxIterations) &&
+            b.T_target_source.isFinite() && c.translation().norm() <= o.max_correction_m &&
+            std::abs(c.theta()) <= o.max_correction_rad;
+        if (ok) {
+          const double hd2 = s.loc->options().hit_distance_m * s.loc->options().hit_distance_m;
+          const std::function<bool(const Eigen::Vector2d&)> near_recent = [&](const Eigen::Vector2d& w) {
+            double d2 = 0.0;
+            return target.nearestWithin(w, hd2, &d2) < target.size();
+          };
+          const double score = s.loc->score(sub, b.T_target_source, sensor, near_recent);
+          const double moved =
+              std::max(c.translation().norm() / o.max_correction_m, std::abs(c.theta()) / o.max_correction_rad);
+          if (score >= o.min_track_score + o.correction_score_slope * moved) {
+            m = b;
+            r.score = score;
+            r.beyond_map = true;
+            why.clear();
+          }
+        }
+      }
       if (why.empty()) break;
     }
     r.track_ms = msSince(t0);
     if (why.empty()) {
       // The step is measured between checked poses only; carried priors are not evidence.
       if (s.lost == 0) s.step = s.pose->inverse() * m.T_target_source;
+      if (!r.beyond_map) s.beyond_map_path_m = 0.0;
+      s.remember(sub, m.T_target_source);
       s.placed(m.T_target_source);
       s.lost = 0;
       s.candidate.reset();
@@ -268,6 +339,9 @@ TrackResult Tracker::add(const Frame& frame) {
     r.relocalized = s.fixed_once;
     r.reason.clear();
     s.fixed_once = true;
+    // The recent scans were placed before tracking failed, perhaps elsewhere (a kidnapping).
+    s.forgetRecent();
+    s.remember(subsample(points, o.max_points), g.T_world_robot);
     s.placed(g.T_world_robot);
     // The step between the last two agreeing answers: the constant-velocity prior of the next scan
     // when there is no odometry (standing still would be metres off on a log of keyframes).

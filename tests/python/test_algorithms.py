@@ -159,6 +159,12 @@ def test_tracker(office_frames, office_map):
         lidar2d.Tracker(office_map, slide_score_margin=-0.1)
     with pytest.raises(lidar2d.Error, match="correction_score_slope"):
         lidar2d.Tracker(office_map, correction_score_slope=2.0)
+    with pytest.raises(lidar2d.Error, match="max_beyond_map_m"):
+        lidar2d.Tracker(office_map, max_beyond_map_m=0.0)
+    # In the map of the whole run no scan needs the recent scans; with them off it tracks alike.
+    assert not any(r["beyond_map"] for r in results)
+    off = lidar2d.Tracker(office_map, recent_scans=0)
+    assert [off.add(f)["status"] for f in office_frames] == statuses
     with pytest.raises(TypeError):
         tracker.add(np.zeros((10, 2)))
 

@@ -30,14 +30,15 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <numbers>
 #include <string>
 #include <vector>
 
 #include "lidar2d/core/laser_scan.hpp"
-#include "lidar2d/core/se2.hpp"
 #include "lidar2d/core/occupancy_image.hpp"
+#include "lidar2d/core/se2.hpp"
 #include "lidar2d/localization/lines.hpp"
 
 namespace lidar2d::localization {
@@ -290,6 +291,12 @@ class Localizer {
   /// space cost nothing (docs/localization.md).
   double score(const Points2& points_robot, const SE2& T_world_robot,
                const Eigen::Vector2d& sensor_robot = Eigen::Vector2d::Zero()) const;
+  /// The same score, a point for which `also_explained` (world frame) holds counting as on an
+  /// obstacle: what the map lacks but other evidence shows (the tracker's recent scans beyond the
+  /// map's edge). Such a point in the map's known free space still counts half against the pose,
+  /// and a beam through the map's obstacles fully.
+  double score(const Points2& points_robot, const SE2& T_world_robot, const Eigen::Vector2d& sensor_robot,
+               const std::function<bool(const Eigen::Vector2d&)>& also_explained) const;
 
   const Database& database() const;
   const LocalizerOptions& options() const;

@@ -19,8 +19,13 @@
 /// localization runs until it answers. A pose is never reported as `tracking` unless its match
 /// passed the checks: an unchecked pose is `lost` (with a NaN pose).
 ///
-/// Memory is constant over any log length: the tracker keeps the map's field, the localizer and
-/// the last pose, odometry and step, nothing per scan.
+/// With odometry, where the map explains too little of a scan (a place the map lacks, its edge),
+/// the scan is matched against the last few placed scans too (`recent_scans`) and tracked when the
+/// map and those scans together explain it, for up to `max_beyond_map_m` of path since the map
+/// alone last explained a scan (TrackResult::beyond_map).
+///
+/// Memory is constant over any log length: the tracker keeps the map's field, the localizer, the
+/// last pose, odometry and step, and the points of the last `recent_scans` placed scans.
 ///
 /// Frames: `T_world_robot` in the map's world frame; odometry `T_odom_robot` in any frame (only
 /// its steps are used).
@@ -90,6 +95,17 @@ struct TrackerOptions {
   double max_correction_rad = 15.0 * std::numbers::pi / 180.0;  ///< the same for the heading [rad], > 0
   /// Failed scans in a row after which the prior is dropped and only global localization runs, >= 1
   std::size_t max_lost_scans = 5;
+  /// With odometry, a scan whose map match fails (the map explains too little of it: a room the map
+  /// lacks, the map's edge, a turn in place facing unmapped ground) is matched against the last this
+  /// many placed scans (ICP from the prior), and tracked when the map and those scans together
+  /// explain enough of it (Localizer::score, a point near a recent scan's point counting as
+  /// explained; the same min_track_score and correction_score_slope) and the map contradicts it
+  /// nowhere more than the score allows (beams through the map's walls). 0: off (such scans are lost)
+  std::size_t recent_scans = 10;
+  /// Path [m] (odometry) since the map alone last explained a scan, beyond which a scan the map does
+  /// not explain is no longer tracked on the recent scans (they drift by about 1-2% of the path),
+  /// > 0
+  double max_beyond_map_m = 10.0;
   void validate() const;
   static registration::LikelihoodFieldOptions trackingField() {
     registration::LikelihoodFieldOptions o;
@@ -114,6 +130,9 @@ struct TrackResult {
   SE2 T_world_robot;     ///< pose in the map's world frame; NaN when lost
   double score = 0.0;    ///< Localizer::score of the pose (0 when lost), in [0, 1]
   bool relocalized = false;  ///< a global fix after an earlier fix (a recovery, not the first fix)
+  /// `tracking` on the recent scans where the map explains too little (TrackerOptions::recent_scans):
+  /// the pose chains from the last scan the map placed, and drifts
+  bool beyond_map = false;
   std::string reason;    ///< why a scan was not tracked ("no fix yet", "low score", "jump", "not converged", ...)
   int iterations = 0;    ///< likelihood-field iterations of the tracking match (0 if none)
   double track_ms = 0.0;   ///< time of the tracking match and its score [ms]
