@@ -407,12 +407,12 @@ struct Slam::Impl {
       const bool moved = rel.translation().norm() >= opt.node_min_translation_m ||
                          std::abs(rel.theta()) >= opt.node_min_rotation_rad ||
                          f.time - last_node_time >= opt.node_max_interval_s;
-      if (t.restart || ((rec.matched || t.new_ground) && moved && pts.size() >= opt.min_points)) {
+      if (t.restart || ((rec.matched || t.placed_by_odometry) && moved && pts.size() >= opt.min_points)) {
         rec.node = nodes_added;
         rec.is_node = true;
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
-                prediction.source == internal::PriorSource::kOdometry, t.new_ground);
+                prediction.source == internal::PriorSource::kOdometry, t.placed_by_odometry);
       } else {
         rec.node = nodes_added - 1;
         rec.T_node_scan = rel;

@@ -41,11 +41,17 @@ class FrontEnd {
     bool degenerate = false;
     Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
     bool restart = false;                           ///< tracking lost: the local map restarts at this scan
-    /// Unmatched, but at the odometry's prediction the scan overlaps almost nothing of the local map
-    /// (it sees only new ground): it is placed there and becomes a node, not a failure.
-    bool new_ground = false;
+    /// Unmatched, but nothing contradicts the odometry's prediction (FrontEnd::OdometryVouches): it
+    /// is placed there and becomes a node, not a failure.
+    bool placed_by_odometry = false;
     bool overrode_prior = false;                    ///< the match contradicts the prior (strong scan evidence)
   };
+
+  /// Why an unmatched scan under a trusted odometry prior (odometryTrusted) is placed by the
+  /// odometry rather than counted towards a lost track: it overlaps almost nothing of the local map
+  /// at the prediction (it sees only new ground), or the best match near the prediction, though too
+  /// weak to take, explains more of it than any match farther away (the scan points nowhere else).
+  enum class OdometryVouches { kNo, kNewGround, kBestMatchNearIt };
 
   /// True once a scan was remembered.
   bool started() const { return have_prev; }
@@ -116,15 +122,18 @@ class FrontEnd {
     std::optional<Candidate> rejected;              ///< a match contradicting the prior, without the evidence
     double explained = 0.0;                         ///< the share of the scan T explains
     double explained_in_gate = 0.0;                 ///< the best match within the prior's gate explained this
-    /// Nothing within the gate matched, no match beyond it was refused, and the scan at the
-    /// prediction sees only new ground (onlyNewGroundAt): Tracked::new_ground when unmatched.
-    bool only_new_ground = false;
+    /// Nothing within the gate matched, no match beyond it was refused, and the odometry vouches
+    /// for the prediction (OdometryVouches): Tracked::placed_by_odometry when unmatched.
+    OdometryVouches vouches = OdometryVouches::kNo;
   };
 
   void rebuildLocalMap();
   void remapDegenerate(Candidate& c, const SE2& T_pred) const;
-  /// Whether, under an odometry prior with no gap since the last match, under kNewGroundOverlap
-  /// of the scan at the prediction overlaps the local map.
+  /// Whether `p` is an odometry prior the front end trusts: no gap since the last match, time as
+  /// predicted, a plausible step.
+  bool odometryTrusted(const Prediction& p) const;
+  /// Whether, under a trusted odometry prior, under kNewGroundOverlap of the scan at the prediction
+  /// overlaps the local map.
   bool onlyNewGroundAt(const Points2& pts, const Prediction& p, const SE2& T_pred) const;
   MatchOutcome frontEndMatch(const Points2& pts, const Prediction& p, const SE2& T_pred,
                              const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
