@@ -119,9 +119,16 @@ struct Tracker::State {
     if (!recent_target) {
       Points2 all;
       for (const auto& pts : recent) all.insert(all.end(), pts.begin(), pts.end());
-      recent_target = std::make_unique<registration::IcpTarget>(all, registration::IcpOptions{});
+      recent_target = std::make_unique<registration::IcpTarget>(all, recentIcp());
     }
     return *recent_target;
+  }
+  /// ICP against the recent scans: a k-d tree, since the points of several scans in the world
+  /// frame, far from its origin, are no scan for the bearing walk.
+  static registration::IcpOptions recentIcp() {
+    registration::IcpOptions icp;
+    icp.neighbor_search = registration::NeighborSearch::kKdTree;
+    return icp;
   }
   void forgetRecent() {
     recent.clear();
@@ -267,7 +274,7 @@ TrackResult Tracker::add(const Frame& frame) {
       if (!why.empty() && with_odometry && !s.recent.empty() && s.beyond_map_path_m <= o.max_beyond_map_m &&
           !degeneracy::analyze(points).degenerate()) {
         const registration::IcpTarget& target = s.recentTarget();
-        const registration::Result b = registration::alignIcp(target, sub, init);
+        const registration::Result b = registration::alignIcp(target, sub, init, State::recentIcp());
         const SE2 c = init.inverse() * b.T_target_source;
         const bool ok =
             (b.status == registration::Status::kConverged || b.status == registration::Status::kMaxIterations) &&
