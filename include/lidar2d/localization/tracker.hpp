@@ -128,7 +128,8 @@ const char* toString(TrackStatus status);
 struct TrackResult {
   TrackStatus status = TrackStatus::kLost;
   SE2 T_world_robot;     ///< pose in the map's world frame; NaN when lost
-  double score = 0.0;    ///< Localizer::score of the pose (0 when lost), in [0, 1]
+  /// Localizer::score of the pose (0 when lost; beyond_map: the map and the recent scans together), in [0, 1]
+  double score = 0.0;
   bool relocalized = false;  ///< a global fix after an earlier fix (a recovery, not the first fix)
   /// `tracking` on the recent scans where the map explains too little (TrackerOptions::recent_scans):
   /// the pose chains from the last scan the map placed, and drifts
