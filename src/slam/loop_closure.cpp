@@ -71,9 +71,10 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   std::sort(candidates.begin(), candidates.end());
   int searches_left = opt.loop_searches_per_node;
   // A fragment after a lost track, not yet tied to the map before it, searches at every node: each
-  // node of a revisit is a chance to tie it (and to confirm a pending closure).
+  // node of a revisit is a chance to tie it (and to confirm a pending closure). So do the nodes
+  // after one placed by the odometry without a match (search_every_node_until).
   const bool every_node = n % static_cast<std::size_t>(opt.loop_search_every_nodes) == 0 ||
-                          (s_.untied_since && n >= *s_.untied_since);
+                          (s_.untied_since && n >= *s_.untied_since) || n <= s_.search_every_node_until;
   // Listed when rejected: a searched closure (link-following ones are routine).
   auto listRejected = [&](Constraint&& c) {
     ++s_.stats.loop_rejected;

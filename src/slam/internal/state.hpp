@@ -108,6 +108,12 @@ struct SlamState {
   // closure ties the fragment to the nodes before it: the descriptor search relocalizes its nodes
   // against every earlier submap, without the drift limits (its link is only the prediction).
   std::optional<std::size_t> untied_since;
+  /// Nodes up to this one search for loop closures at every node (graphNode sets it after a node
+  /// placed by the odometry without a match). On orebro's and intel's keyframes a lost track's
+  /// relocalization had corrected drift that the scans placed by odometry, kept in one chain,
+  /// left to the next closure; 30 nodes of searches recovered it (BENCHMARK.md, SLAM).
+  std::size_t search_every_node_until = 0;
+  static constexpr std::size_t kSearchEveryNodeAfterPlaced = 30;
   // The odometry constraint across the latest lost track (indices into edges and constraints, and
   // its `to` node), while the fragment is untied: the relocalization checks it.
   using RestartOdometry = State::RestartOdometry;
