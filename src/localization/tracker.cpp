@@ -98,27 +98,25 @@ struct Tracker::State {
   /// path since [m]; none before the first fix or after a scan without odometry.
   std::optional<SE2> dead_reckoned;
   double dead_reckoned_path_m = 0.0;
-  /// The points (world frame) of the last recent_scans placed scans, oldest first, and their ICP
-  /// target, built when a scan the map does not explain needs it.
-  std::deque<Points2> recent;
+  /// The last recent_scans placed scans (pose, points in the robot frame), oldest first, and their
+  /// ICP target in the world frame, built only when a scan the map does not explain needs it.
+  std::deque<std::pair<SE2, Points2>> recent;
   std::unique_ptr<registration::IcpTarget> recent_target;
   /// Odometry path since the map alone last explained a scan (a fix or a map match) [m].
   double beyond_map_path_m = 0.0;
 
   /// Remembers the points (robot frame) of a scan placed at `T`.
-  void remember(const Points2& points, const SE2& T) {
+  void remember(Points2 points, const SE2& T) {
     if (o.recent_scans == 0) return;
-    Points2 world;
-    world.reserve(points.size());
-    for (const auto& p : points) world.push_back(T * p);
-    recent.push_back(std::move(world));
+    recent.emplace_back(T, std::move(points));
     while (recent.size() > o.recent_scans) recent.pop_front();
     recent_target.reset();
   }
   const registration::IcpTarget& recentTarget() {
     if (!recent_target) {
       Points2 all;
-      for (const auto& pts : recent) all.insert(all.end(), pts.begin(), pts.end());
+      for (const auto& [T, pts] : recent)
+        for (const auto& p : pts) all.push_back(T * p);
       recent_target = std::make_unique<registration::IcpTarget>(all, recentIcp());
     }
     return *recent_target;

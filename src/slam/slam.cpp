@@ -484,10 +484,10 @@ struct Slam::Impl {
       state.untied_since = n;
     }
     if (n > 0) internal::addSequentialConstraints(state, n, restart, predicted, degenerate, dir_local);
-    // A scan the front end placed by the odometry, unmatched: how far the chain drifted there is
-    // less certain, so the nodes after it search for closures at every node (as a lost track's
-    // fragment does), not every loop_search_every_nodes.
-    if (predicted && !restart) state.search_every_node_until = n + internal::SlamState::kSearchEveryNodeAfterPlaced;
+    // A scan the front end placed by the odometry, unmatched (`predicted`; never with `restart`): how
+    // far the chain drifted there is less certain, so the nodes after it search for closures at
+    // every node (as a lost track's fragment does), not every loop_search_every_nodes.
+    if (predicted) state.search_every_node_until = n + internal::SlamState::kSearchEveryNodeAfterPlaced;
     backEnd(n, static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes);
   }
 };

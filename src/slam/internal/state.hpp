@@ -109,9 +109,9 @@ struct SlamState {
   // against every earlier submap, without the drift limits (its link is only the prediction).
   std::optional<std::size_t> untied_since;
   /// Nodes up to this one search for loop closures at every node (graphNode sets it after a node
-  /// placed by the odometry without a match). On orebro's and intel's keyframes a lost track's
-  /// relocalization had corrected drift that the scans placed by odometry, kept in one chain,
-  /// left to the next closure; 30 nodes of searches recovered it (BENCHMARK.md, SLAM).
+  /// placed by the odometry without a match): the chain's drift there is less certain, and where a
+  /// lost track's relocalization would have corrected it, these searches find the closures instead
+  /// (BENCHMARK.md, SLAM).
   std::size_t search_every_node_until = 0;
   static constexpr std::size_t kSearchEveryNodeAfterPlaced = 30;
   // The odometry constraint across the latest lost track (indices into edges and constraints, and
