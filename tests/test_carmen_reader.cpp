@@ -514,19 +514,55 @@ TEST_F(CarmenSynthetic, FirstLaserTypeIsReadAndOthersSkipped) {
   EXPECT_TRUE(hasWarning(r.notes, "skipped other laser messages: 1 FLASER"));
 }
 
-// A declared range max below what the laser measured (edmonton's PARAM robot_front_laser_max 10):
-// ReaderOptions::laser_range_max replaces it, the readings below it become returns, the no-return
-// code above it stays none.
+// A declared range max below what the laser measured (edmonton's PARAM robot_front_laser_max 10,
+// its SICK reading walls to 45 m and 51.15 m for no return): the readings prove it wrong, so the
+// range max becomes 99% of the no-return code, and the notes say so. ReaderOptions::laser_range_max
+// replaces either (10 keeps the log's, and openLog then warns of the returns it drops).
+TEST_F(CarmenSynthetic, ARangeMaxTheReadingsContradictIsReplaced) {
+  const std::string path =
+      write("PARAM robot_front_laser_max 10 nohost 0\nFLASER 5 2 12.5 25 51.15 51.15 0 0 0 0 0 0 1 host 1\n");
+  auto r = readWithNotes(path);
+  ASSERT_EQ(r.frames.size(), 1u);
+  EXPECT_DOUBLE_EQ(r.frames[0].scan.rangeMax(), 51.15 * 0.99);
+  EXPECT_EQ(r.frames[0].scan.validIndices(), (std::vector<std::size_t>{0, 1, 2}));
+  EXPECT_TRUE(hasWarning(r.notes, "the log's range max (10.00 m) is below what its laser measured: 40.0% of the "
+                                  "beams of its first 1 scans read beyond it, under the no-return reading 51.15 m; "
+                                  "read with the range max 50.64 m (--laser-range-max 10 keeps the log's)"));
+  EXPECT_EQ(r.notes.beams_beyond_range_max, 0u);
+  ReaderOptions o;
+  o.laser_range_max = 10.0;
+  r = readWithNotes(path, o);
+  EXPECT_DOUBLE_EQ(r.frames[0].scan.rangeMax(), 10.0);
+  EXPECT_EQ(r.frames[0].scan.numValid(), 1u);
+  EXPECT_EQ(r.notes.beams_beyond_range_max, 2u);
+  EXPECT_TRUE(hasWarning(r.notes, "40.0% of the beams read beyond the range max (10.00 m"));
+  EXPECT_FALSE(hasWarning(r.notes, "is below what its laser measured"));
+}
+
+// Readings beyond the declared range max with no no-return code above them all (here 25 m beyond
+// the commonest, 12.5 m) do not say where the laser's range ends: the log's range max is kept and
+// openLog warns. A no-return code alone (80.99 declared, 81.91 written: freiburg-079) changes nothing.
+TEST_F(CarmenSynthetic, ARangeMaxIsKeptWithoutProofOfTheLasersRange) {
+  auto r = readWithNotes(write("PARAM robot_front_laser_max 10 nohost 0\n"
+                               "FLASER 4 2 12.5 25 3 0 0 0 0 0 0 1 host 1\nFLASER 4 2 12.5 13 3 0 0 0 0 0 0 2 host 2\n"));
+  ASSERT_EQ(r.frames.size(), 2u);
+  EXPECT_DOUBLE_EQ(r.frames[0].scan.rangeMax(), 10.0);
+  EXPECT_FALSE(hasWarning(r.notes, "is below what its laser measured"));
+  EXPECT_TRUE(hasWarning(r.notes, "25.0% of the beams read beyond the range max (10.00 m"));
+  r = readWithNotes(write("PARAM robot_front_laser_max 80.99 nohost 0\nFLASER 4 2 81.91 81.91 3 0 0 0 0 0 0 1 host 1\n"));
+  EXPECT_DOUBLE_EQ(r.frames[0].scan.rangeMax(), 80.99);
+  EXPECT_EQ(r.frames[0].scan.numValid(), 2u);
+  EXPECT_TRUE(r.notes.warnings.empty());
+}
+
+// ReaderOptions::laser_range_max replaces the log's range max: readings below it become returns,
+// the no-return code above it stays none; a value out of range is an invalid argument.
 TEST_F(CarmenSynthetic, ARangeMaxFromTheOptionsReplacesTheLogs) {
   const std::string path =
       write("PARAM robot_front_laser_max 10 nohost 0\nFLASER 4 2 12.5 25 51.15 0 0 0 0 0 0 1 host 1\n");
-  auto r = readWithNotes(path);
-  ASSERT_EQ(r.frames.size(), 1u);
-  EXPECT_DOUBLE_EQ(r.frames[0].scan.rangeMax(), 10.0);
-  EXPECT_EQ(r.frames[0].scan.numValid(), 1u);
   ReaderOptions o;
   o.laser_range_max = 50.0;
-  r = readWithNotes(path, o);
+  auto r = readWithNotes(path, o);
   ASSERT_EQ(r.frames.size(), 1u);
   const LaserScan& s = r.frames[0].scan;
   EXPECT_DOUBLE_EQ(s.rangeMax(), 50.0);

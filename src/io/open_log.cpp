@@ -147,11 +147,7 @@ class LogWatch final : public FrameSource {
     if (frames_ > 0 && f->time < prev_time_) ++time_backwards_;
     prev_time_ = f->time;
     ++frames_;
-    beams_ += f->scan.size();
-    const double range_max = f->scan.rangeMax();
-    for (const double r : f->scan.ranges())
-      if (std::isfinite(r) && r >= range_max && (over_max_.size() < kMaxValues || over_max_.contains(r)))
-        ++over_max_[r];
+    beyond_.add(f->scan);
     return f;
   }
   LogFormat format() const override { return inner_->format(); }
@@ -165,34 +161,26 @@ class LogWatch final : public FrameSource {
       n.warnings.push_back(fmt::format("{} scans repeat the previous scan's timestamp", time_repeats_));
     if (!told && time_backwards_)
       n.warnings.push_back(fmt::format("{} scans have a timestamp earlier than the previous scan's", time_backwards_));
-    // The most frequent reading at or beyond the range max is the no-return code; the others
-    // (beyond 1% of it) are returns the range max discards.
-    if (!over_max_.empty()) {
-      const auto code = std::max_element(over_max_.begin(), over_max_.end(),
-                                         [](const auto& a, const auto& b) { return a.second < b.second; });
-      for (const auto& [r, count] : over_max_)
-        if (std::abs(r - code->first) > 0.01 * code->first) n.beams_beyond_range_max += count;
-      const double share = static_cast<double>(n.beams_beyond_range_max) / static_cast<double>(beams_);
-      if (share >= 0.01)
-        n.warnings.push_back(fmt::format(
-            "{:.1f}% of the beams read beyond the range max ({:.2f} m of the first scan) and are not the log's "
-            "no-return reading ({:.2f} m, the most frequent there): they count as no return; the laser may measure "
-            "farther than its declared range max (CARMEN: PARAM robot_front_laser_max, laser_front_laser_max_range); "
-            "--laser-range-max R, R below {:.2f}, reads them as returns",
-            100.0 * share, range_max_, code->first, code->first));
+    n.beams_beyond_range_max = beyond_.returns();
+    if (beyond_.contradicted()) {
+      const double code = *beyond_.code();
+      n.warnings.push_back(fmt::format(
+          "{:.1f}% of the beams read beyond the range max ({:.2f} m of the first scan) and are not the log's "
+          "no-return reading ({:.2f} m, the most frequent there): they count as no return; the laser may measure "
+          "farther than its declared range max (CARMEN: PARAM robot_front_laser_max, laser_front_laser_max_range); "
+          "--laser-range-max R, R below {:.2f}, reads them as returns",
+          100.0 * static_cast<double>(n.beams_beyond_range_max) / static_cast<double>(beyond_.beams()), range_max_,
+          code, code));
     }
     return n;
   }
   std::optional<std::size_t> sizeHint() const override { return inner_->sizeHint(); }
 
  private:
-  // Distinct readings beyond the range max kept (a no-return code is one value; returns beyond a
-  // declared maximum spread over many): bounds the memory on any log.
-  static constexpr std::size_t kMaxValues = 100000;
   std::unique_ptr<FrameSource> inner_;
-  std::size_t frames_ = 0, beams_ = 0, time_repeats_ = 0, time_backwards_ = 0;
+  std::size_t frames_ = 0, time_repeats_ = 0, time_backwards_ = 0;
   double prev_time_ = 0.0, range_max_ = 0.0;
-  std::map<double, std::size_t> over_max_;
+  internal::BeyondRangeMax beyond_;
 };
 
 std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOptions& options) {
@@ -212,6 +200,43 @@ std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOpt
 }  // namespace
 
 namespace internal {
+
+void BeyondRangeMax::add(const LaserScan& scan) {
+  beams_ += scan.size();
+  const double range_max = scan.rangeMax();
+  for (const double r : scan.ranges())
+    if (std::isfinite(r) && r >= range_max && (over_.size() < kMaxValues || over_.contains(r))) ++over_[r];
+}
+
+std::optional<double> BeyondRangeMax::code() const {
+  if (over_.empty()) return std::nullopt;
+  return std::max_element(over_.begin(), over_.end(), [](const auto& a, const auto& b) { return a.second < b.second; })
+      ->first;
+}
+
+std::size_t BeyondRangeMax::returns() const {
+  const std::optional<double> c = code();
+  if (!c) return 0;
+  std::size_t n = 0;
+  for (const auto& [r, count] : over_)
+    if (std::abs(r - *c) > kCodeTolerance * *c) n += count;
+  return n;
+}
+
+bool BeyondRangeMax::contradicted() const {
+  return beams_ > 0 && static_cast<double>(returns()) >= kShare * static_cast<double>(beams_);
+}
+
+bool BeyondRangeMax::codeAboveReturns() const {
+  const std::optional<double> c = code();
+  if (!c) return false;
+  std::size_t at_code = 0;
+  for (const auto& [r, count] : over_) {
+    if (r > *c * (1.0 + kCodeTolerance)) return false;
+    if (r >= *c * (1.0 - kCodeTolerance)) at_code += count;
+  }
+  return static_cast<double>(at_code) >= kShare * static_cast<double>(beams_);
+}
 
 LaserMount applyTiltRule(const LaserMount& mount, const ReaderOptions& options, const ErrorLocation& where,
                          const std::string& what, std::vector<std::string>& warnings) {

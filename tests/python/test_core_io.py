@@ -130,23 +130,26 @@ def test_simulate_and_worlds():
 
 
 def test_read_log_laser_range_max(tmp_path):
-    # A declared range max of 10 m below what the laser read (edmonton's log): laser_range_max
-    # replaces it; the no-return code above it stays no return.
+    # A declared range max of 10 m below what the laser read (edmonton's log): the readings prove
+    # it wrong (returns up to 25 m under the no-return code 51.15), so the reader takes 99% of the
+    # code and says so; laser_range_max replaces either, the no-return code above it no return.
     log = tmp_path / "declared.log"
     log.write_text("PARAM robot_front_laser_max 10 nohost 0\n"
-                   "FLASER 4 2 12.5 25 51.15 0 0 0 0 0 0 1 host 1\n")
-    (frame,) = list(lidar2d.read_log(log))
-    assert list(frame.valid) == [True, False, False, False]
-    (frame,) = list(lidar2d.read_log(log, laser_range_max=50.0))
-    assert list(frame.valid) == [True, True, True, False]
-    # The reader says so, as `lidar2d info` does: beyond 10 m, 12.5 and 25 m are returns, 51.15 (the
-    # most frequent reading there) the no-return code: 2 of 8 beams.
-    with log.open("a") as f:
-        f.write("FLASER 4 2 51.15 51.15 51.15 0 0 0 0 0 0 2 host 2\n")
+                   "FLASER 5 2 12.5 25 51.15 51.15 0 0 0 0 0 0 1 host 1\n")
     reader = lidar2d.read_log(log)
-    list(reader)
+    (frame,) = list(reader)
+    assert list(frame.valid) == [True, True, True, False, False]
+    assert any("the log's range max (10.00 m) is below what its laser measured" in w
+               for w in reader.notes()["warnings"])
+    (frame,) = list(lidar2d.read_log(log, laser_range_max=50.0))
+    assert list(frame.valid) == [True, True, True, False, False]
+    # Kept at 10 m, the reader warns, as `lidar2d info` does: beyond 10 m, 12.5 and 25 m are
+    # returns, 51.15 (the most frequent reading there) the no-return code: 2 of 5 beams.
+    reader = lidar2d.read_log(log, laser_range_max=10.0)
+    (frame,) = list(reader)
+    assert list(frame.valid) == [True, False, False, False, False]
     assert reader.notes()["beams_beyond_range_max"] == 2
-    assert any("25.0% of the beams read beyond the range max" in w for w in reader.notes()["warnings"])
+    assert any("40.0% of the beams read beyond the range max" in w for w in reader.notes()["warnings"])
     reader = lidar2d.read_log(log, laser_range_max=50.0)
     list(reader)
     assert reader.notes()["beams_beyond_range_max"] == 0

@@ -77,9 +77,12 @@ struct ReaderOptions {
   bool allow_tilted_laser = false;
   /// The laser's range max [m], replacing the log's (CARMEN FLASER/RLASER: 80 m or a PARAM;
   /// ROBOTLASER and ROS bags: each message's own): readings at or beyond it are no return, those
-  /// below it (and above range_min) valid. For a log that declares less than its laser measures
-  /// (SourceNotes: a warning, `beams_beyond_range_max`); above the log's no-return code, that code
-  /// becomes a return. Finite, in (0, kMaxLaserRangeMax]; std::nullopt keeps the log's.
+  /// below it (and above range_min) valid. Above the log's no-return code, that code becomes a
+  /// return. Finite, in (0, kMaxLaserRangeMax]; std::nullopt: the log's, except where a CARMEN
+  /// log's first 300 scans contradict it (1% of their beams or more read beyond it, and a no-return
+  /// code lies above all of them: the range max becomes 99% of that code, and the notes' warnings
+  /// say so; docs/file-formats.md). Where other readings beyond it remain, the notes warn
+  /// (`beams_beyond_range_max`).
   std::optional<double> laser_range_max;
   /// A range table given file by file; when set, `openLog` reads it whatever its path argument.
   std::optional<RangeTableFiles> range_table;
