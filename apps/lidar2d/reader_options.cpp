@@ -172,8 +172,8 @@ void addReaderOptions(CLI::App* sub, io::ReaderOptions& options) {
   sub->add_option_function<double>(
          "--laser-range-max", [&options](double r) { options.laser_range_max = r; },
          "the laser's range max [m], replacing the log's: readings at or beyond it are no return, those below it "
-         "returns (for a log that declares less than its laser measures: every command that reads the log warns; "
-         "default: the log's)")
+         "returns (default: the log's; a CARMEN log whose first scans read beyond it, under a no-return code, is "
+         "read to that code, and every command that reads the log says so)")
       ->check(positiveNumber())
       ->type_name("METRES");
   sub->add_option("--max-tilt", options.max_laser_tilt_deg,
