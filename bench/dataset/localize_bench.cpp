@@ -117,7 +117,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     if (!queries) throw std::runtime_error(fmt::format("{}: cannot write", bo.queries));
     queries
         << "map\tscan\tmapped\toutcome\treason\tscore\tfit\trunner_up_score\trunner_up_fit\ttruth_fit\tcandidate_near_"
-           "truth\talternative_fits\tpoints\n";
+           "truth\talternative_fits\tpoints\tregions\tlookup_ms\tverify_ms\twall_ms\n";
   }
   for (const std::string& log : bo.logs) {
     const std::string path = (std::filesystem::path(data_dir) / log).string();
@@ -206,12 +206,14 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         for (const auto& a : r.alternatives) alts += fmt::format("{}{:.4f}", alts.empty() ? "" : ",", a.fit);
         const bool two = r.candidates.size() > 1;
         queries << fmt::format(
-            "{}\t{}\t{}\t{}\t{}\t{:.4f}\t{:.4f}\t{:.4f}\t{:.4f}\t{}\t{}\t{}\t{}\n", name, odd[k], int(mapped_place),
+            "{}\t{}\t{}\t{}\t{}\t{:.4f}\t{:.4f}\t{:.4f}\t{:.4f}\t{}\t{}\t{}\t{}\t{}\t{:.2f}\t{:.2f}\t{:.2f}\n", name,
+            odd[k], int(mapped_place),
             r.declined ? "declined" : (at_truth ? "right" : "wrong"), r.reason.empty() ? "-" : r.reason, r.score,
             r.candidates.empty() ? 0.0 : r.candidates.front().fit, two ? r.candidates[1].score : 0.0,
             two ? r.candidates[1].fit : 0.0,
             truth == r.candidates.end() ? std::string("-") : fmt::format("{:.4f}", truth->fit),
-            truth == r.candidates.end() ? -1 : truth - r.candidates.begin(), alts.empty() ? "-" : alts, r.num_points);
+            truth == r.candidates.end() ? -1 : truth - r.candidates.begin(), alts.empty() ? "-" : alts, r.num_points,
+            r.num_regions, r.lookup_ms, r.verify_ms, ms.back());
       }
       if (bo.verbose && !right)
         std::cerr << fmt::format(
