@@ -79,8 +79,8 @@ struct Decision {
 };
 
 // The range max from the laser's own readings, when they contradict the log's. A CARMEN log's
-// range max is a setting of the program that wrote it (PARAM robot_front_laser_max is the robot
-// module's obstacle range; FLASER carries none and gets 80 m): edmonton's declares 10 m while its
+// range max is a setting of the program that wrote it (PARAM robot_front_laser_max is a parameter
+// of CARMEN's robot module; FLASER carries none and gets 80 m): edmonton's declares 10 m while its
 // SICK reads walls to 45 m and writes 51.15 m for no return, and the declared 10 m dropped 29% of
 // the beams, half the building (SLAM with perfect odometry 0.99 m ATE against 0.35 m read to the
 // no-return code: BENCHMARK.md, SLAM). Replaced only when the first scans prove it: at least
