@@ -376,11 +376,8 @@ class CarmenSource final : public FrameSource {
     prev_time_ = m.time;
     p.frame.index = count_++;
     p.frame.time = m.time;
-    if (decision_.range_max && m.scan.rangeMax() == *decision_.declared_range_max) {
-      LaserScanFields fields = m.scan.fields();
-      fields.range_max = *decision_.range_max;
-      m.scan = LaserScan::create(std::move(fields));
-    }
+    if (decision_.range_max && m.scan.rangeMax() == *decision_.declared_range_max)
+      m.scan = withRangeMax(m.scan, *decision_.range_max);
     p.frame.scan = std::move(m.scan);
     p.frame.T_robot_laser = m.T_robot_laser;
     p.pose = m.pose;

@@ -108,13 +108,11 @@ class RangeMaxOverride final : public FrameSource {
   std::optional<Frame> next() override {
     std::optional<Frame> f = inner_->next();
     if (!f) return f;
-    LaserScanFields fields = f->scan.fields();
-    if (!(range_max_ > fields.range_min))
+    if (!(range_max_ > f->scan.rangeMin()))
       throw invalidArgument(fmt::format("the laser range max {:g} m is not above the log's range min {:g} m",
-                                        range_max_, fields.range_min),
+                                        range_max_, f->scan.rangeMin()),
                             {"ReaderOptions", 0, "laser_range_max"});
-    fields.range_max = range_max_;
-    f->scan = LaserScan::create(std::move(fields));
+    f->scan = internal::withRangeMax(f->scan, range_max_);
     return f;
   }
   LogFormat format() const override { return inner_->format(); }
@@ -200,6 +198,12 @@ std::unique_ptr<FrameSource> openFormat(const std::string& path, const ReaderOpt
 }  // namespace
 
 namespace internal {
+
+LaserScan withRangeMax(const LaserScan& scan, double range_max) {
+  LaserScanFields fields = scan.fields();
+  fields.range_max = range_max;
+  return LaserScan::create(std::move(fields));
+}
 
 void BeyondRangeMax::add(const LaserScan& scan) {
   beams_ += scan.size();

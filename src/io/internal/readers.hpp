@@ -42,6 +42,10 @@ LaserMount applyTiltRule(const LaserMount& mount, const ReaderOptions& options, 
 /// applyTiltRule): the scan projected, T_robot_laser, laser_upside_down and laser_tilt_rad.
 void mountFrame(Frame& frame, const LaserMount& mount);
 
+/// `scan` with another range max: validity recomputed from its raw readings (which scans keep).
+/// Throws what LaserScan::create throws (a range max not above range_min).
+LaserScan withRangeMax(const LaserScan& scan, double range_max);
+
 /// The readings of a log's scans at or beyond their range max, counted by value. The most frequent
 /// is the log's no-return code (a laser writes one value for "no return": 51.15 m in edmonton's log,
 /// 81.91 m in freiburg-079's); readings more than kCodeTolerance (relative) from it are returns that
