@@ -3,7 +3,7 @@
 # not tuned on, made by `lidar2d perturb` (docs/perturb.md). Prints a markdown table, one row per run,
 # and writes it to OUT_DIR/robustness.md.
 #
-#   tools/robustness-benchmark.sh [--quick] [--seeds N,...] [--part corrected|floor|raw|sim]... [--logs NAME,...]
+#   tools/robustness-benchmark.sh [--quick] [--seeds N,...] [--part corrected|floor|raw|sim|lasers]... [--logs NAME,...]
 #                                 [BUILD_DIR] [OUT_DIR]
 #
 # Parts (all by default; --part may be repeated):
@@ -25,6 +25,11 @@
 #              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, and kidnapped (perturb
 #              --keep-odometry --kidnap 15: the robot carried for the 15 s in the middle of the log,
 #              its odometry unaware). Error: ATE.
+#   lasers     the same worlds seen by other lasers than the simulator's default (270 degrees, 30 m,
+#              541 beams, 10 Hz): a low-cost 360-degree laser (360 beams, 12 m, 2 cm noise, 5% of
+#              returns lost), a depth camera's fake laser (58 degrees, 640 beams, 0.5-6 m, 30 Hz) and
+#              a fast long-range laser (1081 beams over 270 degrees, 30 m, 40 Hz); simulated with each
+#              seed, realistic odometry, dense and as keyframes (--keyframes 1,30). Error: ATE.
 # --quick uses seed 1 only; --seeds other seeds (e.g. --seeds 4,5,6: held-out runs for a change
 # tuned on seeds 1-3); --logs keeps only the logs / worlds named (e.g. --logs intel,orebro).
 #
@@ -52,7 +57,7 @@ while [ $# -gt 0 ]; do
       SEED_LIST=$1 ;;
     --part)
       shift
-      case "${1:-}" in corrected | floor | raw | sim) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, floor, raw, sim)" >&2; exit 2 ;; esac ;;
+      case "${1:-}" in corrected | floor | raw | sim | lasers) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, floor, raw, sim, lasers)" >&2; exit 2 ;; esac ;;
     --logs) shift; LOGS=",${1:-},";;
     -h | --help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     -*) echo "unknown option $1" >&2; exit 2 ;;
@@ -64,7 +69,7 @@ BUILD=${POSITIONAL[0]:-build}
 OUT=${POSITIONAL[1]:-bench-out/robustness}
 BIN=$BUILD/lidar2d
 DATA=${LIDAR2D_DATA_DIR:-$(cd "$(dirname "$0")/.." && pwd)/../shared/data}
-[ ${#PARTS[@]} -eq 0 ] && PARTS=(corrected raw sim)
+[ ${#PARTS[@]} -eq 0 ] && PARTS=(corrected raw sim lasers)
 SEEDS=(1 2 3)
 [ "$QUICK" = 1 ] && SEEDS=(1)
 [ -n "$SEED_LIST" ] && IFS=, read -r -a SEEDS <<<"$SEED_LIST"
@@ -194,5 +199,31 @@ if want_part sim; then
     done
     k=$OUT/logs/sim-$w-kidnapped.log
     perturb "$s" --keep-odometry --kidnap 15 -o "$k" && run "sim $w kidnapped" "$k" "$k" "$k"
+  done
+fi
+
+if want_part lasers; then
+  mkdir -p "$OUT/logs"
+  declare -A LASERS=(
+    [360deg-12m]="--beams 360 --fov 360 --max-range 12 --range-noise 0.02 --dropout 0.05"
+    [58deg-6m]="--beams 640 --fov 58 --max-range 6 --min-range 0.5 --range-noise 0.01 --dropout 0.02 --rate 30"
+    [270deg-30m-40Hz]="--beams 1081 --fov 270 --max-range 30 --rate 40"
+  )
+  for w in office corridor symmetric open; do
+    want_log "$w" || continue
+    for laser in 360deg-12m 58deg-6m 270deg-30m-40Hz; do
+      for seed in "${SEEDS[@]}"; do
+        s=$OUT/logs/sim-$w-$laser-s$seed.log
+        # shellcheck disable=SC2086 # the laser's options are words
+        "$BIN" simulate --world "$w" --seed "$seed" ${LASERS[$laser]} -o "$s" >/dev/null
+        for variant in dense kf; do
+          kf=()
+          [ "$variant" = kf ] && kf=(--keyframes 1,30)
+          p=$OUT/logs/sim-$w-$laser-$variant-s$seed.log
+          perturb "$s" --odom-model realistic "${kf[@]}" --seed "$seed" -o "$p" || continue
+          run "sim $w $laser $variant s$seed" "$p" "$p" "$p"
+        done
+      done
+    done
   done
 fi

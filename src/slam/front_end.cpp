@@ -285,8 +285,16 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   if (!win && (beyond_wins || !beyond_counts)) {
     if (onlyNewGroundAt(pts, p, T_pred))
       out.vouches = OdometryVouches::kNewGround;
-    else if (in_gate && odometryTrusted(p) && in_gate->explained > (beyond_gate ? beyond_gate->explained : 0.0))
-      out.vouches = OdometryVouches::kBestMatchNearIt;
+    else if (odometryTrusted(p)) {
+      // The prediction itself is a pose near the prediction: where ICP found too few pairs to move
+      // from it (a narrow field of view turning onto a wall the local map holds a corner of), what
+      // the scan explains there is the best near the odometry's pose.
+      const double at_prediction =
+          overlapWith(*local_target, pts, T_pred, opt.match_inlier_distance_m, kOverlapM).explained;
+      out.explained_in_gate = std::max(out.explained_in_gate, at_prediction);
+      if (out.explained_in_gate > (beyond_gate ? beyond_gate->explained : 0.0))
+        out.vouches = OdometryVouches::kBestMatchNearIt;
+    }
   }
   if (beyond_wins && (win || out.vouches == OdometryVouches::kNo)) {
     win = &*beyond_gate;

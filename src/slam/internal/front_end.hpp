@@ -50,7 +50,8 @@ class FrontEnd {
   /// Why an unmatched scan under a trusted odometry prior (odometryTrusted) is placed by the
   /// odometry rather than counted towards a lost track: it overlaps almost nothing of the local map
   /// at the prediction (it sees only new ground), or the best match near the prediction, though too
-  /// weak to take, explains more of it than any match farther away (the scan points nowhere else).
+  /// weak to take (or the prediction itself, where ICP found too few pairs), explains more of it
+  /// than any match farther away (the scan points nowhere else).
   enum class OdometryVouches { kNo, kNewGround, kBestMatchNearIt };
 
   /// True once a scan was remembered.
@@ -121,7 +122,8 @@ class FrontEnd {
     bool overrode_prior = false;                    ///< T contradicts the prior (taken on scan evidence)
     std::optional<Candidate> rejected;              ///< a match contradicting the prior, without the evidence
     double explained = 0.0;                         ///< the share of the scan T explains
-    double explained_in_gate = 0.0;                 ///< the best match within the prior's gate explained this
+    double explained_in_gate =
+        0.0;  ///< the best match within the prior's gate (or, unmatched, the prediction) explained this
     /// Nothing within the gate matched, no match beyond it was refused, and the odometry vouches
     /// for the prediction (OdometryVouches): Tracked::placed_by_odometry when unmatched.
     OdometryVouches vouches = OdometryVouches::kNo;
