@@ -442,6 +442,35 @@ TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
   EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.2);
 }
 
+// A low-cost 360-degree laser reaching 12 m in the open world: its first scan sees 18 returns, too
+// few to match against, and a local map of it holds nothing the next scans could contradict. Under
+// the odometry they see new ground and extend it; five of them used to count as a lost track and
+// leave the first scan a fragment of its own.
+TEST(Slam, ALocalMapTooSmallToMatchAgainstIsExtendedByOdometry) {
+  const sim::Scenario sc = sim::builtinScenario("open");
+  sim::SimulatorOptions so;
+  so.seed = 1;
+  so.laser.beams = 360;
+  so.laser.fov_rad = 2.0 * std::numbers::pi;
+  so.laser.range_max_m = 12.0;
+  so.laser.range_noise_m = 0.02;
+  so.laser.dropout = 0.05;
+  const auto dense = sim::simulate(sc.world, sim::samplePath(sc.waypoints, sim::PathOptions{}, 0), so);
+  sim::LogPerturbationOptions po;
+  po.odometry = sim::realisticOdometryNoise();
+  po.keyframes.min_distance_m = 1.0;
+  po.keyframes.min_turn_rad = 30.0 * kDeg;
+  po.seed = 1;
+  const auto frames = sim::perturbLog(dense, po);
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, SlamOptions{}, &slam);
+  const std::string all = eventText(*slam);
+  EXPECT_GT(countEvents(*slam, "sees only new ground"), 0) << "the case no longer arises\n" << all;
+  EXPECT_EQ(countEvents(*slam, "local map restarted"), 0) << all;
+  EXPECT_EQ(slam->stats().fragments, 1u);
+  EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.2);
+}
+
 // Where nothing within the prior's gate matches and the scan at the odometry's pose sees only new
 // ground, a match elsewhere explaining half the scan is a look-alike part of the local map, not
 // evidence against the odometry: in the identical rooms, keyframes 2 m / 45 degrees apart, such a

@@ -131,8 +131,10 @@ bool FrontEnd::odometryTrusted(const Prediction& p) const {
 }
 
 bool FrontEnd::onlyNewGroundAt(const Points2& pts, const Prediction& p, const SE2& T_pred) const {
-  if (!odometryTrusted(p) || pts.size() < opt.min_points || !local_target || local_target->size() < opt.min_points)
-    return false;
+  if (!odometryTrusted(p) || pts.size() < opt.min_points) return false;
+  // A local map of fewer points than a match needs (the first scan saw a few returns: a 12 m laser
+  // in an open hall) holds nothing the scan could overlap.
+  if (!local_target || local_target->size() < opt.min_points) return true;
   return overlapWith(*local_target, pts, T_pred, opt.match_inlier_distance_m, kOverlapM).overlap < kNewGroundOverlap;
 }
 
@@ -189,7 +191,10 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
                                                const std::vector<SE2>& alternatives, const std::vector<SE2>& earlier,
                                                double earlier_below) {
   MatchOutcome out;
-  if (!local_target || local_target->size() < opt.min_points || pts.size() < opt.min_points) return out;
+  if (!local_target || local_target->size() < opt.min_points || pts.size() < opt.min_points) {
+    if (onlyNewGroundAt(pts, p, T_pred)) out.vouches = OdometryVouches::kNewGround;
+    return out;
+  }
   auto tryFrom = [&](const SE2& init) {
     Candidate c;
     c.res = opt.front_end_likelihood_field ? registration::matchLikelihoodField(*local_field, pts, init, local_lf)
