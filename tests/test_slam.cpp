@@ -417,10 +417,12 @@ TEST(Slam, ScansThatMatchNothingBetterElsewhereArePlacedByOdometryNotLost) {
 // scan is placed by it (0.13 m ATE). Five such scans used to count as a lost track; the restarted
 // local map was tied to a look-alike room and the odometry across it dropped as a kidnapping
 // (2.4 m ATE).
-TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
+/// The symmetric world's route seen by a depth camera's fake laser (58 degrees, 0.5-6 m, 30 Hz),
+/// with realistic odometry; `seed` for both.
+std::vector<Frame> depthCameraInTheIdenticalRooms(std::uint64_t seed) {
   const sim::Scenario sc = sim::builtinScenario("symmetric");
   sim::SimulatorOptions so;
-  so.seed = 1;
+  so.seed = seed;
   so.laser.beams = 640;
   so.laser.fov_rad = 58.0 * kDeg;
   so.laser.range_min_m = 0.5;
@@ -431,8 +433,12 @@ TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
   const auto dense = sim::simulate(sc.world, sim::samplePath(sc.waypoints, path, 0), so);
   sim::LogPerturbationOptions po;
   po.odometry = sim::realisticOdometryNoise();
-  po.seed = 1;
-  const auto frames = sim::perturbLog(dense, po);
+  po.seed = seed;
+  return sim::perturbLog(dense, po);
+}
+
+TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
+  const auto frames = depthCameraInTheIdenticalRooms(1);
   Slam* slam = nullptr;
   const auto est = runSlam(frames, SlamOptions{}, &slam);
   const std::string all = eventText(*slam);
@@ -440,6 +446,24 @@ TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
   EXPECT_EQ(countEvents(*slam, "local map restarted"), 0) << all;
   EXPECT_EQ(slam->stats().fragments, 1u);
   EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.2);
+}
+
+// The same camera lost facing a wall (seed 10): the restarted local map's scans match a look-alike
+// room, whose closures contradict the odometry across the lost track. Where the odometry puts the
+// scans, hardly any of them lies in the free space of the map before: the view there is ground the
+// submaps lack, not evidence of a carried robot, so the closures are refused and the odometry kept
+// (2.4 m ATE when it was dropped as a kidnapping; seeds 9 and 11 likewise 4.0 and 2.7 m).
+TEST(Slam, ARelocalizationShowsTheRobotCarriedOnlyWhereTheScanContradictsTheOdometrysPose) {
+  const auto frames = depthCameraInTheIdenticalRooms(10);
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, SlamOptions{}, &slam);
+  const std::string all = eventText(*slam);
+  EXPECT_GT(countEvents(*slam, "local map restarted"), 0) << "the case no longer arises\n" << all;
+  std::size_t refused = 0;
+  for (const Constraint& c : slam->constraints())
+    refused += c.reason.find("no evidence the robot was carried") != std::string::npos ? 1 : 0;
+  EXPECT_GT(refused, 0u) << all;
+  EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.3);
 }
 
 // A low-cost 360-degree laser reaching 12 m in the open world: its first scan sees 18 returns, too

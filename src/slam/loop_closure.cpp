@@ -260,6 +260,25 @@ void LoopClosure::submitSearched(Constraint c, Submap& sm, std::optional<Constra
 }
 
 void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
+  // A relocalization showing the robot carried (it contradicts the odometry across the lost track)
+  // needs the scan's evidence against where the odometry put it: enough of its points there in
+  // the free space of the map before the fragment. Ground the map does not hold is no evidence: a
+  // depth camera's 58-degree view at the right place, lost facing a wall, saw what the submaps
+  // there lack, was tied to a look-alike room 3-25 m away and the odometry dropped as a kidnapping.
+  if (s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since && s_.untiedHasOdometryLink() &&
+      carriedSigmas(c) > opt.prior_gate_sigmas) {
+    const double in_free = inFreeSpaceWhereEstimated(c.to, *s_.untied_since);
+    if (in_free < kCarriedInFree) {
+      ++s_.stats.loop_rejected;
+      c.accepted = false;
+      c.reason = fmt::format(
+          "contradicts the odometry across the lost track, and where the odometry puts the scan only {:.0f}% of "
+          "it lies in the map's free space: no evidence the robot was carried",
+          100.0 * in_free);
+      s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+      return;
+    }
+  }
   ++s_.stats.loop_accepted;
   // Along a direction the submap cannot pin the scan (a corridor's axis) the closure holds wherever
   // the estimate put it: it constrains only the other directions, and it does not show the
@@ -321,20 +340,62 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   s_.addEdge(std::move(c), sqrt_info, descriptor ? 0.0 : opt.loop_huber);
 }
 
-void LoopClosure::dropCarriedOdometry(const Constraint& c) {
-  if (!s_.untiedHasOdometryLink()) return;
-  const SlamState::RestartOdometry ro = *s_.restart_odometry;
-  s_.restart_odometry.reset();
+double LoopClosure::carriedSigmas(const Constraint& c) const {
+  const SlamState::RestartOdometry& ro = *s_.restart_odometry;
   const std::size_t r = ro.node;
   // The step across the lost track the closure implies (node r - 1 as estimated, node c.to where
   // the closure puts it, node r by the front end's poses after the lost track), in the odometry
   // step's own sigmas.
-  Constraint& odo = s_.constraints[ro.constraint];
+  const Constraint& odo = s_.constraints[ro.constraint];
   const SE2 T_world_to_by_closure = s_.nodes[c.from].T_world_robot * c.T_from_to;
   const SE2 T_r_to = s_.nodes[r].T_local_robot.inverse() * s_.nodes[c.to].T_local_robot;
   const SE2 step = s_.nodes[r - 1].T_world_robot.inverse() * T_world_to_by_closure * T_r_to.inverse();
-  const MotionPrediction p = odometryPrediction(opt, odo.T_from_to, s_.nodes[r].time - s_.nodes[r - 1].time);
-  const double sigmas = p.distance(step);
+  return odometryPrediction(opt, odo.T_from_to, s_.nodes[r].time - s_.nodes[r - 1].time).distance(step);
+}
+
+double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) const {
+  const Points2& pts = s_.node_points[n];
+  if (pts.empty()) return 0.0;
+  const SE2& T_world_node = s_.nodes[n].T_world_robot;
+  std::vector<char> in_free(pts.size(), 0);
+  for (const Submap& sm : s_.submaps) {
+    if (!sm.finished || sm.nodes.back() >= first) continue;
+    const SE2 T_anchor_node = s_.nodes[sm.anchor].T_world_robot.inverse() * T_world_node;
+    const Eigen::Vector2d t = T_anchor_node.translation();
+    const double reach = opt.max_range_m;
+    if ((t.array() < sm.nodes_min_anchor.array() - reach).any() ||
+        (t.array() > sm.nodes_max_anchor.array() + reach).any())
+      continue;
+    const OccupancyImage image = submapImage(sm, opt.map_voxel_m);
+    if (image.width() == 0) continue;
+    const SE2 T_map_node = image.origin().inverse() * T_anchor_node;
+    const double res = image.resolution();
+    // Free: the point's cell and every cell within the match's inlier distance seen free (a point
+    // on a wall, a little off, is not counted against the pose).
+    const int margin = static_cast<int>(std::ceil(opt.match_inlier_distance_m / res));
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      if (in_free[i]) continue;
+      const Eigen::Vector2d q = T_map_node * pts[i] / res;
+      const int cx = static_cast<int>(std::floor(q.x())), cy = static_cast<int>(std::floor(q.y()));
+      bool free = true;
+      for (int dy = -margin; dy <= margin && free; ++dy)
+        for (int dx = -margin; dx <= margin && free; ++dx) {
+          const int x = cx + dx, y = cy + dy;
+          free = image.contains(x, y) && image.at(x, y) >= 0 && image.at(x, y) <= kFreeMax;
+        }
+      in_free[i] = free;
+    }
+  }
+  return static_cast<double>(std::count(in_free.begin(), in_free.end(), 1)) / static_cast<double>(pts.size());
+}
+
+void LoopClosure::dropCarriedOdometry(const Constraint& c) {
+  if (!s_.untiedHasOdometryLink()) return;
+  const double sigmas = carriedSigmas(c);
+  const SlamState::RestartOdometry ro = *s_.restart_odometry;
+  s_.restart_odometry.reset();
+  const std::size_t r = ro.node;
+  Constraint& odo = s_.constraints[ro.constraint];
   if (!(sigmas > opt.prior_gate_sigmas)) return;
   s_.edges.erase(s_.edges.begin() + static_cast<std::ptrdiff_t>(ro.edge));
   odo.accepted = false;
@@ -387,16 +448,20 @@ const registration::CorrelativeGrid& LoopClosure::coarseGridOf(std::size_t s) {
 /// built with the mapping module: every node's scan inserted (log-odds, ray traced) at its pose in
 /// the anchor's frame. A finished submap is frozen (the front end's relative poses of its nodes
 /// no longer change), so the grid can be dropped and rebuilt alike.
-registration::CorrelativeGrid LoopClosure::submapGrid(const Submap& sm,
-                                                      const registration::CorrelativeOptions& grid_options) const {
+OccupancyImage LoopClosure::submapImage(const Submap& sm, double resolution_m) const {
   mapping::MapOptions mo;
-  mo.resolution_m = grid_options.resolution_m;
+  mo.resolution_m = resolution_m;
   mo.insert.max_range_m = opt.max_range_m;
   const auto map = mapping::makeMap(mapping::MapModel::kLogOdds, mo);
   const SE2 T_anchor_local = s_.nodes[sm.anchor].T_local_robot.inverse();
   for (const std::size_t n : sm.nodes)
     map->insert(s_.node_scans[n].first, T_anchor_local * s_.nodes[n].T_local_robot * s_.node_scans[n].second);
-  const OccupancyImage image = mapping::toOccupancyImage(*map);
+  return mapping::toOccupancyImage(*map);
+}
+
+registration::CorrelativeGrid LoopClosure::submapGrid(const Submap& sm,
+                                                      const registration::CorrelativeOptions& grid_options) const {
+  const OccupancyImage image = submapImage(sm, grid_options.resolution_m);
   if (image.width() == 0) return registration::CorrelativeGrid::fromPoints(sm.points_anchor, grid_options);
   return registration::CorrelativeGrid::fromMap(image, grid_options);
 }

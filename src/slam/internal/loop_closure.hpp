@@ -77,6 +77,11 @@ class LoopClosure {
   static constexpr std::size_t kUntiedSubmapsPerSearch = 4;
   static constexpr double kUntiedMarginM = 2.0;      // beyond the box of a submap's nodes
   static constexpr double kUntiedMaxWindowM = 15.0;  // the largest half-window of that search
+  // acceptLoop: a relocalization shows the robot carried only where at least this share of the scan
+  // lies in the map's free space at the estimate's pose (about twice what noise and a slightly
+  // misplaced pose put there).
+  static constexpr double kCarriedInFree = 0.1;
+  static constexpr int kFreeMax = 25;  // occupancy values 0..kFreeMax are free (map_server's 0.25)
 
   /// The score grid of submap `s` at searchUntied's coarse resolution, built on demand (a few kept).
   const registration::CorrelativeGrid& coarseGridOf(std::size_t s);
@@ -91,6 +96,15 @@ class LoopClosure {
   /// the lost track beyond prior_gate_sigmas, that odometry is wrong (a kidnapped robot) and its
   /// constraint leaves the graph (listed as rejected, with an event).
   void dropCarriedOdometry(const Constraint& c);
+  /// How far (in the odometry step's sigmas) the untied fragment's closure `c` puts the step across
+  /// the lost track from the odometry's (the fragment must have its odometry link).
+  double carriedSigmas(const Constraint& c) const;
+  /// The share of node n's scan that lies, with the node where the estimate puts it, in the free
+  /// space of a finished submap before node `first` (cells seen free within the inlier distance).
+  double inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) const;
+  /// Submap `sm`'s occupancy grid: every node's scan inserted (log-odds, ray traced) at its pose in
+  /// the anchor's frame.
+  OccupancyImage submapImage(const Submap& sm, double resolution_m) const;
 
   SlamState& s_;
   const SlamOptions& opt;
