@@ -8,6 +8,10 @@
 #include <cmath>
 #include <cstddef>
 #include <numbers>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
@@ -346,22 +350,35 @@ TEST(Slam, KeyframesWithoutOdometryFollowTheRobotsOwnMotion) {
 // scans in a row). It sees new ground, not another place: placed by odometry it extends the local
 // map, where five such scans used to count as a lost track, restart the local map and leave
 // fragments that the symmetric world's look-alike rooms then tied to the wrong room (3.8 m ATE).
+/// `world`'s route seen by `laser` scanning at `rate_hz`, with realistic odometry; as keyframes
+/// `keyframes` (metres, degrees) apart when given. `seed` for the simulation and the odometry.
+std::vector<Frame> simulatedWith(const std::string& world, const sim::LaserModel& laser, double rate_hz,
+                                 std::uint64_t seed, std::optional<std::pair<double, double>> keyframes = {}) {
+  const sim::Scenario sc = sim::builtinScenario(world);
+  sim::SimulatorOptions so;
+  so.seed = seed;
+  so.laser = laser;
+  sim::PathOptions path;
+  path.rate_hz = rate_hz;
+  const auto dense = sim::simulate(sc.world, sim::samplePath(sc.waypoints, path, 0), so);
+  sim::LogPerturbationOptions po;
+  po.odometry = sim::realisticOdometryNoise();
+  if (keyframes) {
+    po.keyframes.min_distance_m = keyframes->first;
+    po.keyframes.min_turn_rad = keyframes->second * kDeg;
+  }
+  po.seed = seed;
+  return sim::perturbLog(dense, po);
+}
+
 /// The symmetric world (four identical rooms) seen by a short-range laser (181 beams over 180
 /// degrees, 4 m) as keyframes `distance_m` or `turn_deg` apart, with realistic odometry.
 std::vector<Frame> shortRangeKeyframes(double distance_m, double turn_deg, std::uint64_t seed) {
-  const sim::Scenario sc = sim::builtinScenario("symmetric");
-  sim::SimulatorOptions so;
-  so.seed = seed;
-  so.laser.beams = 181;
-  so.laser.fov_rad = std::numbers::pi;
-  so.laser.range_max_m = 4.0;
-  const auto dense = sim::simulate(sc.world, sim::samplePath(sc.waypoints, sim::PathOptions{}, 0), so);
-  sim::LogPerturbationOptions po;
-  po.odometry = sim::realisticOdometryNoise();
-  po.keyframes.min_distance_m = distance_m;
-  po.keyframes.min_turn_rad = turn_deg * kDeg;
-  po.seed = seed;
-  return sim::perturbLog(dense, po);
+  sim::LaserModel laser;
+  laser.beams = 181;
+  laser.fov_rad = std::numbers::pi;
+  laser.range_max_m = 4.0;
+  return simulatedWith("symmetric", laser, 10.0, seed, std::pair{distance_m, turn_deg});
 }
 
 std::ptrdiff_t countEvents(const Slam& slam, const char* what) {
@@ -410,6 +427,18 @@ TEST(Slam, ScansThatMatchNothingBetterElsewhereArePlacedByOdometryNotLost) {
   EXPECT_GT(searches, clean->stats().loop_searches);
 }
 
+/// The symmetric world's route seen by a depth camera's fake laser (58 degrees, 0.5-6 m, 30 Hz),
+/// with realistic odometry; `seed` for both.
+std::vector<Frame> depthCameraInTheIdenticalRooms(std::uint64_t seed) {
+  sim::LaserModel laser;
+  laser.beams = 640;
+  laser.fov_rad = 58.0 * kDeg;
+  laser.range_min_m = 0.5;
+  laser.range_max_m = 6.0;
+  laser.dropout = 0.02;
+  return simulatedWith("symmetric", laser, 30.0, seed);
+}
+
 // A depth camera's fake laser (58 degrees, 0.5-6 m, 30 Hz) turning in the identical rooms: the
 // scan swings onto a wall of which the local map holds only a corner, ICP from the odometry's pose
 // finds too few pairs to move, and no match anywhere explains anything. The prediction itself then
@@ -417,26 +446,6 @@ TEST(Slam, ScansThatMatchNothingBetterElsewhereArePlacedByOdometryNotLost) {
 // scan is placed by it (0.13 m ATE). Five such scans used to count as a lost track; the restarted
 // local map was tied to a look-alike room and the odometry across it dropped as a kidnapping
 // (2.4 m ATE).
-/// The symmetric world's route seen by a depth camera's fake laser (58 degrees, 0.5-6 m, 30 Hz),
-/// with realistic odometry; `seed` for both.
-std::vector<Frame> depthCameraInTheIdenticalRooms(std::uint64_t seed) {
-  const sim::Scenario sc = sim::builtinScenario("symmetric");
-  sim::SimulatorOptions so;
-  so.seed = seed;
-  so.laser.beams = 640;
-  so.laser.fov_rad = 58.0 * kDeg;
-  so.laser.range_min_m = 0.5;
-  so.laser.range_max_m = 6.0;
-  so.laser.dropout = 0.02;
-  sim::PathOptions path;
-  path.rate_hz = 30.0;
-  const auto dense = sim::simulate(sc.world, sim::samplePath(sc.waypoints, path, 0), so);
-  sim::LogPerturbationOptions po;
-  po.odometry = sim::realisticOdometryNoise();
-  po.seed = seed;
-  return sim::perturbLog(dense, po);
-}
-
 TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
   const auto frames = depthCameraInTheIdenticalRooms(1);
   Slam* slam = nullptr;
@@ -471,21 +480,13 @@ TEST(Slam, ARelocalizationShowsTheRobotCarriedOnlyWhereTheScanContradictsTheOdom
 // the odometry they see new ground and extend it; five of them used to count as a lost track and
 // leave the first scan a fragment of its own.
 TEST(Slam, ALocalMapTooSmallToMatchAgainstIsExtendedByOdometry) {
-  const sim::Scenario sc = sim::builtinScenario("open");
-  sim::SimulatorOptions so;
-  so.seed = 1;
-  so.laser.beams = 360;
-  so.laser.fov_rad = 2.0 * std::numbers::pi;
-  so.laser.range_max_m = 12.0;
-  so.laser.range_noise_m = 0.02;
-  so.laser.dropout = 0.05;
-  const auto dense = sim::simulate(sc.world, sim::samplePath(sc.waypoints, sim::PathOptions{}, 0), so);
-  sim::LogPerturbationOptions po;
-  po.odometry = sim::realisticOdometryNoise();
-  po.keyframes.min_distance_m = 1.0;
-  po.keyframes.min_turn_rad = 30.0 * kDeg;
-  po.seed = 1;
-  const auto frames = sim::perturbLog(dense, po);
+  sim::LaserModel laser;
+  laser.beams = 360;
+  laser.fov_rad = 2.0 * std::numbers::pi;
+  laser.range_max_m = 12.0;
+  laser.range_noise_m = 0.02;
+  laser.dropout = 0.05;
+  const auto frames = simulatedWith("open", laser, 10.0, 1, std::pair{1.0, 30.0});
   Slam* slam = nullptr;
   const auto est = runSlam(frames, SlamOptions{}, &slam);
   const std::string all = eventText(*slam);
