@@ -427,6 +427,18 @@ TEST(Slam, ScansThatMatchNothingBetterElsewhereArePlacedByOdometryNotLost) {
   EXPECT_GT(searches, clean->stats().loop_searches);
 }
 
+/// SLAM with its defaults on `frames`: the rule whose event holds `what` places scans by the
+/// odometry, no lost track restarts the local map, the run ends in one fragment within `max_ate_m`.
+void expectPlacedByOdometryNotLost(const std::vector<Frame>& frames, const char* what, double max_ate_m) {
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, SlamOptions{}, &slam);
+  const std::string all = eventText(*slam);
+  EXPECT_GT(countEvents(*slam, what), 0) << "the case no longer arises\n" << all;
+  EXPECT_EQ(countEvents(*slam, "local map restarted"), 0) << all;
+  EXPECT_EQ(slam->stats().fragments, 1u);
+  EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, max_ate_m);
+}
+
 /// The symmetric world's route seen by a depth camera's fake laser (58 degrees, 0.5-6 m, 30 Hz),
 /// with realistic odometry; `seed` for both.
 std::vector<Frame> depthCameraInTheIdenticalRooms(std::uint64_t seed) {
@@ -447,14 +459,7 @@ std::vector<Frame> depthCameraInTheIdenticalRooms(std::uint64_t seed) {
 // local map was tied to a look-alike room and the odometry across it dropped as a kidnapping
 // (2.4 m ATE).
 TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
-  const auto frames = depthCameraInTheIdenticalRooms(1);
-  Slam* slam = nullptr;
-  const auto est = runSlam(frames, SlamOptions{}, &slam);
-  const std::string all = eventText(*slam);
-  EXPECT_GT(countEvents(*slam, "no match explains more of it"), 0) << "the case no longer arises\n" << all;
-  EXPECT_EQ(countEvents(*slam, "local map restarted"), 0) << all;
-  EXPECT_EQ(slam->stats().fragments, 1u);
-  EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.2);
+  expectPlacedByOdometryNotLost(depthCameraInTheIdenticalRooms(1), "no match explains more of it", 0.2);
 }
 
 // The same camera lost facing a wall (seed 10): the restarted local map's scans match a look-alike
@@ -486,14 +491,8 @@ TEST(Slam, ALocalMapTooSmallToMatchAgainstIsExtendedByOdometry) {
   laser.range_max_m = 12.0;
   laser.range_noise_m = 0.02;
   laser.dropout = 0.05;
-  const auto frames = simulatedWith("open", laser, 10.0, 1, std::pair{1.0, 30.0});
-  Slam* slam = nullptr;
-  const auto est = runSlam(frames, SlamOptions{}, &slam);
-  const std::string all = eventText(*slam);
-  EXPECT_GT(countEvents(*slam, "sees only new ground"), 0) << "the case no longer arises\n" << all;
-  EXPECT_EQ(countEvents(*slam, "local map restarted"), 0) << all;
-  EXPECT_EQ(slam->stats().fragments, 1u);
-  EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.2);
+  expectPlacedByOdometryNotLost(simulatedWith("open", laser, 10.0, 1, std::pair{1.0, 30.0}), "sees only new ground",
+                                0.2);
 }
 
 // Where nothing within the prior's gate matches and the scan at the odometry's pose sees only new
