@@ -477,6 +477,7 @@ TEST(Slam, ARelocalizationShowsTheRobotCarriedOnlyWhereTheScanContradictsTheOdom
   for (const Constraint& c : slam->constraints())
     refused += c.reason.find("no evidence the robot was carried") != std::string::npos ? 1 : 0;
   EXPECT_GT(refused, 0u) << all;
+  EXPECT_GT(countEvents(*slam, "no evidence the robot was carried, the odometry is kept"), 0) << all;
   EXPECT_LT(ateAgainstTruth(est, frames).trans_m.rmse, 0.3);
 }
 

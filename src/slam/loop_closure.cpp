@@ -275,6 +275,15 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
           "contradicts the odometry across the lost track, and where the odometry puts the scan only {:.0f}% of "
           "it lies in the map's free space: no evidence the robot was carried",
           100.0 * in_free);
+      if (carry_refused_for != s_.untied_since) {  // one event per fragment
+        carry_refused_for = s_.untied_since;
+        s_.back_end_events.push_back(
+            {s_.node_frame_index[c.to], s_.nodes[c.to].time,
+             fmt::format("a closure would tie the fragment from node {} to submap {} {:.1f} sigmas from the odometry "
+                         "across the lost track, but where the odometry puts the scan only {:.0f}% of it lies in "
+                         "the map's free space: no evidence the robot was carried, the odometry is kept",
+                         *s_.untied_since, s_.nodes[c.from].submap, carriedSigmas(c), 100.0 * in_free)});
+      }
       s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
       return;
     }

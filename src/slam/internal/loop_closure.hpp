@@ -114,6 +114,7 @@ class LoopClosure {
   std::vector<std::size_t> grid_lru;  // submaps holding a grid, least recently used first
   std::size_t untied_cursor = 0;      // the next submap searchUntied tries, in turn
   std::vector<std::size_t> coarse_lru;  // submaps holding a coarse grid, least recently used first
+  std::optional<std::size_t> carry_refused_for;  // the fragment (untied_since) whose refusal was reported
 };
 
 }  // namespace lidar2d::slam::internal
