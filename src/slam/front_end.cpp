@@ -294,9 +294,8 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
       // The prediction itself is a pose near the prediction: where ICP found too few pairs to move
       // from it (a narrow field of view turning onto a wall the local map holds a corner of), what
       // the scan explains there is the best near the odometry's pose.
-      const double at_prediction =
-          overlapWith(*local_target, pts, T_pred, opt.match_inlier_distance_m, kOverlapM).explained;
-      out.explained_in_gate = std::max(out.explained_in_gate, at_prediction);
+      out.explained_in_gate =
+          std::max(out.explained_in_gate, explainedFraction(*local_target, pts, T_pred, opt.match_inlier_distance_m));
       if (out.explained_in_gate > (beyond_gate ? beyond_gate->explained : 0.0))
         out.vouches = OdometryVouches::kBestMatchNearIt;
     }

@@ -261,12 +261,13 @@ void LoopClosure::submitSearched(Constraint c, Submap& sm, std::optional<Constra
 
 void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   // A relocalization showing the robot carried (it contradicts the odometry across the lost track)
-  // needs the scan's evidence against where the odometry put it: enough of its points there in
-  // the free space of the map before the fragment. Ground the map does not hold is no evidence: a
-  // depth camera's 58-degree view at the right place, lost facing a wall, saw what the submaps
-  // there lack, was tied to a look-alike room 3-25 m away and the odometry dropped as a kidnapping.
-  if (s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since && s_.untiedHasOdometryLink() &&
-      carriedSigmas(c) > opt.prior_gate_sigmas) {
+  // needs the scan's evidence against where the odometry put it: enough of its points there in the
+  // free space of the map before the fragment. Ground the map does not hold is no evidence: a narrow
+  // laser lost facing a wall at the right place sees what the submaps there lack, and its closure to
+  // a look-alike room would otherwise drop the right odometry as a kidnapping.
+  const bool ties_untied = s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since;
+  const double sigmas = ties_untied && s_.untiedHasOdometryLink() ? carriedSigmas(c) : 0.0;
+  if (sigmas > opt.prior_gate_sigmas) {
     const double in_free = inFreeSpaceWhereEstimated(c.to, *s_.untied_since);
     if (in_free < kCarriedInFree) {
       ++s_.stats.loop_rejected;
@@ -282,7 +283,7 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
              fmt::format("a closure would tie the fragment from node {} to submap {} {:.1f} sigmas from the odometry "
                          "across the lost track, but where the odometry puts the scan only {:.0f}% of it lies in "
                          "the map's free space: no evidence the robot was carried, the odometry is kept",
-                         *s_.untied_since, s_.nodes[c.from].submap, carriedSigmas(c), 100.0 * in_free)});
+                         *s_.untied_since, s_.nodes[c.from].submap, sigmas, 100.0 * in_free)});
       }
       s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
       return;
@@ -310,7 +311,7 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
          fmt::format("loop closure found by descriptors: node {} to submap {}, correcting {:.2f} m of drift", c.to,
                      s_.nodes[c.from].submap, correction)});
   }
-  if (s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since) {
+  if (ties_untied) {
     ++s_.stats.relocalizations;
     dropCarriedOdometry(c);
     s_.back_end_events.push_back({s_.node_frame_index[c.to], s_.nodes[c.to].time,
@@ -366,12 +367,14 @@ double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) 
   const Points2& pts = s_.node_points[n];
   if (pts.empty()) return 0.0;
   const SE2& T_world_node = s_.nodes[n].T_world_robot;
+  // The submaps' grids are built here, not kept: this runs only for closures that would show a
+  // robot carried, a few per lost track.
   std::vector<char> in_free(pts.size(), 0);
+  const double reach = opt.max_range_m;  // a submap's free space lies within this of its nodes
   for (const Submap& sm : s_.submaps) {
     if (!sm.finished || sm.nodes.back() >= first) continue;
     const SE2 T_anchor_node = s_.nodes[sm.anchor].T_world_robot.inverse() * T_world_node;
     const Eigen::Vector2d t = T_anchor_node.translation();
-    const double reach = opt.max_range_m;
     if ((t.array() < sm.nodes_min_anchor.array() - reach).any() ||
         (t.array() > sm.nodes_max_anchor.array() + reach).any())
       continue;

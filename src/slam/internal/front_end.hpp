@@ -122,8 +122,8 @@ class FrontEnd {
     bool overrode_prior = false;                    ///< T contradicts the prior (taken on scan evidence)
     std::optional<Candidate> rejected;              ///< a match contradicting the prior, without the evidence
     double explained = 0.0;                         ///< the share of the scan T explains
-    double explained_in_gate =
-        0.0;  ///< the best match within the prior's gate (or, unmatched, the prediction) explained this
+    /// The share the best match within the prior's gate explains (unmatched: or the prediction).
+    double explained_in_gate = 0.0;
     /// Nothing within the gate matched, no match beyond it was refused, and the odometry vouches
     /// for the prediction (OdometryVouches): Tracked::placed_by_odometry when unmatched.
     OdometryVouches vouches = OdometryVouches::kNo;
