@@ -4,11 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <numbers>
+#include <random>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/frame_source.hpp"
@@ -382,6 +384,86 @@ TEST(Localization, SymmetricWorldDeclinesOrListsEverySymmetricPose) {
     }
   }
   EXPECT_GE(declined, n * 3 / 4);
+}
+
+// The free-space check skips the samples of a beam that the map's clearance shows to lie in open
+// space: the count of beams through walls must be the one of reading every sample. Random thin
+// walls (one cell, with gaps) across unknown space, at three resolutions (the 2 cm map samples
+// every 2.5 cells); points on the walls (each explained: +1, and -1 when its beam crossed another
+// wall first) and in unknown space away from them (0, or -1 through a wall). The expected score
+// walks every sample of every beam.
+TEST(Localization, TheFreeSpaceCheckSeesEveryWallABeamCrosses) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (const double res : {0.02, 0.05, 0.1}) {
+    const int n = static_cast<int>(std::lround(16.0 / res));
+    auto map = OccupancyImage::filled(n, n, res, SE2(), OccupancyImage::kUnknown);
+    auto cellOf = [&](const Eigen::Vector2d& p) {
+      return Eigen::Vector2i(static_cast<int>(std::floor(p.x() / res)), static_cast<int>(std::floor(p.y() / res)));
+    };
+    // A free 3 m room in a corner, so that the database has positions.
+    for (int r = 0; r < n; ++r)
+      for (int c = 0; c < n; ++c) {
+        const Eigen::Vector2d q((c + 0.5) * res, (r + 0.5) * res);
+        if (q.x() < 3.0 && q.y() < 3.0)
+          map.set(c, r, q.x() < 0.1 || q.y() < 0.1 || q.x() > 2.9 || q.y() > 2.9 ? 100 : 0);
+      }
+    std::vector<Eigen::Vector2d> on_walls;
+    for (int w = 0; w < 40; ++w) {
+      const Eigen::Vector2d a(4.0 + 11.0 * u(rng), 4.0 + 11.0 * u(rng)),
+          b = a + Eigen::Vector2d(4.0 * u(rng) - 2.0, 4.0 * u(rng) - 2.0);
+      const int steps = static_cast<int>((b - a).norm() / (0.25 * res));
+      for (int k = 0; k <= steps; ++k) {
+        const double f = static_cast<double>(k) / std::max(1, steps);
+        if (std::fmod(f * 10.0, 1.0) > 0.8) continue;  // gaps
+        const Eigen::Vector2i c = cellOf(a + f * (b - a));
+        map.set(c.x(), c.y(), 100);
+      }
+    }
+    for (int r = 0; r < n; ++r)
+      for (int c = 0; c < n; ++c)
+        if (map.at(c, r) == 100 && (c + 0.5) * res > 3.5) on_walls.push_back({(c + 0.5) * res, (r + 0.5) * res});
+    const Localizer loc(map, {}, fastDb());
+    auto nearWall = [&](const Eigen::Vector2d& p) {
+      const Eigen::Vector2i c = cellOf(p);
+      const int k = static_cast<int>(std::ceil(0.5 / res));
+      for (int dy = -k; dy <= k; ++dy)
+        for (int dx = -k; dx <= k; ++dx)
+          if (map.contains(c.x() + dx, c.y() + dy) && map.at(c.x() + dx, c.y() + dy) == 100) return true;
+      return false;
+    };
+    for (int trial = 0; trial < 20; ++trial) {
+      const SE2 T_world_robot(3.5 + 12.0 * u(rng), 3.5 + 12.0 * u(rng), 2.0 * std::numbers::pi * u(rng));
+      Points2 pts;
+      int explained = 0, through = 0;
+      for (int i = 0; i < 120; ++i) {
+        Eigen::Vector2d w;
+        bool on_wall = i % 2 == 0;
+        if (on_wall) {
+          w = on_walls[rng() % on_walls.size()];
+        } else {
+          do w = Eigen::Vector2d(3.5 + 12.0 * u(rng), 3.5 + 12.0 * u(rng));
+          while (nearWall(w));
+        }
+        pts.push_back(T_world_robot.inverse() * w);
+        // The reference: every sample, one cell (or 5 cm) apart, up to 0.3 m before the point.
+        const Eigen::Vector2d o = T_world_robot.translation() / res, e = w / res;
+        const double len = (e - o).norm() - 0.3 / res;
+        const Eigen::Vector2d dir = (e - o).normalized();
+        const double step = std::max(1.0, 0.05 / res);
+        bool crossed = false;
+        for (double t = 0.5; t < len && !crossed; t += step) {
+          const Eigen::Vector2i c = cellOf((o + t * dir) * res);
+          crossed = map.contains(c.x(), c.y()) && map.at(c.x(), c.y()) >= 65;
+        }
+        explained += on_wall;
+        through += crossed;
+      }
+      ASSERT_GT(through, 0) << "res " << res << " trial " << trial;  // the walls are in the way
+      const double expected = std::clamp(static_cast<double>(explained - through) / 120.0, 0.0, 1.0);
+      EXPECT_NEAR(loc.score(pts, T_world_robot), expected, 1e-12) << "res " << res << " trial " << trial;
+    }
+  }
 }
 
 TEST(Localization, PointsInKnownFreeSpaceCountAgainstAPoseAndUnknownSpaceDoesNot) {

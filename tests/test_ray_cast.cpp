@@ -110,9 +110,14 @@ TEST(ClearanceGrid, IsTheDistanceBetweenSquaresToTheNearestObstacle) {
     for (int i = 0; i < g.width * g.height; ++i) g.occupied.push_back(u(rng) < density);
     const ClearanceGrid c(g.occupied, g.width, g.height);
     const ClearanceGrid c3(g.occupied, g.width, g.height, 3);  // in three threads: the same
+    // From an occupancy grid's values (obstacles at least 65): the same.
+    std::vector<std::int8_t> values;
+    for (std::uint8_t o : g.occupied) values.push_back(static_cast<std::int8_t>(o ? 65 + rng() % 36 : rng() % 66 - 1));
+    const ClearanceGrid cv(values, 65, g.width, g.height, 2);
     for (int y = 0; y < g.height; ++y)
       for (int x = 0; x < g.width; ++x) {
         ASSERT_EQ(c3.at(x, y), c.at(x, y)) << "trial " << trial << " cell " << x << " " << y;
+        ASSERT_EQ(cv.at(x, y), c.at(x, y)) << "trial " << trial << " cell " << x << " " << y;
         double best = 1e9;
         for (int oy = 0; oy < g.height; ++oy)
           for (int ox = 0; ox < g.width; ++ox)

@@ -29,6 +29,17 @@ void parallelRanges(std::size_t n, unsigned threads, F&& f) {
 ClearanceGrid::ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int32_t width, std::int32_t height,
                              unsigned threads)
     : width_(std::max(0, width)), height_(std::max(0, height)) {
+  build([&obstacle](std::size_t i) { return obstacle[i] != 0; }, threads);
+}
+
+ClearanceGrid::ClearanceGrid(std::span<const std::int8_t> values, int occupied_min, std::int32_t width,
+                             std::int32_t height, unsigned threads)
+    : width_(std::max(0, width)), height_(std::max(0, height)) {
+  build([values, occupied_min](std::size_t i) { return values[i] >= occupied_min; }, threads);
+}
+
+template <class Obstacle>
+void ClearanceGrid::build(Obstacle&& obstacle, unsigned threads) {
   const auto W = static_cast<std::size_t>(width_), H = static_cast<std::size_t>(height_);
   cells_.assign(W * H, 0);
   if (W == 0 || H == 0) return;
@@ -37,7 +48,7 @@ ClearanceGrid::ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int
     for (std::size_t y = y0; y < y1; ++y)
       for (std::size_t x = 0; x < W; ++x) {
         const std::size_t i = y * W + x;
-        cells_[i] = obstacle[i] || (x > 0 && obstacle[i - 1]) || (x + 1 < W && obstacle[i + 1]);
+        cells_[i] = obstacle(i) || (x > 0 && obstacle(i - 1)) || (x + 1 < W && obstacle(i + 1));
       }
   });
   // Column pass: vertical distance to the nearest dilated cell (vertically dilated on the fly).
@@ -67,7 +78,8 @@ void ClearanceGrid::columns(std::size_t x0, std::size_t x1) {
 }
 
 // Row pass: g^2(x) = min_q (x - q)^2 + f(q), f = squared column distance.
-void ClearanceGrid::rows(const std::vector<std::uint8_t>& obstacle, std::size_t y0, std::size_t y1) {
+template <class Obstacle>
+void ClearanceGrid::rows(const Obstacle& obstacle, std::size_t y0, std::size_t y1) {
   const auto W = static_cast<std::size_t>(width_);
   std::vector<double> f(W), z(W + 1);
   std::vector<std::size_t> v(W);
@@ -99,7 +111,7 @@ void ClearanceGrid::rows(const std::vector<std::uint8_t>& obstacle, std::size_t 
       while (z[k + 1] < static_cast<double>(x)) ++k;
       const double dx = static_cast<double>(x) - static_cast<double>(v[k]);
       const double g = std::sqrt(dx * dx + f[v[k]]);
-      row[x] = obstacle[y * W + x] ? 0 : static_cast<std::uint8_t>(1 + std::min(254.0, std::floor(g)));
+      row[x] = obstacle(y * W + x) ? 0 : static_cast<std::uint8_t>(1 + std::min(254.0, std::floor(g)));
     }
   }
 }

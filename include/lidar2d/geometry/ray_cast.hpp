@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <vector>
 
 namespace lidar2d::geometry {
@@ -92,6 +93,10 @@ class ClearanceGrid {
   /// values); width, height >= 0. Computed by `threads` threads (at least one; same result).
   ClearanceGrid(const std::vector<std::uint8_t>& obstacle, std::int32_t width, std::int32_t height,
                 unsigned threads = 1);
+  /// The same grid with the obstacle cells those of an occupancy grid's `values` (row-major,
+  /// width x height of them) at least `occupied_min`, without a copy of the mask.
+  ClearanceGrid(std::span<const std::int8_t> values, int occupied_min, std::int32_t width, std::int32_t height,
+                unsigned threads = 1);
   std::int32_t width() const { return width_; }
   std::int32_t height() const { return height_; }
   /// Precondition: the cell is inside the grid (not checked).
@@ -100,8 +105,11 @@ class ClearanceGrid {
   }
 
  private:
+  template <class Obstacle>
+  void build(Obstacle&& obstacle, unsigned threads);
   void columns(std::size_t x0, std::size_t x1);
-  void rows(const std::vector<std::uint8_t>& obstacle, std::size_t y0, std::size_t y1);
+  template <class Obstacle>
+  void rows(const Obstacle& obstacle, std::size_t y0, std::size_t y1);
   std::int32_t width_, height_;
   std::vector<std::uint8_t> cells_;
 };
