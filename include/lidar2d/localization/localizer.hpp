@@ -259,8 +259,9 @@ struct LocalizationResult {
   double describe_ms = 0, lookup_ms = 0, verify_ms = 0, total_ms = 0;  ///< timings [ms]
 };
 
-/// Localizes single scans in one map. Holds the map's likelihood field and the database; const
-/// methods are thread-safe. Non-copyable.
+/// Localizes single scans in one map. Holds the map, its likelihood field, its clearance grid (one
+/// byte per cell: the free-space check's beams skip open floor) and the database; const methods
+/// are thread-safe. Non-copyable.
 class Localizer {
  public:
   /// Builds the database in memory (DatabaseOptions) and the likelihood field of `map`.
