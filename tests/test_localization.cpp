@@ -417,7 +417,7 @@ TEST(Localization, TheFreeSpaceCheckSeesEveryWallABeamCrosses) {
         const double f = static_cast<double>(k) / std::max(1, steps);
         if (std::fmod(f * 10.0, 1.0) > 0.8) continue;  // gaps
         const Eigen::Vector2i c = cellOf(a + f * (b - a));
-        map.set(c.x(), c.y(), 100);
+        if (map.contains(c.x(), c.y())) map.set(c.x(), c.y(), 100);
       }
     }
     for (int r = 0; r < n; ++r)
