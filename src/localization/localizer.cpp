@@ -180,7 +180,8 @@ ScoreParts scoreParts(const Localizer::State& s, const Points2& points_robot, co
       const double step = std::max(1.0, 0.05 / res);
       // A sample in a cell whose square is g cells from every obstacle square: the samples less
       // than g further on lie in no obstacle cell, and are skipped (the same answer as reading
-      // each; the beams cross mostly open floor, and each read waited on memory).
+      // each; the beams cross mostly open floor, and each read waited on memory). They are stepped
+      // over, not jumped, so that every sample read lies where the walk of every sample puts it.
       double open_until = 0.0;
       for (double t = 0.5; t < len && !crossed; t += step) {
         if (t < open_until) continue;

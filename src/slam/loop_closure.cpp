@@ -313,7 +313,7 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   }
   if (ties_untied) {
     ++s_.stats.relocalizations;
-    dropCarriedOdometry(c);
+    dropCarriedOdometry(sigmas);
     s_.back_end_events.push_back({s_.node_frame_index[c.to], s_.nodes[c.to].time,
                          fmt::format("relocalized: the fragment from node {} (after lost tracking) is tied to submap {} "
                                      "by node {}",
@@ -383,8 +383,10 @@ double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) 
     const SE2 T_map_node = image.origin().inverse() * T_anchor_node;
     const double res = image.resolution();
     // Free: the point's cell and every cell within the match's inlier distance seen free (a point
-    // on a wall, a little off, is not counted against the pose).
+    // on a wall, a little off, is not counted against the pose); free as the submaps' descriptor
+    // databases read the same images.
     const int margin = static_cast<int>(std::ceil(opt.match_inlier_distance_m / res));
+    const int free_max = s_.match.descriptor_db.free_max;
     for (std::size_t i = 0; i < pts.size(); ++i) {
       if (in_free[i]) continue;
       const Eigen::Vector2d q = T_map_node * pts[i] / res;
@@ -393,7 +395,7 @@ double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) 
       for (int dy = -margin; dy <= margin && free; ++dy)
         for (int dx = -margin; dx <= margin && free; ++dx) {
           const int x = cx + dx, y = cy + dy;
-          free = image.contains(x, y) && image.at(x, y) >= 0 && image.at(x, y) <= kFreeMax;
+          free = image.contains(x, y) && image.at(x, y) >= 0 && image.at(x, y) <= free_max;
         }
       in_free[i] = free;
     }
@@ -401,9 +403,8 @@ double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) 
   return static_cast<double>(std::count(in_free.begin(), in_free.end(), 1)) / static_cast<double>(pts.size());
 }
 
-void LoopClosure::dropCarriedOdometry(const Constraint& c) {
+void LoopClosure::dropCarriedOdometry(double sigmas) {
   if (!s_.untiedHasOdometryLink()) return;
-  const double sigmas = carriedSigmas(c);
   const SlamState::RestartOdometry ro = *s_.restart_odometry;
   s_.restart_odometry.reset();
   const std::size_t r = ro.node;

@@ -81,7 +81,6 @@ class LoopClosure {
   // lies in the map's free space at the estimate's pose (about twice what noise and a slightly
   // misplaced pose put there).
   static constexpr double kCarriedInFree = 0.1;
-  static constexpr int kFreeMax = 25;  // occupancy values 0..kFreeMax are free (map_server's 0.25)
 
   /// The score grid of submap `s` at searchUntied's coarse resolution, built on demand (a few kept).
   const registration::CorrelativeGrid& coarseGridOf(std::size_t s);
@@ -92,10 +91,10 @@ class LoopClosure {
                                                   std::vector<std::size_t>& lru, std::size_t max_kept,
                                                   const registration::CorrelativeOptions& options);
   void acceptLoop(Constraint c, Submap& sm);
-  /// `c` ties the untied fragment to the map before it: when it contradicts the odometry across
-  /// the lost track beyond prior_gate_sigmas, that odometry is wrong (a kidnapped robot) and its
-  /// constraint leaves the graph (listed as rejected, with an event).
-  void dropCarriedOdometry(const Constraint& c);
+  /// A closure ties the untied fragment to the map before it, `sigmas` (carriedSigmas) from the
+  /// odometry across the lost track: beyond prior_gate_sigmas that odometry is wrong (a kidnapped
+  /// robot) and its constraint leaves the graph (listed as rejected, with an event).
+  void dropCarriedOdometry(double sigmas);
   /// How far (in the odometry step's sigmas) the untied fragment's closure `c` puts the step across
   /// the lost track from the odometry's (the fragment must have its odometry link).
   double carriedSigmas(const Constraint& c) const;
