@@ -289,12 +289,27 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
       return;
     }
   }
-  ++s_.stats.loop_accepted;
   // Along a direction the submap cannot pin the scan (a corridor's axis) the closure holds wherever
   // the estimate put it: it constrains only the other directions, and it does not show the
   // estimate to be right (the descriptor search keeps looking for the drift along the corridor).
   const std::optional<Eigen::Vector2d> weak =
       weakDirection(*sm.icp, s_.node_points[c.to], c.T_from_to, opt.match_inlier_distance_m, opt.degeneracy_threshold);
+  // A searched closure that neither the estimate nor the latest closure expects is a look-alike
+  // place: in a building of identical rooms a wrong closure and the link-following ones after it
+  // agree with each other, and their cluster outweighs the right closures under the robust loss.
+  // Descriptor closures and relocalizations correct drift no estimate foresees: not checked.
+  if (c.searched && !c.descriptor && !ties_untied) {
+    const std::optional<Eigen::Vector2d> weak_world =
+        weak ? std::optional<Eigen::Vector2d>(s_.nodes[c.from].T_world_robot.rotation() * *weak) : std::nullopt;
+    if (auto why = contradictsLatestClosure(c, weak_world)) {
+      ++s_.stats.loop_rejected;
+      c.accepted = false;
+      c.reason = std::move(*why);
+      s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+      return;
+    }
+  }
+  ++s_.stats.loop_accepted;
   Eigen::Matrix3d sqrt_info =
       weak ? directionalSqrtInfo(*weak, std::numeric_limits<double>::infinity(), opt.loop_sigma_m, opt.loop_sigma_rad)
            : diagSqrtInfo(opt.loop_sigma_m, opt.loop_sigma_rad);
@@ -348,6 +363,59 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   // chain of stiff front-end edges that far. It has passed the stricter tests (and a second
   // closure confirms it), so it is a plain quadratic constraint.
   s_.addEdge(std::move(c), sqrt_info, descriptor ? 0.0 : opt.loop_huber);
+}
+
+namespace {
+
+/// Whether a closure's edge constrains both directions of the translation (a closure along a
+/// corridor's axis has no information along it).
+bool pinsBoth(const PoseGraphEdge& e) {
+  const Eigen::Matrix3d& S = e.sqrt_information;
+  return std::abs(S(0, 0) * S(1, 1) - S(0, 1) * S(1, 0)) > 1e-12;
+}
+
+}  // namespace
+
+std::optional<std::string> LoopClosure::contradictsLatestClosure(
+    const Constraint& c, const std::optional<Eigen::Vector2d>& weak_world) const {
+  // The drift allowance is the odometry's: without odometry nothing measures the motion between
+  // scans (on the intel bag without it, right closures disagreed with the latest one by 2-4 m).
+  if (!s_.node_odometry[c.to]) return std::nullopt;
+  // The latest closure accepted (a relocalization may tie an earlier node than the fragment's own
+  // closures since) that pins its node in both directions and that the latest optimisation kept.
+  // Accepted constraints and edges are in the same order.
+  const Constraint* ref = nullptr;
+  std::size_t edge = s_.edges.size();
+  for (auto it = s_.constraints.rbegin(); it != s_.constraints.rend() && !ref; ++it) {
+    if (!it->accepted) continue;
+    const PoseGraphEdge& e = s_.edges[--edge];
+    if (it->kind != Constraint::Kind::kLoop || it->to >= c.to || !pinsBoth(e)) continue;
+    if (edge < s_.edge_scale.size() && s_.edge_scale[edge] < 0.5) continue;
+    ref = &*it;
+  }
+  if (!ref) return std::nullopt;
+  const std::size_t m = ref->to;
+  // Across a lost track the front end's chain says nothing of where the robot went.
+  for (const std::size_t r : s_.restarts)
+    if (r > m && r <= c.to) return std::nullopt;
+  const Eigen::Vector2d by_closure = (s_.nodes[c.from].T_world_robot * c.T_from_to).translation();
+  const Eigen::Vector2d by_latest = (s_.nodes[ref->from].T_world_robot * ref->T_from_to *
+                                     (s_.nodes[m].T_local_robot.inverse() * s_.nodes[c.to].T_local_robot))
+                                        .translation();
+  const Eigen::Vector2d by_estimate = s_.nodes[c.to].T_world_robot.translation();
+  auto apart = [&](const Eigen::Vector2d& p) {
+    Eigen::Vector2d d = by_closure - p;
+    if (weak_world) d -= d.dot(*weak_world) * *weak_world;
+    return d.norm();
+  };
+  const double open_m = s_.node_path_m[c.to] - s_.node_path_m[m];
+  const double from_latest = apart(by_latest), from_estimate = apart(by_estimate);
+  const double tolerance_m = kConsistentM + opt.loop_window_per_m * open_m;
+  if (from_latest <= tolerance_m || from_estimate <= tolerance_m) return std::nullopt;
+  return fmt::format(
+      "contradicts the estimate by {:.2f} m and the closure at node {} by {:.2f} m, {:.1f} m of path before (more "
+      "than {:.2f} m): a look-alike place",
+      from_estimate, m, from_latest, open_m, tolerance_m);
 }
 
 double LoopClosure::carriedSigmas(const Constraint& c) const {

@@ -84,7 +84,8 @@ struct SlamOptions {
   double loop_linear_window_m = 3.0;
   // The window widens with the path travelled since the latest accepted closure (the estimate
   // drifts with it): loop_window_per_m of that path, between loop_linear_window_m and
-  // loop_max_linear_window_m; the candidate submaps' radius widens with it.
+  // loop_max_linear_window_m; the candidate submaps' radius widens with it. It is also the drift a
+  // closure may show against the estimate and the latest closure (LoopClosure::contradictsLatestClosure).
   double loop_window_per_m = 0.03;
   double loop_max_linear_window_m = 8.0;
   double loop_angular_window_rad = 15.0 * kDeg;
@@ -300,7 +301,8 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "branch-and-bound window half-width (the least: see loop_window_per_m)"},
     {LIDAR2D_SLAM_FIELD(loop_window_per_m), "loop closure", "m/m", OptionRange::atLeast(0),
      "the window widens to this share of the path travelled since the latest accepted closure (the "
-     "estimate's drift), and the candidate submaps' radius with it ..."},
+     "estimate's drift), and the candidate submaps' radius with it; a closure contradicting both the "
+     "estimate and that closure by over 1 m plus this share is refused ..."},
     {LIDAR2D_SLAM_FIELD(loop_max_linear_window_m), "loop closure", "m", OptionRange::above(0),
      "... up to this half-width"},
     {LIDAR2D_SLAM_FIELD(loop_angular_window_rad), "loop closure", "deg", OptionRange::above(0),

@@ -81,6 +81,11 @@ class LoopClosure {
   // lies in the map's free space at the estimate's pose (about twice what noise and a slightly
   // misplaced pose put there).
   static constexpr double kCarriedInFree = 0.1;
+  // contradictsLatestClosure: what a closure may differ from the latest one's prediction and from
+  // the estimate over no path at all. Two closures' errors and the estimate's (pending corrections
+  // not yet optimized in) stay well within it; a look-alike room or corridor stretch, the wrong
+  // closures it guards against, lies metres away.
+  static constexpr double kConsistentM = 1.0;
 
   /// The score grid of submap `s` at searchUntied's coarse resolution, built on demand (a few kept).
   const registration::CorrelativeGrid& coarseGridOf(std::size_t s);
@@ -91,6 +96,13 @@ class LoopClosure {
                                                   std::vector<std::size_t>& lru, std::size_t max_kept,
                                                   const registration::CorrelativeOptions& options);
   void acceptLoop(Constraint c, Submap& sm);
+  /// Why a searched closure `c` (to node c.to, in the frame of node c.from) contradicts both the
+  /// estimate and the latest accepted closure carried on along the front end's chain, beyond
+  /// kConsistentM plus loop_window_per_m of the path between them; nullopt when it agrees with
+  /// either, when no such closure precedes it on the same fragment, or without odometry. `weak_world` (unit, world
+  /// frame): the closure's unconstrained direction, left out of both comparisons.
+  std::optional<std::string> contradictsLatestClosure(const Constraint& c,
+                                                      const std::optional<Eigen::Vector2d>& weak_world) const;
   /// A closure ties the untied fragment to the map before it, `sigmas` (carriedSigmas) from the
   /// odometry across the lost track: beyond prior_gate_sigmas that odometry is wrong (a kidnapped
   /// robot) and its constraint leaves the graph (listed as rejected, with an event).
