@@ -99,7 +99,7 @@ void optimize(SlamState& s, int iterations) { optimizeWith(s, iterations, false)
 void reportDownweighted(SlamState& s) {
   s.stats.loop_downweighted = 0;
   for (std::size_t k = 0; k < s.edge_scale.size() && k < s.edges.size(); ++k) {
-    if (!(s.edge_scale[k] < 0.5)) continue;
+    if (!s.edgeFaded(k)) continue;
     const PoseGraphEdge& e = s.edges[k];
     ++s.stats.loop_downweighted;
     s.events.push_back({s.scans[s.nodes[e.to].scan].frame_index, s.nodes[e.to].time,

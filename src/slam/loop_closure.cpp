@@ -389,9 +389,7 @@ std::optional<std::string> LoopClosure::contradictsLatestClosure(
   for (auto it = s_.constraints.rbegin(); it != s_.constraints.rend() && !ref; ++it) {
     if (!it->accepted) continue;
     const PoseGraphEdge& e = s_.edges[--edge];
-    if (it->kind != Constraint::Kind::kLoop || it->to >= c.to || !pinsBoth(e)) continue;
-    if (edge < s_.edge_scale.size() && s_.edge_scale[edge] < 0.5) continue;
-    ref = &*it;
+    if (it->kind == Constraint::Kind::kLoop && it->to < c.to && pinsBoth(e) && !s_.edgeFaded(edge)) ref = &*it;
   }
   if (!ref) return std::nullopt;
   const std::size_t m = ref->to;

@@ -99,8 +99,8 @@ class LoopClosure {
   /// Why a searched closure `c` (to node c.to, in the frame of node c.from) contradicts both the
   /// estimate and the latest accepted closure carried on along the front end's chain, beyond
   /// kConsistentM plus loop_window_per_m of the path between them; nullopt when it agrees with
-  /// either, when no such closure precedes it on the same fragment, or without odometry. `weak_world` (unit, world
-  /// frame): the closure's unconstrained direction, left out of both comparisons.
+  /// either, when no such closure precedes it on the same fragment, or without odometry.
+  /// `weak_world` (unit, world frame): the closure's unconstrained direction, left out of both.
   std::optional<std::string> contradictsLatestClosure(const Constraint& c,
                                                       const std::optional<Eigen::Vector2d>& weak_world) const;
   /// A closure ties the untied fragment to the map before it, `sigmas` (carriedSigmas) from the

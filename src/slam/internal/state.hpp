@@ -124,6 +124,9 @@ struct SlamState {
     return untied_since && restart_odometry && restart_odometry->node == *untied_since;
   }
   std::vector<double> edge_scale;  // of `edges` at the latest optimisation (PoseGraphSummary::edge_scale)
+  /// Whether the latest optimisation faded edge k (a closure the rest of the graph contradicts:
+  /// dynamic covariance scaling left it under half its weight); false for edges added since.
+  bool edgeFaded(std::size_t k) const { return k < edge_scale.size() && edge_scale[k] < 0.5; }
   std::size_t nodes_since_optimization = 0;
   std::size_t loops_since_optimization = 0;
   bool searched_loop_pending = false;     // a searched closure was accepted since the last optimisation
