@@ -11,6 +11,7 @@
 
 #include "lidar2d/io/map_file.hpp"
 #include "lidar2d/io/trajectory.hpp"
+#include "lidar2d/slam/slam.hpp"
 #include "support/test_support.hpp"
 
 namespace lidar2d::test {
@@ -55,6 +56,11 @@ TEST_F(CliSlam, WritesEveryOutput) {
   const auto summary = nlohmann::json::parse(test::readFile(run() / "summary.json"));
   EXPECT_EQ(summary["scans"], 400);
   EXPECT_GT(summary["nodes"].get<int>(), 10);
+  // The simulator's odometry reads distances 0.5% long (sim::OdometryNoise's default scale_bias): the scans
+  // measure 1 / 1.005 of them.
+  EXPECT_NEAR(summary["odometry_scale"].get<double>(), 1.0 / 1.005, 0.003);
+  EXPECT_GE(summary["odometry_scale_evidence_m"].get<double>(), slam::kOdometryScaleMinEvidenceM);
+  EXPECT_NE(test::readFile(run() / "report.html").find("m per metre of odometry"), std::string::npos);
   // The graph file lists nodes and constraints.
   const std::string graph = test::readFile(run() / "graph.txt");
   EXPECT_NE(graph.find("\nNODE 0 "), std::string::npos);

@@ -543,6 +543,52 @@ TEST(Slam, KeyframesWithoutOdometryTurnAfterAStraightDrive) {
   EXPECT_EQ(slam->stats().fragments, 1u);
 }
 
+TEST(SlamMotionPrior, TheOdometryScaleIsTheRatioOfTheDistancesOnceTenMetresWereSeen) {
+  internal::OdometryScale scale;
+  const SE2 odo(1.0, 0.04, 0.01);         // a span of its own
+  const SE2 matched(0.98, 0.0392, 0.01);  // 0.98 of it
+  int steps = 0;
+  for (; steps < 100 && scale.evidenceM() < kOdometryScaleMinEvidenceM; ++steps) {
+    EXPECT_EQ(scale.factor(), 1.0);
+    scale.observe(odo, matched);
+  }
+  EXPECT_EQ(steps, 11);  // 11 m of spans, the older ones faded a little
+  EXPECT_NEAR(scale.factor(), 0.98, 1e-9);
+  // A span read twice as long by the scans (a bad match, a slipping wheel) counts as 1.5 times.
+  internal::OdometryScale twice = scale, capped = scale;
+  twice.observe(odo, SE2(2.0, 0.08, 0.01));
+  capped.observe(odo, SE2(1.5, 0.06, 0.01));
+  EXPECT_NEAR(twice.factor(), capped.factor(), 1e-12);
+  EXPECT_GT(twice.factor(), scale.factor());
+  // Older spans fade: after 300 m read 1.1 times long the factor is nearly 1.1, not the mean.
+  for (int i = 0; i < 300; ++i) scale.observe(odo, SE2(1.1, 0.044, 0.01));
+  EXPECT_NEAR(scale.factor(), 1.1, 0.01);
+  EXPECT_LT(scale.evidenceM(), internal::OdometryScale::kMemoryM);
+  // The factor is bounded to what odometry can plausibly be off by.
+  for (int i = 0; i < 300; ++i) scale.observe(odo, SE2(1.4, 0.0, 0.0));
+  EXPECT_EQ(scale.factor(), internal::OdometryScale::kMaxFactor);
+}
+
+TEST(SlamMotionPrior, SmallNoisyOdometryStepsAreMeasuredOverSpans) {
+  // 2 cm steps (a 40 Hz laser) whose odometry is 5 mm off across the motion, alternately left and
+  // right: each step's length reads 3% long, a span's chord does not.
+  internal::OdometryScale scale;
+  for (int i = 0; i < 2000; ++i) {
+    const double across = (i % 2 == 0 ? 0.005 : -0.005);
+    scale.observe(SE2(0.02, across, 0.0), SE2(0.98 * 0.02, 0.0, 0.0));
+    if (i % 200 == 199) scale.interrupt();  // a degenerate scan every 4 m
+  }
+  EXPECT_NEAR(scale.factor(), 0.98, 0.002);
+  // An interrupted span is not measured: steps that never add up to a span give no evidence.
+  internal::OdometryScale broken;
+  for (int i = 0; i < 2000; ++i) {
+    broken.observe(SE2(0.02, 0.0, 0.0), SE2(0.03, 0.0, 0.0));
+    if (i % 20 == 19) broken.interrupt();  // every 0.4 m
+  }
+  EXPECT_EQ(broken.evidenceM(), 0.0);
+  EXPECT_EQ(broken.factor(), 1.0);
+}
+
 TEST(SlamMotionPrior, WithoutOdometryKeyframesAreBoundByTheirOwnStepsDenseLogsByTime) {
   SlamOptions o;
   o.use_odometry = false;
@@ -673,6 +719,44 @@ TEST(Slam, CorridorDoesNotSlide) {
   const Errors odo = poseErrors(odometryInTruthFrame(frames), frames);
   EXPECT_GT(slam->stats().degenerate, 50u);
   EXPECT_LT(e.max, std::max(0.5, 1.5 * odo.max)) << "odometry max error " << odo.max;
+}
+
+/// The corridor's route as keyframes a metre or 30 degrees apart, with realistic odometry whose
+/// distances read `scale_bias` long.
+std::vector<Frame> corridorKeyframes(double scale_bias, std::uint64_t seed) {
+  sim::LogPerturbationOptions po;
+  po.odometry = sim::realisticOdometryNoise();
+  po.odometry.scale_bias = scale_bias;
+  po.keyframes.min_distance_m = 1.0;
+  po.keyframes.min_turn_rad = 30.0 * kDeg;
+  po.seed = seed;
+  return sim::perturbLog(simulateWorld("corridor"), po);
+}
+
+// Along the corridor the scans cannot pin the translation: it is the odometry's, and odometry that
+// reads distances 2% long put the keyframes 0.4-0.5 m off (BENCHMARK.md, SLAM). The steps the scans
+// do pin (the rooms at its ends, the turns) measure the scale; with scale_odometry the prediction
+// along the corridor takes it.
+TEST(Slam, OdometryReadingDistancesLongIsScaledByWhatTheScansMeasure) {
+  SlamOptions scale;
+  scale.scale_odometry = true;
+  for (const std::uint64_t seed : {1u, 2u}) {
+    const auto frames = corridorKeyframes(0.02, seed);
+    Slam* slam = nullptr;
+    // By default the scale is measured and reported, not applied.
+    const Errors fixed = poseErrors(runSlam(frames, {}, &slam), frames);
+    const double measured = slam->stats().odometry_scale;
+    EXPECT_NEAR(measured, 1.0 / 1.02, 0.005) << "seed " << seed;
+    EXPECT_GE(slam->stats().odometry_scale_evidence_m, kOdometryScaleMinEvidenceM);
+    const Errors scaled = poseErrors(runSlam(frames, scale, &slam), frames);
+    EXPECT_NEAR(slam->stats().odometry_scale, 1.0 / 1.02, 0.005) << "seed " << seed;
+    EXPECT_LT(scaled.rms, 0.5 * fixed.rms) << "seed " << seed << ": not scaled: " << fixed.rms;
+  }
+  // Odometry of the right scale is measured as such, within the scans' own errors.
+  const auto exact = corridorKeyframes(0.0, 1);
+  Slam* slam = nullptr;
+  runSlam(exact, scale, &slam);
+  EXPECT_NEAR(slam->stats().odometry_scale, 1.0, 0.005);
 }
 
 TEST(Slam, CorridorWithoutOdometryKeepsItsSpeedThroughAScanOutOfOrder) {

@@ -279,6 +279,8 @@ void run(const SlamArgs& a) {
   j["fragments"] = s.fragments;
   j["relocalizations"] = s.relocalizations;
   j["odometry_wins"] = s.odometry_wins;
+  j["odometry_scale"] = s.odometry_scale;
+  j["odometry_scale_evidence_m"] = s.odometry_scale_evidence_m;
   j["degenerate_scans"] = s.degenerate;
   j["loop_searches"] = s.loop_searches;
   j["loop_closures_accepted"] = s.loop_accepted;

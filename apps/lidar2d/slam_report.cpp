@@ -7,6 +7,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "lidar2d/slam/slam.hpp"
 #include "map_output.hpp"
 
 namespace lidar2d::cli {
@@ -185,6 +186,17 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
                                j.value("fragments", 0), j.value("relocalizations", 0), j.value("odometry_wins", 0)));
   row("motion prior", fmt::format("{} matches taken against it on strong scan evidence, {} contradicting it rejected",
                                   j.value("prior_overridden", 0), j.value("prior_kept", 0)));
+  if (j.value("used_odometry", false)) {
+    const bool applied = j.contains("options") && j["options"].value("scale_odometry", false);
+    row("odometry scale",
+        j.value("odometry_scale_evidence_m", 0.0) >= slam::kOdometryScaleMinEvidenceM
+            ? fmt::format("the scans measured {:.3f} m per metre of odometry over the last {:.0f} m of steps they "
+                          "pinned; {}",
+                          j.value("odometry_scale", 1.0), j.value("odometry_scale_evidence_m", 0.0),
+                          applied ? "odometry distances scaled by it" : "not applied (scale_odometry)")
+            : fmt::format("not measured: {:.0f} m of steps the scans pinned, {:.0f} m needed",
+                          j.value("odometry_scale_evidence_m", 0.0), slam::kOdometryScaleMinEvidenceM));
+  }
   row("map", fmt::format("{} x {} cells of {} m", W, H, res));
   html << "</table>\n";
   html << "<h2>Map and trajectory</h2>\n<p class=\"legend\"><span style=\"background:#1f77b4\"></span>trajectory"

@@ -63,6 +63,8 @@ py::dict statsDict(const slam::SlamStats& s) {
   d["unmatched"] = s.unmatched;
   d["degenerate"] = s.degenerate;
   d["fragments"] = s.fragments;
+  d["odometry_scale"] = s.odometry_scale;
+  d["odometry_scale_evidence_m"] = s.odometry_scale_evidence_m;
   d["loop_searches"] = s.loop_searches;
   d["loop_accepted"] = s.loop_accepted;
   d["loop_rejected"] = s.loop_rejected;

@@ -79,6 +79,25 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
                             d.translation().norm(), std::abs(d.theta()) / kDeg, m.rejected->sigmas,
                             toString(p.source), 100.0 * m.rejected->explained));
   }
+  // Steps both ends of which the scans pinned (neither degenerate nor against the prior) measure the
+  // odometry's distance scale.
+  if (!(m.T && prev_matched && !m.degenerate && !m.overrode_prior && odometryTrusted(p))) {
+    prior_.interruptOdometryScale();
+  } else {
+    prior_.observeOdometryStep(p, T_local_prev.inverse() * *m.T);
+    const OdometryScale& scale = prior_.odometryScale();
+    s_.stats.odometry_scale = scale.factor();
+    s_.stats.odometry_scale_evidence_m = scale.evidenceM();
+    if (std::abs(scale.factor() - reported_scale) >= kReportScaleChange) {
+      reported_scale = scale.factor();
+      s_.event(f, fmt::format("the scans measure {:.3f} m per metre of odometry over the last {:.0f} m of steps they "
+                              "pinned: {}",
+                              scale.factor(), scale.evidenceM(),
+                              opt.scale_odometry ? "odometry distances scaled by it from here"
+                                                 : "odometry distances not scaled (scale_odometry)"));
+    }
+  }
+  prev_matched = m.T && !m.degenerate;
   if (m.T) {
     out.T_local_robot = *m.T;
     out.matched = true;

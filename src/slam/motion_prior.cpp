@@ -40,6 +40,26 @@ MotionPrediction odometryPrediction(const SlamOptions& opt, const SE2& odo, doub
   return p;
 }
 
+void OdometryScale::observe(const SE2& odometry_step, const SE2& matched_step) {
+  odometry_span_ = odometry_span_ * odometry_step;
+  scan_span_ = scan_span_ * matched_step;
+  const Eigen::Vector2d o = odometry_span_.translation();
+  const double chord = o.norm();
+  if (chord < kSpanM) return;
+  // What the scans measured along the odometry's chord; a span the two read more than half apart
+  // is a bad match or a wheel slipping, not the scale: bounded.
+  const double measured = std::clamp(scan_span_.translation().dot(o) / chord, 0.5 * chord, 1.5 * chord);
+  interrupt();
+  const double keep = std::exp(-chord / kMemoryM);
+  odometry_m_ = odometry_m_ * keep + chord;
+  scan_m_ = scan_m_ * keep + measured;
+  if (odometry_m_ >= kMinEvidenceM) factor_ = std::clamp(scan_m_ / odometry_m_, kMinFactor, kMaxFactor);
+}
+
+void MotionPrior::observeOdometryStep(const MotionPrediction& p, const SE2& matched_step) {
+  if (p.source == PriorSource::kOdometry) scale_.observe(p.odometry_step, matched_step);
+}
+
 double MotionPrior::usualInterval() const {
   if (recent_intervals_.empty()) return 0.0;
   std::vector<double> v(recent_intervals_.begin(), recent_intervals_.end());
@@ -51,8 +71,10 @@ double MotionPrior::usualInterval() const {
 MotionPrediction MotionPrior::predictImpl(const Frame& f) {
   MotionPrediction p;
   const bool odometry = opt_.use_odometry && f.T_odom_robot.has_value();
+  odom_scaled_.reset();
   if (!have_prev_) {
     odometry_seen_ = odometry;
+    if (odometry) odom_scaled_ = p.T_odom_scaled = f.T_odom_robot;
     return p;
   }
   const double dt = f.time - time_prev_;
@@ -70,6 +92,15 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
   p.dt = dt > 0.0 && std::isfinite(dt) ? dt : usual;
 
   if (odometry) {
+    // The scaled chain: each step's translation by the factor of its time (the odometry itself when
+    // not scaled).
+    if (odom_prev_ && odom_scaled_prev_ && opt_.scale_odometry) {
+      const SE2 d = odom_prev_->inverse() * *f.T_odom_robot;
+      p.T_odom_scaled = *odom_scaled_prev_ * SE2(appliedScale() * d.translation(), d.theta());
+    } else {
+      p.T_odom_scaled = f.T_odom_robot;
+    }
+    odom_scaled_ = p.T_odom_scaled;
     if (odometry_missing_) {
       notes_.push_back(fmt::format("odometry back after {} scans without it", odometry_missing_count_));
       odometry_missing_ = false;
@@ -89,7 +120,10 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       if (plausible) {
         const bool time_ok = p.time_ok;
         const double step_dt = p.dt;
-        p = odometryPrediction(opt_, d, step_dt);
+        const std::optional<SE2> scaled = p.T_odom_scaled;
+        p = odometryPrediction(opt_, SE2(appliedScale() * d.translation(), d.theta()), step_dt);
+        p.odometry_step = d;
+        p.T_odom_scaled = scaled;
         p.time_ok = time_ok;
       } else {
         notes_.push_back(
@@ -136,7 +170,10 @@ void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool tim
   }
   have_prev_ = true;
   time_prev_ = f.time;
-  if (f.T_odom_robot) odom_prev_ = f.T_odom_robot;
+  if (f.T_odom_robot && odom_scaled_) {
+    odom_prev_ = f.T_odom_robot;
+    odom_scaled_prev_ = odom_scaled_;
+  }
 }
 
 /// Without odometry, sigmas that grow with time are honest for a log of a few scans per second, but

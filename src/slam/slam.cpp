@@ -383,7 +383,7 @@ struct Slam::Impl {
       state.event(f, fmt::format("session {} ('{}') starts at node {}: its place in the saved map is unknown until "
                                  "a verified loop closure ties it",
                                  state.sessions.size(), state.sessions.back().name, rec.node));
-      addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), true, false);
+      addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), true, std::nullopt);
       front_end.remember(f, T0, true, prediction.time_ok);
       last_T_local = T0;
     } else if (!front_end.started()) {
@@ -394,7 +394,7 @@ struct Slam::Impl {
       rec.is_node = true;
       rec.matched = true;
       state.scans.push_back(rec);
-      addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), false, true);
+      addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), false, prediction.T_odom_scaled);
       front_end.remember(f, T0, true, prediction.time_ok);
       last_T_local = T0;
     } else {
@@ -412,7 +412,8 @@ struct Slam::Impl {
         rec.is_node = true;
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
-                prediction.source == internal::PriorSource::kOdometry, t.placed_by_odometry);
+                prediction.source == internal::PriorSource::kOdometry ? prediction.T_odom_scaled : std::nullopt,
+                t.placed_by_odometry);
       } else {
         rec.node = nodes_added - 1;
         rec.T_node_scan = rel;
@@ -426,20 +427,21 @@ struct Slam::Impl {
     state.stats.total_seconds += state.scans.back().seconds;
   }
 
-  /// Scan `scan_index` (frame `f`, at `T_local`, with its points `pts` and `raw`) becomes a node:
+  /// Scan `scan_index` (frame `f`, at `T_local`, with its points `pts` and `raw`, and its trusted
+  /// `odometry` pose on the scaled chain, MotionPrediction::T_odom_scaled) becomes a node:
   /// the front end's local map takes it at once, the graph work (graphNode) is queued for the back
   /// end. The front end never reads what the back end computes, so the back end may be several
   /// nodes behind and the run is the same as without its thread.
   void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
-               bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted,
+               bool degenerate, const Eigen::Vector2d& dir_local, bool restart, std::optional<SE2> odometry,
                bool predicted = false) {
     ++nodes_added;
     last_node_time = f.time;
     last_node_T_local = T_local;
     front_end.addNode(T_local, pts, restart);
-    auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart, odom_trusted,
+    auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart, odometry,
                  predicted]() mutable {
-      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odom_trusted, predicted);
+      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odometry, predicted);
       publish();
     };
     if (back_end)
@@ -451,7 +453,8 @@ struct Slam::Impl {
   /// The graph's part of a new node: the node, its submap, its data, its sequential constraints,
   /// then the back end's searches and optimisation (backEnd).
   void graphNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
-                 bool degenerate, const Eigen::Vector2d& dir_local, bool restart, bool odom_trusted, bool predicted) {
+                 bool degenerate, const Eigen::Vector2d& dir_local, bool restart, const std::optional<SE2>& odometry,
+                 bool predicted) {
     const SlamOptions& opt = state.opt;
     const std::size_t n = state.nodes.size();
     Node node;
@@ -475,7 +478,7 @@ struct Slam::Impl {
     node.submap = state.submaps.size() - 1;
     state.submaps.back().nodes.push_back(n);
     state.nodes.push_back(node);
-    appendNodeData(f, std::move(pts), raw, f.T_odom_robot && odom_trusted ? f.T_odom_robot : std::nullopt,
+    appendNodeData(f, std::move(pts), raw, odometry,
                    n == 0 ? 0.0
                           : state.node_path_m[n - 1] +
                                 (state.nodes[n - 1].T_local_robot.translation() - T_local.translation()).norm());
@@ -587,6 +590,8 @@ SlamStats Slam::statsSoFar() const {
   out.correlative_fallbacks = s.stats.correlative_fallbacks;
   out.prior_overridden = s.stats.prior_overridden;
   out.prior_kept = s.stats.prior_kept;
+  out.odometry_scale = s.stats.odometry_scale;
+  out.odometry_scale_evidence_m = s.stats.odometry_scale_evidence_m;
   out.total_seconds = s.stats.total_seconds;
   out.nodes = std::max(out.nodes, impl_->nodes_added);
   return out;

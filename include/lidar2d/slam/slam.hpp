@@ -74,6 +74,10 @@ struct Event {
   std::string what;
 };
 
+/// The metres of odometry path, in steps the scans pinned, before SLAM states the odometry's distance
+/// scale as the scans measured it (SlamStats::odometry_scale; applied with SlamOptions::scale_odometry).
+inline constexpr double kOdometryScaleMinEvidenceM = 10.0;
+
 /// Counters of a run.
 struct SlamStats {
   std::size_t scans = 0, nodes = 0, submaps = 0;
@@ -83,6 +87,12 @@ struct SlamStats {
   std::size_t fragments = 0;         ///< stretches between lost tracks not tied together by a loop closure (1: all one)
   std::size_t relocalizations = 0;   ///< lost tracks tied back to the earlier map by a verified closure
   std::size_t odometry_wins = 0;     ///< node links where odometry overruled an estimate without scan evidence
+  /// The scans' metres per metre of odometry at the end (1 until kOdometryScaleMinEvidenceM; the
+  /// factor odometry distances are scaled by with SlamOptions::scale_odometry), and the metres of
+  /// odometry path behind it
+  /// (older steps fade over about 100 m). This session's own: a saved state does not keep it.
+  double odometry_scale = 1.0;
+  double odometry_scale_evidence_m = 0.0;
   std::size_t loop_searches = 0, loop_accepted = 0, loop_rejected = 0;
   std::size_t loop_downweighted = 0;  ///< accepted closures the final graph scaled below half weight (DCS)
   std::size_t descriptor_queries = 0;      ///< descriptor look-ups

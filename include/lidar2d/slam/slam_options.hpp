@@ -61,6 +61,7 @@ struct SlamOptions {
   double prior_odometry_sigma_rad = 1.0 * kDeg;
   double prior_odometry_sigma_per_turn = 0.1;
   double prior_odometry_sigma_rad_per_m = 2.0 * kDeg;
+  bool scale_odometry = false;
   double prior_velocity_sigma_m = 0.1;
   double prior_velocity_sigma_m_per_s = 1.0;
   double prior_velocity_sigma_rad = 5.0 * kDeg;
@@ -266,6 +267,10 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "... plus this share of the turn ..."},
     {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_rad_per_m), "motion prior", "deg/m", OptionRange::atLeast(0),
      "... plus this much per metre travelled"},
+    {LIDAR2D_SLAM_FIELD(scale_odometry), "motion prior", "flag", OptionRange::any(),
+     "scale odometry distances by the ratio the scans measured over the recent steps they pinned, from "
+     "10 m of such steps (summary.json's odometry_scale, measured either way; off: it moved the corrected "
+     "logs' ATE the wrong way, BENCHMARK.md)"},
     {LIDAR2D_SLAM_FIELD(prior_velocity_sigma_m), "motion prior", "m", OptionRange::above(0),
      "sigma of the constant-velocity prediction's translation (no odometry, or odometry not plausible): "
      "this ..."},

@@ -110,6 +110,8 @@ class FrontEnd {
   // An unmatched scan under an odometry prior of which less than this overlaps the local map at the
   // prediction sees only new ground (FrontEnd::track).
   static constexpr double kNewGroundOverlap = 0.1;
+  // An event states the odometry's scale factor when it moved this much since the last one stated.
+  static constexpr double kReportScaleChange = 0.01;
   // Which earlier scans' poses are starting points (scans back, ascending).
   static constexpr std::array<std::size_t, 4> kEarlierBack{2, 4, 8, 16};
 
@@ -153,6 +155,8 @@ class FrontEnd {
   std::optional<SE2> last_step;  // the front end's last step (robot frame) when time went forward
   std::deque<SE2> recent_poses;  // the front end's poses of the last kEarlierBack.back() scans, oldest first
   int consecutive_failures = 0;
+  bool prev_matched = false;         // the previous scan was matched and pinned in every direction
+  double reported_scale = 1.0;       // the odometry scale the latest event stated
   bool since_gap_unmatched = false;  // no scan matched since the last gap: where the robot is is in doubt
   std::deque<std::pair<SE2, Points2>> local_nodes;  // the local map's nodes: pose, points (robot frame)
   std::unique_ptr<registration::IcpTarget> local_target;

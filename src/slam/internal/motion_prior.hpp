@@ -13,6 +13,7 @@
 
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/core/se2.hpp"
+#include "lidar2d/slam/slam.hpp"
 #include "lidar2d/slam/slam_options.hpp"
 
 namespace lidar2d::slam::internal {
@@ -38,6 +39,11 @@ struct MotionPrediction {
   /// Constant velocity only: the sigmas come from the spread of the robot's recent steps, not from
   /// the time since the previous scan (SlamOptions::prior_velocity_spread_sigmas).
   bool from_spread = false;
+  /// Odometry only: the odometry's own step, before OdometryScale's factor (`delta` carries it).
+  SE2 odometry_step;
+  /// The frame's odometry pose on a chain of its steps, each with the distance scale estimated when
+  /// it was taken (what the graph's odometry constraints link); nothing without odometry.
+  std::optional<SE2> T_odom_scaled;
   bool time_ok = true;  ///< time moved forward, without a gap, since the previous scan
   double dt = 0.0;      ///< the time the step took as used for the sigma [s] (the usual interval when unknown)
 
@@ -47,6 +53,44 @@ struct MotionPrediction {
 
 /// The odometry prediction of step `odo` that took `dt` seconds: its sigmas under `opt`.
 MotionPrediction odometryPrediction(const SlamOptions& opt, const SE2& odo, double dt);
+
+/// The odometry's distance scale as the scans measure it. Wheel odometry reads distances a few
+/// percent long or short (wheel radius, tyre pressure, load). Where the scan pins every direction
+/// that error is corrected step by step, but along a corridor the match takes its translation along
+/// the corridor from the prediction, so the odometry's error there becomes the map's (the simulated
+/// corridor's keyframes with odometry 2% long: 0.42-0.51 m ATE against 0.05-0.12 m with its exact
+/// scale, seeds 1-3). Over spans of consecutive steps the scans pinned, each at least kSpanM of
+/// odometry chord, the distance the scans measured along that chord is compared with its length:
+/// the factor is the ratio of their sums over about the last kMemoryM metres of spans (older ones
+/// fade), once kMinEvidenceM metres were seen, bounded to [kMinFactor, kMaxFactor]. Spans, not
+/// steps: the length of a short noisy step is biased long (its noise across the motion only adds),
+/// by 3% for 2 cm steps with 5 mm of noise (a 40 Hz laser), and consecutive scan-to-map matches
+/// share their errors, which cancel over a span. With exact odometry the factor is 1 to 0.2% (the
+/// simulator). The motion prior applies it only with SlamOptions::scale_odometry (BENCHMARK.md:
+/// on the corrected logs it moved the ATE the wrong way).
+class OdometryScale {
+ public:
+  /// Odometry measured `odometry_step` where the scans matched `matched_step` (both robot frame,
+  /// the same step), both ends pinned: the span goes on, and is measured once long enough.
+  void observe(const SE2& odometry_step, const SE2& matched_step);
+  /// A step the scans did not pin: the span being measured ends unused.
+  void interrupt() { odometry_span_ = scan_span_ = SE2(); }
+  /// The factor odometry translations are multiplied by: 1 until the evidence suffices.
+  double factor() const { return factor_; }
+  /// Metres of odometry chord behind the factor (faded).
+  double evidenceM() const { return odometry_m_; }
+
+  static constexpr double kSpanM = 0.5;
+  static constexpr double kMinEvidenceM = kOdometryScaleMinEvidenceM;
+  static constexpr double kMemoryM = 100.0;
+  static constexpr double kMinFactor = 0.8;
+  static constexpr double kMaxFactor = 1.25;
+
+ private:
+  SE2 odometry_span_, scan_span_;  // the span being measured, from its first scan
+  double odometry_m_ = 0.0, scan_m_ = 0.0;
+  double factor_ = 1.0;
+};
 
 class MotionPrior {
  public:
@@ -63,6 +107,14 @@ class MotionPrior {
   }
   /// Frame `f` ended at `step` from the previous scan (front-end estimate; ignored for the first).
   void remember(const Frame& f, const SE2& step, bool first, bool time_ok);
+  /// The scans matched step `matched_step` of a prediction `p` from odometry, pinning both its ends
+  /// (OdometryScale::observe).
+  void observeOdometryStep(const MotionPrediction& p, const SE2& matched_step);
+  /// A step they did not pin (OdometryScale::interrupt).
+  void interruptOdometryScale() { scale_.interrupt(); }
+  const OdometryScale& odometryScale() const { return scale_; }
+  /// The factor odometry steps are scaled by: OdometryScale's with SlamOptions::scale_odometry, else 1.
+  double appliedScale() const { return opt_.scale_odometry ? scale_.factor() : 1.0; }
   /// The usual interval between scans so far (median of the recent ones, repeated stamps as 0) [s], 0
   /// before any.
   double usualInterval() const;
@@ -82,6 +134,9 @@ class MotionPrior {
   bool have_prev_ = false;
   double time_prev_ = 0.0;
   std::optional<SE2> odom_prev_;
+  std::optional<SE2> odom_scaled_prev_;  // odom_prev_ on the scaled chain (MotionPrediction::T_odom_scaled)
+  std::optional<SE2> odom_scaled_;       // the predicted frame's pose on it
+  OdometryScale scale_;
   bool odometry_seen_ = false, odometry_missing_ = false;
   std::size_t odometry_missing_count_ = 0;
   // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
