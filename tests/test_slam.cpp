@@ -800,11 +800,16 @@ TEST(Slam, ScansLoggedLateInTurnsWithOdometry) {
   // As above, with odometry: a late scan's odometry is interpolated at its (wrong) stamp, so the
   // prediction puts it where the robot is now, tens of degrees from where it was taken; and the
   // fresh scan after it is predicted from the late scan's pose. (Without the earlier scans' poses
-  // as starting points: ATE 1.03 m and 22 degrees; with them 0.04 m and 1.6 degrees.)
-  const LateScanRun r = runThroughLateScanBursts(7, {});
-  ASSERT_GE(r.bursts, 10u);
-  EXPECT_LT(r.ate.trans_m.rmse, 0.1);
-  EXPECT_LT(r.ate.rot_rad.rmse, 3.0 * std::numbers::pi / 180.0);
+  // as starting points: ATE 1.03 m and 22 degrees on seed 7; with them 0.04 m and 1.6 degrees.)
+  // The fresh scan's prior, chained from the late scan's pose, is as wrong as the late scan's was:
+  // unless its sigmas widen by the contradiction before it, its right match is refused (seed 2:
+  // 3.25 degrees ATE, one turn's scans 28-64 degrees off; seed 5: 8.5 m, the map turned over).
+  for (const std::uint64_t seed : {2u, 5u, 7u}) {
+    const LateScanRun r = runThroughLateScanBursts(seed, {});
+    ASSERT_GE(r.bursts, 10u);
+    EXPECT_LT(r.ate.trans_m.rmse, 0.05) << "seed " << seed;
+    EXPECT_LT(r.ate.rot_rad.rmse, 1.0 * std::numbers::pi / 180.0) << "seed " << seed;
+  }
 }
 
 TEST(Slam, SurvivesGapsBackwardsTimeMissingOdometryAndAKidnapping) {
