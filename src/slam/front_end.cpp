@@ -22,20 +22,8 @@ FrontEnd::Prediction FrontEnd::predict(const Frame& f) {
   return prior_.predict(f, [&](std::string what) { s_.event(f, std::move(what)); });
 }
 
-FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Prediction& prediction) {
+FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Prediction& p) {
   Tracked out;
-  // A prior whose heading the previous scan contradicted beyond the gate is in doubt for this step
-  // too: its sigmas are at least half that contradiction. A scan logged late in a turn matches where
-  // it was taken, tens of degrees from the odometry interpolated at its stamp, and the fresh scan
-  // after it is predicted from that pose with a step of the odometry that is just as wrong (the
-  // simulated office with late-scan bursts: the fresh scan's right match, 28 degrees off, refused at
-  // 18 sigmas). Not after an override in translation alone (the Intel bag's odometry jumps of 0.2-0.9
-  // m): a prior widened after those let look-alikes win (the Intel bag with a gap, 0.0176 -> 0.0185 m).
-  Prediction p = prediction;
-  if (last_override) {
-    p.sigma_m = std::max(p.sigma_m, 0.5 * last_override->translation().norm());
-    p.sigma_rad = std::max(p.sigma_rad, 0.5 * std::abs(last_override->theta()));
-  }
   const SE2 T_pred = T_local_prev * p.delta;
   std::vector<SE2> alternatives;
   if (p.delta.translation().norm() > opt.alternative_start_m || std::abs(p.delta.theta()) > opt.alternative_start_rad) {
@@ -75,11 +63,10 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
   out.T_local_robot = T_pred;
   out.degenerate = m.degenerate;
   out.dir = m.dir;
-  last_override.reset();
   if (m.overrode_prior) {
     ++s_.stats.prior_overridden;
     const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * *m.T);
-    if (std::abs(d.theta()) > opt.prior_gate_sigmas * p.sigma_rad) last_override = d;
+    prior_.overridden(p, d);
     s_.event(f, fmt::format("the scan overrides the {} prior by {:.2f} m / {:.1f} deg ({:.1f} sigmas): its match "
                             "explains {:.0f}% of the scan, the best within the prior {:.0f}%",
                             toString(p.source), d.translation().norm(), std::abs(d.theta()) / kDeg,

@@ -60,6 +60,17 @@ void MotionPrior::observeOdometryStep(const MotionPrediction& p, const SE2& matc
   if (p.source == PriorSource::kOdometry) scale_.observe(p.odometry_step, matched_step);
 }
 
+void MotionPrior::overridden(const MotionPrediction& p, const SE2& taken) {
+  if (std::abs(taken.theta()) > opt_.prior_gate_sigmas * p.sigma_rad) heading_override_ = taken;
+}
+
+void MotionPrior::widenAfterOverride(MotionPrediction& p) {
+  if (!heading_override_) return;
+  p.sigma_m = std::max(p.sigma_m, 0.5 * heading_override_->translation().norm());
+  p.sigma_rad = std::max(p.sigma_rad, 0.5 * std::abs(heading_override_->theta()));
+  heading_override_.reset();
+}
+
 double MotionPrior::usualInterval() const {
   if (recent_intervals_.empty()) return 0.0;
   std::vector<double> v(recent_intervals_.begin(), recent_intervals_.end());
@@ -92,22 +103,21 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
   p.dt = dt > 0.0 && std::isfinite(dt) ? dt : usual;
 
   if (odometry) {
-    // The scaled chain: each step's translation by the factor of its time (the odometry itself when
-    // not scaled).
-    if (odom_prev_ && odom_scaled_prev_ && opt_.scale_odometry) {
-      const SE2 d = odom_prev_->inverse() * *f.T_odom_robot;
-      p.T_odom_scaled = *odom_scaled_prev_ * SE2(appliedScale() * d.translation(), d.theta());
-    } else {
-      p.T_odom_scaled = f.T_odom_robot;
-    }
+    // The odometry's step since the previous scan that had odometry, and that step with its
+    // translation scaled (appliedScale): the prediction's, and the scaled chain's (the odometry
+    // itself when not scaled).
+    const std::optional<SE2> step =
+        odom_prev_ ? std::optional<SE2>(odom_prev_->inverse() * *f.T_odom_robot) : std::nullopt;
+    const SE2 scaled_step = step ? SE2(appliedScale() * step->translation(), step->theta()) : SE2();
+    p.T_odom_scaled = step && opt_.scale_odometry ? *odom_scaled_prev_ * scaled_step : *f.T_odom_robot;
     odom_scaled_ = p.T_odom_scaled;
     if (odometry_missing_) {
       notes_.push_back(fmt::format("odometry back after {} scans without it", odometry_missing_count_));
       odometry_missing_ = false;
     }
     odometry_seen_ = true;
-    if (odom_prev_) {
-      const SE2 d = odom_prev_->inverse() * *f.T_odom_robot;
+    if (step) {
+      const SE2& d = *step;
       const double dist = d.translation().norm(), turn = std::abs(d.theta());
       bool plausible = d.isFinite();
       // Plausible against the time the step took, not against fixed per-step limits: a gap of
@@ -121,7 +131,7 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
         const bool time_ok = p.time_ok;
         const double step_dt = p.dt;
         const std::optional<SE2> scaled = p.T_odom_scaled;
-        p = odometryPrediction(opt_, SE2(appliedScale() * d.translation(), d.theta()), step_dt);
+        p = odometryPrediction(opt_, scaled_step, step_dt);
         p.odometry_step = d;
         p.T_odom_scaled = scaled;
         p.time_ok = time_ok;

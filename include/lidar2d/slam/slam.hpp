@@ -89,8 +89,8 @@ struct SlamStats {
   std::size_t odometry_wins = 0;     ///< node links where odometry overruled an estimate without scan evidence
   /// The scans' metres per metre of odometry at the end (1 until kOdometryScaleMinEvidenceM; the
   /// factor odometry distances are scaled by with SlamOptions::scale_odometry), and the metres of
-  /// odometry path behind it
-  /// (older steps fade over about 100 m). This session's own: a saved state does not keep it.
+  /// odometry path behind it (older steps fade over about 100 m). This session's own: a saved state
+  /// does not keep it.
   double odometry_scale = 1.0;
   double odometry_scale_evidence_m = 0.0;
   std::size_t loop_searches = 0, loop_accepted = 0, loop_rejected = 0;

@@ -157,7 +157,6 @@ class FrontEnd {
   int consecutive_failures = 0;
   bool prev_matched = false;         // the previous scan was matched and pinned in every direction
   double reported_scale = 1.0;       // the odometry scale the latest event stated
-  std::optional<SE2> last_override;  // prior^-1 * match of the previous scan, when it overrode the prior's heading
   bool since_gap_unmatched = false;  // no scan matched since the last gap: where the robot is is in doubt
   std::deque<std::pair<SE2, Points2>> local_nodes;  // the local map's nodes: pose, points (robot frame)
   std::unique_ptr<registration::IcpTarget> local_target;

@@ -101,10 +101,20 @@ class MotionPrior {
   template <class EventSink>
   MotionPrediction predict(const Frame& f, EventSink&& event) {
     MotionPrediction p = predictImpl(f);
+    widenAfterOverride(p);
     for (std::string& e : notes_) event(std::move(e));
     notes_.clear();
     return p;
   }
+  /// The front end took a match `taken` (prediction^-1 * match) against prediction `p`, on scan
+  /// evidence. When its heading contradicts `p` beyond the gate, the next prediction's sigmas are at
+  /// least half of it: odometry whose heading was wrong at this stamp is in doubt for the next step
+  /// too. A scan logged late in a turn matches where it was taken, tens of degrees from the odometry
+  /// interpolated at its stamp, and the fresh scan after it is predicted from that pose with an
+  /// odometry step just as wrong (the simulated office with late-scan bursts: the fresh scan's right
+  /// match, 28 degrees off, refused at 18 sigmas). Not after an override in translation alone (the
+  /// Intel bag's odometry jumps of 0.2-0.9 m): a prior widened after those let look-alikes win.
+  void overridden(const MotionPrediction& p, const SE2& taken);
   /// Frame `f` ended at `step` from the previous scan (front-end estimate; ignored for the first).
   void remember(const Frame& f, const SE2& step, bool first, bool time_ok);
   /// The scans matched step `matched_step` of a prediction `p` from odometry, pinning both its ends
@@ -123,6 +133,7 @@ class MotionPrior {
   MotionPrediction predictImpl(const Frame& f);
   SE2 velocityStep() const;
   void narrowToSpread(MotionPrediction& p) const;
+  void widenAfterOverride(MotionPrediction& p);
 
   static constexpr std::size_t kVelocitySteps = 5;  // steps behind the constant-velocity prediction
   static constexpr std::size_t kIntervals = 21;     // intervals behind the usual interval
@@ -137,6 +148,7 @@ class MotionPrior {
   std::optional<SE2> odom_scaled_prev_;  // odom_prev_ on the scaled chain (MotionPrediction::T_odom_scaled)
   std::optional<SE2> odom_scaled_;       // the predicted frame's pose on it
   OdometryScale scale_;
+  std::optional<SE2> heading_override_;  // the previous scan's override, when it contradicted the heading (overridden)
   bool odometry_seen_ = false, odometry_missing_ = false;
   std::size_t odometry_missing_count_ = 0;
   // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
