@@ -780,6 +780,38 @@ TEST(Slam, CorridorWithoutOdometryKeepsItsSpeedThroughAScanOutOfOrder) {
   EXPECT_LT(ateAgainstTruth(runSlam(glitched, o), frames).trans_m.rmse, 0.3);
 }
 
+// Keyframes a metre or 30 degrees apart in the featureless corridor, without odometry: the scans
+// cannot measure the steps along it, so the constant-velocity prediction sets them, and that must
+// be the length of the robot's straight steps. The median of its last five steps, its turns before
+// the corridor among them (the keyframes' short ones), drove the corridor at 90% of its length:
+// 2.1 m ATE. And the corridor's own steps, which only repeat the prediction, must not become the
+// velocity: after a scan stamped out of order the prediction stood still, every scan after it
+// confirmed that, and the robot stood still in the map for the rest of the corridor.
+TEST(Slam, CorridorKeyframesWithoutOdometryDriveTheirStraightStepsLength) {
+  const auto frames = keyframesOf("corridor");
+  SlamOptions o;
+  o.use_odometry = false;
+  Slam* slam = nullptr;
+  const double ate = ateAgainstTruth(runSlam(frames, o, &slam), frames).trans_m.rmse;
+  EXPECT_GT(slam->stats().degenerate, 40u);  // the corridor's keyframes
+  EXPECT_LT(ate, 0.1);
+
+  std::size_t k = 0;  // a keyframe in the middle of the corridor, while the robot drives along it
+  while (k < frames.size() && frames[k].T_world_robot->x() < 25.0) ++k;
+  ASSERT_LT(k + 16, frames.size());
+  auto glitched = frames;
+  glitched[k].time = frames[k - 1].time - 0.5;
+  const std::vector<SE2> est = runSlam(glitched, o, &slam);
+  EXPECT_EQ(countEvents(*slam, "time goes backwards"), 1);
+  // The glitched scan's own step is unknown (it may have been taken before the scan logged ahead of
+  // it); the 15 steps after it are the robot's.
+  const SE2 driven = est[k + 1].inverse() * est[k + 16];
+  const SE2 truth = frames[k + 1].T_world_robot->inverse() * *frames[k + 16].T_world_robot;
+  EXPECT_GT(truth.translation().norm(), 10.0);
+  EXPECT_LT((driven.translation() - truth.translation()).norm(), 0.1)
+      << "driven " << driven.translation().transpose() << " m, truth " << truth.translation().transpose();
+}
+
 TEST(Slam, ScansLoggedLateInTurnsWithoutOdometry) {
   // The Intel bag logs runs of scans up to a second late while the robot turns (alternating with
   // fresh ones): without odometry such a scan is tens of degrees from the constant-velocity

@@ -165,9 +165,9 @@ void FrontEnd::addNode(const SE2& T_local, const Points2& pts, bool restart) {
   rebuildLocalMap();
 }
 
-void FrontEnd::remember(const Frame& f, const SE2& T_local, bool first, bool time_ok) {
+void FrontEnd::remember(const Frame& f, const SE2& T_local, bool first, bool time_ok, bool pinned) {
   const SE2 step = first ? SE2() : T_local_prev.inverse() * T_local;
-  prior_.remember(f, step, first, time_ok);
+  prior_.remember(f, step, first, time_ok, pinned);
   if (!first) {
     last_step = time_ok ? std::optional<SE2>(step) : std::nullopt;
     recent_poses.push_back(T_local);
@@ -226,7 +226,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
       c.overlap = overlapWith(*local_target, pts, c.res.T_target_source, opt.match_inlier_distance_m, kOverlapM);
     c.explained = c.overlap.explained;
     c.T = c.res.T_target_source;
-    if (finite) remapDegenerate(c, T_pred);
+    if (finite) remapDegenerate(c, p, T_pred);
     // Weighed against the prior after remapping: along a corridor ICP slides anywhere, and that
     // slide says nothing against the prediction.
     c.sigmas = finite ? p.distance(T_local_prev.inverse() * c.T) : std::numeric_limits<double>::infinity();
@@ -336,8 +336,10 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
 
 /// Degeneracy (Zhang, Kaess & Singh 2016): the translational block of the information matrix per
 /// matched point; a weak eigen-direction is not pinned by the scan, so the translation along it is
-/// taken from the prediction (solution remapping) instead of whatever the solver slid to.
-void FrontEnd::remapDegenerate(Candidate& c, const SE2& T_pred) const {
+/// taken from the prediction (solution remapping) instead of whatever the solver slid to. Without
+/// odometry the prediction's step is the robot's recent steps turning as this match does
+/// (MotionPrior::stepTurning) when there are such steps.
+void FrontEnd::remapDegenerate(Candidate& c, const Prediction& p, const SE2& T_pred) const {
   const registration::Result& res = c.res;
   if (res.num_inliers == 0) return;
   const std::optional<Eigen::Vector2d> dir = weakestDirection(
@@ -345,7 +347,11 @@ void FrontEnd::remapDegenerate(Candidate& c, const SE2& T_pred) const {
   if (!dir) return;
   c.degenerate = true;
   c.dir = *dir;
-  c.T = degeneracy::remapPose(T_pred, c.T, degeneracy::projectorRemovingDirection(std::atan2(c.dir.y(), c.dir.x())));
+  SE2 from = T_pred;
+  if (p.source == PriorSource::kConstantVelocity && p.time_ok)
+    if (const std::optional<SE2> step = prior_.stepTurning(angleDiff(c.T.theta(), T_local_prev.theta())))
+      from = T_local_prev * *step;
+  c.T = degeneracy::remapPose(from, c.T, degeneracy::projectorRemovingDirection(std::atan2(c.dir.y(), c.dir.x())));
 }
 
 }  // namespace lidar2d::slam::internal

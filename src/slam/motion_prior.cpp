@@ -162,13 +162,21 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
   return p;
 }
 
-void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool time_ok) {
+void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool time_ok, bool pinned) {
   if (!first) {
-    if (!time_ok) recent_steps_.clear();
-    recent_steps_.push_back(time_ok ? step : SE2());
+    // A gap: the robot may have stopped, so the velocity starts again from a standstill. A scan
+    // stamped before the previous one says nothing of the velocity (it may have been taken earlier,
+    // or its clock slipped): the history stays.
+    const bool backwards = f.time < time_prev_;
+    if (!time_ok && !backwards) {
+      recent_steps_.clear();
+      recent_steps_.push_back(SE2());
+      spread_steps_.clear();
+    } else if (time_ok && pinned) {
+      recent_steps_.push_back(step);
+      spread_steps_.push_back(step);
+    }
     if (recent_steps_.size() > kVelocitySteps) recent_steps_.pop_front();
-    if (!time_ok) spread_steps_.clear();
-    if (time_ok) spread_steps_.push_back(step);
     if (spread_steps_.size() > kSpreadSteps) spread_steps_.pop_front();
     // Repeated stamps count (as 0): in a log whose stamps mostly repeat they do not say how long a
     // step took, and one absurd interval among them (a clock wrapping) must not become the usual one.
@@ -234,6 +242,22 @@ void MotionPrior::narrowToSpread(MotionPrediction& p) const {
   p.sigma_m = std::min(p.sigma_m, std::max(0.5 * opt_.fallback_linear_window_m, k * spread_m));
   p.sigma_rad = std::min(p.sigma_rad, std::max(0.5 * opt_.fallback_angular_window_rad, k * spread_rad));
   p.from_spread = true;
+}
+
+std::optional<SE2> MotionPrior::stepTurning(double turn) const {
+  std::vector<double> x, y;
+  for (const SE2& s : spread_steps_) {
+    if (std::abs(angleDiff(s.theta(), turn)) > kSimilarTurnRad) continue;
+    x.push_back(s.x());
+    y.push_back(s.y());
+  }
+  if (x.size() < kMinSimilarSteps) return std::nullopt;
+  auto median = [](std::vector<double>& v) {
+    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  return SE2(median(x), median(y), turn);
 }
 
 /// The constant-velocity step: the component-wise median (x, y, theta) of the last

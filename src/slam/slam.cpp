@@ -419,7 +419,7 @@ struct Slam::Impl {
         rec.T_node_scan = rel;
         state.scans.push_back(rec);
       }
-      front_end.remember(f, t.T_local_robot, false, prediction.time_ok);
+      front_end.remember(f, t.T_local_robot, false, prediction.time_ok, t.matched && !t.degenerate);
       last_T_local = t.T_local_robot;
     }
     ++state.stats.scans;

@@ -69,8 +69,8 @@ class FrontEnd {
   /// end keeps its own copy, so it never reads the graph the back end may be extending.
   void addNode(const SE2& T_local, const Points2& pts, bool restart);
   /// Remembers scan `f` at `T_local` for the next prediction; `first`: the first scan (no step),
-  /// `time_ok` as predicted.
-  void remember(const Frame& f, const SE2& T_local, bool first, bool time_ok);
+  /// `time_ok` as predicted, `pinned`: the scan measured its step (MotionPrior::remember).
+  void remember(const Frame& f, const SE2& T_local, bool first, bool time_ok, bool pinned = true);
 
   /// One match of the scan: its result, the share of the scan it explains and its distance from
   /// the prediction in sigmas.
@@ -132,7 +132,7 @@ class FrontEnd {
   };
 
   void rebuildLocalMap();
-  void remapDegenerate(Candidate& c, const SE2& T_pred) const;
+  void remapDegenerate(Candidate& c, const Prediction& p, const SE2& T_pred) const;
   /// Whether `p` is an odometry prior the front end trusts: no gap since the last match, time as
   /// predicted, a plausible step.
   bool odometryTrusted(const Prediction& p) const;

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <deque>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <vector>
@@ -116,7 +117,10 @@ class MotionPrior {
   /// Intel bag's odometry jumps of 0.2-0.9 m): a prior widened after those let look-alikes win.
   void overridden(const MotionPrediction& p, const SE2& taken);
   /// Frame `f` ended at `step` from the previous scan (front-end estimate; ignored for the first).
-  void remember(const Frame& f, const SE2& step, bool first, bool time_ok);
+  /// `pinned`: the scan measured the step (matched, not degenerate); only such steps make the
+  /// constant-velocity history, since an unmatched or degenerate step is (along its weak direction)
+  /// the prediction itself.
+  void remember(const Frame& f, const SE2& step, bool first, bool time_ok, bool pinned = true);
   /// The scans matched step `matched_step` of a prediction `p` from odometry, pinning both its ends
   /// (OdometryScale::observe).
   void observeOdometryStep(const MotionPrediction& p, const SE2& matched_step);
@@ -128,6 +132,13 @@ class MotionPrior {
   /// The usual interval between scans so far (median of the recent ones, repeated stamps as 0) [s], 0
   /// before any.
   double usualInterval() const;
+  /// Without odometry, the step the robot's recent pinned steps say it takes when it turns by
+  /// `turn` [rad]: the component-wise median translation of those (since the latest gap) whose turn
+  /// is within kSimilarTurnRad of it, with `turn`; nothing when fewer than kMinSimilarSteps are.
+  /// Along a corridor the scan measures the turn but not the distance: a robot driving straight
+  /// drives its straight steps' length, not the average of its last few steps, turns included (a
+  /// keyframe log keeps a scan every metre or 30 degrees, so its turning steps are the short ones).
+  std::optional<SE2> stepTurning(double turn) const;
 
  private:
   MotionPrediction predictImpl(const Frame& f);
@@ -139,6 +150,8 @@ class MotionPrior {
   static constexpr std::size_t kIntervals = 21;     // intervals behind the usual interval
   static constexpr std::size_t kSpreadSteps = 20;   // steps behind the spread of the robot's motion
   static constexpr std::size_t kMinSpreadSteps = 10;
+  static constexpr double kSimilarTurnRad = 10.0 * std::numbers::pi / 180.0;
+  static constexpr std::size_t kMinSimilarSteps = 3;
 
   const SlamOptions& opt_;
   std::vector<std::string> notes_;
@@ -151,10 +164,10 @@ class MotionPrior {
   std::optional<SE2> heading_override_;  // the previous scan's override, when it contradicted the heading (overridden)
   bool odometry_seen_ = false, odometry_missing_ = false;
   std::size_t odometry_missing_count_ = 0;
-  // The front end's last few steps (robot frame), oldest first; emptied across gaps. The
-  // constant-velocity prediction is their component-wise median (`velocityStep`).
+  // The front end's last few steps the scans pinned (robot frame), oldest first; a gap leaves only
+  // a standstill. The constant-velocity prediction is their component-wise median (`velocityStep`).
   std::deque<SE2> recent_steps_;
-  // The last kSpreadSteps steps since the latest gap (robot frame), oldest first.
+  // The last kSpreadSteps steps the scans pinned since the latest gap (robot frame), oldest first.
   std::deque<SE2> spread_steps_;
   std::deque<double> recent_intervals_;  // intervals between scans (>= 0) [s], oldest first
 };
