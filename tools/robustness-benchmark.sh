@@ -3,7 +3,7 @@
 # not tuned on, made by `lidar2d perturb` (docs/perturb.md). Prints a markdown table, one row per run,
 # and writes it to OUT_DIR/robustness.md.
 #
-#   tools/robustness-benchmark.sh [--quick] [--seeds N,...] [--part corrected|floor|raw|sim|lasers]... [--logs NAME,...]
+#   tools/robustness-benchmark.sh [--quick] [--seeds N,...] [--part corrected|floor|short|raw|sim|lasers]... [--logs NAME,...]
 #                                 [BUILD_DIR] [OUT_DIR]
 #
 # Parts (all by default; --part may be repeated):
@@ -18,6 +18,10 @@
 #              output of another SLAM system); and the same log with slam --no-odometry (keyframe logs
 #              without odometry: the constant-velocity prior alone). Not in the default set. Error: ATE
 #              against the truth.
+#   short      every log in ../shared/data/corrected read with a short-range laser (perturb
+#              --laser-range-max 5.6: a low-cost laser's 5.6 m, beams beyond it no return), realistic
+#              odometry, dense and as keyframes, seeds as for corrected: a large building seen a few
+#              metres around the robot. Not in the default set. Error: ATE against the truth.
 #   raw        the three raw bags as they are, with a 10 s gap at their largest turn (perturb
 #              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), and with
 #              slam --no-odometry. Error: Kuemmerle relations (mean +- std).
@@ -57,7 +61,7 @@ while [ $# -gt 0 ]; do
       SEED_LIST=$1 ;;
     --part)
       shift
-      case "${1:-}" in corrected | floor | raw | sim | lasers) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, floor, raw, sim, lasers)" >&2; exit 2 ;; esac ;;
+      case "${1:-}" in corrected | floor | short | raw | sim | lasers) PARTS+=("$1") ;; *) echo "unknown part '${1:-}' (corrected, floor, short, raw, sim, lasers)" >&2; exit 2 ;; esac ;;
     --logs) shift; LOGS=",${1:-},";;
     -h | --help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     -*) echo "unknown option $1" >&2; exit 2 ;;
@@ -141,7 +145,7 @@ perturb() {
 emit "| run | scans | SLAM error | odometry error | loops accepted | fragments | wall [s] | p99 [ms/scan] | max [ms/scan] | peak MB |"
 emit "|---|---|---|---|---|---|---|---|---|---|"
 
-if want_part corrected || want_part floor; then
+if want_part corrected || want_part floor || want_part short; then
   mkdir -p "$OUT/logs"
   for log in "$DATA"/corrected/*.log.gz; do
     base=$(basename "$log" .log.gz)
@@ -158,6 +162,17 @@ if want_part corrected || want_part floor; then
           p=$OUT/logs/$base-$variant-s$seed.log
           perturb "$log" --odom-model realistic "${kf[@]}" "${clock[@]}" --seed "$seed" -o "$p" || continue
           run "$base $variant$tag s$seed" "$p" "$p" "$p"
+        done
+      done
+    fi
+    if want_part short; then
+      for seed in "${SEEDS[@]}"; do
+        for variant in dense kf; do
+          kf=()
+          [ "$variant" = kf ] && kf=(--keyframes 1,30)
+          p=$OUT/logs/$base-$variant-5.6m-s$seed.log
+          perturb "$log" --odom-model realistic "${kf[@]}" "${clock[@]}" --laser-range-max 5.6 --seed "$seed" -o "$p" || continue
+          run "$base $variant$tag 5.6 m laser s$seed" "$p" "$p" "$p"
         done
       done
     fi
