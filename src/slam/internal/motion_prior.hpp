@@ -142,6 +142,9 @@ class MotionPrior {
 
  private:
   MotionPrediction predictImpl(const Frame& f);
+  /// The interval a gap is measured against (five times it, and `time_gap_s`): usualInterval, or
+  /// the mean of the recent intervals where repeated stamps make that 0.
+  double intervalForGaps() const;
   SE2 velocityStep() const;
   void narrowToSpread(MotionPrediction& p) const;
   void widenAfterOverride(MotionPrediction& p);
@@ -170,6 +173,7 @@ class MotionPrior {
   // The last kSpreadSteps steps the scans pinned since the latest gap (robot frame), oldest first.
   std::deque<SE2> spread_steps_;
   std::deque<double> recent_intervals_;  // intervals between scans (>= 0) [s], oldest first
+  std::size_t repeated_ = 0;             // scans in a row up to the previous one that repeated its predecessor's stamp
 };
 
 }  // namespace lidar2d::slam::internal
