@@ -3,11 +3,20 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <vector>
 
 namespace lidar2d::slam::internal {
+namespace {
+
+/// The upper median of `v` (its element n/2 in sorted order; n > 0), in O(n).
+double upperMedian(std::vector<double> v) {
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+}  // namespace
 
 const char* toString(PriorSource s) {
   switch (s) {
@@ -73,10 +82,7 @@ void MotionPrior::widenAfterOverride(MotionPrediction& p) {
 
 double MotionPrior::usualInterval() const {
   if (recent_intervals_.empty()) return 0.0;
-  std::vector<double> v(recent_intervals_.begin(), recent_intervals_.end());
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
+  return upperMedian(std::vector<double>(recent_intervals_.begin(), recent_intervals_.end()));
 }
 
 /// Scans logged in bursts under one stamp (a driver that stamps a batch of scans when it sends
@@ -85,8 +91,7 @@ double MotionPrior::usualInterval() const {
 /// (orebro: 78 gaps, 2 fragments). There the time a scan took on average, the mean of the recent
 /// intervals, is the reference (and a burst's time is shared by its scans: predictImpl); elsewhere
 /// the median (one long pause must not hide the next).
-double MotionPrior::intervalForGaps() const {
-  const double usual = usualInterval();
+double MotionPrior::intervalForGaps(double usual) const {
   if (usual > 0.0 || recent_intervals_.empty()) return usual;
   double sum = 0.0;
   for (const double dt : recent_intervals_) sum += dt;
@@ -104,7 +109,7 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
   }
   const double dt = f.time - time_prev_;
   const double usual = usualInterval();
-  const double between = intervalForGaps();
+  const double between = intervalForGaps(usual);
   // After k scans that repeated the previous stamp, the k + 1 scans up to this one were taken over
   // dt: each took dt / (k + 1).
   const double per_scan = dt / static_cast<double>(1 + repeated_);
@@ -242,12 +247,7 @@ void MotionPrior::narrowToSpread(MotionPrediction& p) const {
     y[i] = spread_steps_[i].y();
     th[i] = spread_steps_[i].theta();
   }
-  auto median = [](std::vector<double> v) {
-    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    return *mid;
-  };
-  const double mx = median(x), my = median(y), mth = median(th);
+  const double mx = upperMedian(x), my = upperMedian(y), mth = upperMedian(th);
   double ss_m = 0.0, ss_rad = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     ss_m += (x[i] - mx) * (x[i] - mx) + (y[i] - my) * (y[i] - my);
@@ -271,12 +271,7 @@ std::optional<SE2> MotionPrior::stepTurning(double turn) const {
     y.push_back(s.y());
   }
   if (x.size() < kMinSimilarSteps) return std::nullopt;
-  auto median = [](std::vector<double>& v) {
-    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    return *mid;
-  };
-  return SE2(median(x), median(y), turn);
+  return SE2(upperMedian(std::move(x)), upperMedian(std::move(y)), turn);
 }
 
 /// The constant-velocity step: the component-wise median (x, y, theta) of the last
@@ -287,19 +282,13 @@ std::optional<SE2> MotionPrior::stepTurning(double turn) const {
 /// ended (metres of error without odometry).
 SE2 MotionPrior::velocityStep() const {
   if (recent_steps_.empty()) return SE2();
-  std::array<std::array<double, kVelocitySteps>, 3> v{};
-  const std::size_t n = recent_steps_.size();
-  for (std::size_t i = 0; i < n; ++i) {
-    v[0][i] = recent_steps_[i].x();
-    v[1][i] = recent_steps_[i].y();
-    v[2][i] = recent_steps_[i].theta();
+  std::vector<double> x, y, th;
+  for (const SE2& s : recent_steps_) {
+    x.push_back(s.x());
+    y.push_back(s.y());
+    th.push_back(s.theta());
   }
-  auto median = [n](std::array<double, kVelocitySteps>& a) {
-    const auto mid = a.begin() + static_cast<std::ptrdiff_t>(n / 2);
-    std::nth_element(a.begin(), mid, a.begin() + static_cast<std::ptrdiff_t>(n));
-    return *mid;
-  };
-  return SE2(median(v[0]), median(v[1]), median(v[2]));
+  return SE2(upperMedian(std::move(x)), upperMedian(std::move(y)), upperMedian(std::move(th)));
 }
 
 }  // namespace lidar2d::slam::internal

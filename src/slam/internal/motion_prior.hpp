@@ -142,9 +142,9 @@ class MotionPrior {
 
  private:
   MotionPrediction predictImpl(const Frame& f);
-  /// The interval a gap is measured against (five times it, and `time_gap_s`): usualInterval, or
-  /// the mean of the recent intervals where repeated stamps make that 0.
-  double intervalForGaps() const;
+  /// The interval a gap is measured against (five times it, and `time_gap_s`): `usual`
+  /// (usualInterval), or the mean of the recent intervals where repeated stamps make that 0.
+  double intervalForGaps(double usual) const;
   SE2 velocityStep() const;
   void narrowToSpread(MotionPrediction& p) const;
   void widenAfterOverride(MotionPrediction& p);
