@@ -1,6 +1,6 @@
 // `lidar2d perturb` end to end with the options of issue 29: without them the output is byte for byte
 // what perturb wrote before; --odom-model and the odometry terms, --keyframes, --gap (at a time,
-// centred, at the largest turn), --time-jitter, --time-bursts, --synthesize-times, --keep-odometry,
+// centred, at the largest turn), --odom-lag, --time-jitter, --time-bursts, --synthesize-times, --keep-odometry,
 // the summary line, determinism, and bad input (usage errors exit 2, bad input exits 1 with one
 // line, never a partial output file). The library itself is tested in test_perturb.cpp.
 
@@ -219,6 +219,40 @@ TEST(PerturbCli, TimestampFaults) {
   EXPECT_NEAR(std::sqrt(sum2 / static_cast<double>(j.size())), 0.01, 0.0015);  // 600 samples: 3 % std error
 }
 
+TEST(PerturbCli, OdometryLagReadsTheOdometryAtAnotherTime) {
+  TempDir tmp;
+  const std::string clean = simulatedLog(tmp);
+  const auto in = readAll(clean);
+  const std::string late = (tmp / "late.log").string(), early = (tmp / "early.log").string(),
+                    random = (tmp / "random.log").string(), random2 = (tmp / "random2.log").string();
+  // One period late (10 Hz), no noise: each scan's odometry step is the truth's next one; one period
+  // early, the previous one.
+  ASSERT_EQ(runCli({"perturb", clean, "--odom-noise", "0,0,0", "--odom-lag", "0.1", "-o", late}).exit_code, 0);
+  ASSERT_EQ(runCli({"perturb", clean, "--odom-noise", "0,0,0", "--odom-lag", "-0.1", "-o", early}).exit_code, 0);
+  const auto l = readAll(late), e = readAll(early);
+  ASSERT_EQ(l.size(), in.size());
+  ASSERT_EQ(e.size(), in.size());
+  auto step = [](const std::vector<Frame>& f, std::size_t k, bool odom) {
+    return odom ? f[k - 1].T_odom_robot->inverse() * *f[k].T_odom_robot
+                : f[k - 1].T_world_robot->inverse() * *f[k].T_world_robot;
+  };
+  for (std::size_t k = 2; k + 1 < in.size(); ++k) {
+    EXPECT_TRUE(test::IsNearPose(step(in, k + 1, false), step(l, k, true), 1e-6, 1e-4)) << k;
+    EXPECT_TRUE(test::IsNearPose(step(in, k - 1, false), step(e, k, true), 1e-6, 1e-4)) << k;
+    EXPECT_TRUE(test::IsNearPose(*in[k].T_world_robot, *l[k].T_world_robot, 0, 0)) << k;  // truth unchanged
+  }
+  // A random lag: seeded, named in the log's comment.
+  ASSERT_EQ(runCli({"perturb", clean, "--odom-model", "realistic", "--odom-lag", "0,0.03", "--seed", "3", "-o", random})
+                .exit_code,
+            0);
+  ASSERT_EQ(
+      runCli({"perturb", clean, "--odom-model", "realistic", "--odom-lag", "0,0.03", "--seed", "3", "-o", random2})
+          .exit_code,
+      0);
+  EXPECT_EQ(test::readFile(random), test::readFile(random2));
+  EXPECT_NE(test::readFile(random).find("lag_s=0,0.03"), std::string::npos);
+}
+
 TEST(PerturbCli, KeepOdometryDropsAndRetimesALogWithoutTruth) {
   TempDir tmp;
   // An odometry-only CARMEN log: FLASER lines whose poses are odometry, turning 10 degrees per scan
@@ -316,6 +350,12 @@ TEST(PerturbCli, UsageErrorsExit2WithoutOutput) {
       {"--odom-drift-deg-per-m", "nan"},
       {"--keep-odometry", "--odom-model", "realistic"},
       {"--keep-odometry", "--odom-noise", "0.1,0.1,0.1"},
+      {"--odom-lag", "x"},
+      {"--odom-lag", "0.1,-0.02"},
+      {"--odom-lag", "inf"},
+      {"--odom-lag", "0.1,nan"},
+      {"--odom-lag", "0.1,0.02,3"},
+      {"--keep-odometry", "--odom-lag", "0.05"},
   };
   for (const auto& opts : bad) {
     std::vector<std::string> args{"perturb", clean, "-o", out};

@@ -411,6 +411,99 @@ TEST(LogPerturber, JitterHasItsSigmaAndLeavesOdometryAlone) {
   EXPECT_NEAR(dt.stddev(), 0.03, 0.0015);
 }
 
+// ---- odometry lag ----
+
+TEST(TruthAt, InterpolatesBetweenTheFramesAroundTheTime) {
+  // Stamps 0, 1, 1 (repeated), 0.5 (backwards), 3; headings across +-pi.
+  const std::vector<TimedPose> tl = {{0.0, SE2(0, 0, 3.0)},
+                                     {1.0, SE2(1, 0, -3.0)},
+                                     {1.0, SE2(1, 1, -3.0)},
+                                     {0.5, SE2(9, 9, 0.0)},
+                                     {3.0, SE2(3, 1, -2.0)}};
+  // Between frames 0 and 1: the heading the short way round (3.0 -> -3.0 is +0.283 rad).
+  const SE2 a = truthAt(tl, 0, 0.5);
+  EXPECT_NEAR(a.x(), 0.5, 1e-12);
+  EXPECT_NEAR(angleDiff(a.theta(), 3.0 + 0.5 * (2 * kPi - 6.0)), 0.0, 1e-12);
+  // From frame 2 forward: past the backward stamp to the first later frame (frame 4 at 3) and the
+  // one before it (frame 3 at 0.5).
+  const SE2 b = truthAt(tl, 2, 1.75);
+  EXPECT_NEAR(b.x(), 9 + (1.75 - 0.5) / 2.5 * (3 - 9), 1e-12);
+  // From frame 4 backward: to the bracket (frame 3 at 0.5, frame 4 at 3).
+  EXPECT_NEAR(truthAt(tl, 4, 2.0).y(), 9 + 1.5 / 2.5 * (1 - 9), 1e-12);
+  // Before the first and after the last frame: their truth.
+  EXPECT_TRUE(IsNearPose(tl[0].T_world_robot, truthAt(tl, 0, -1.0), 0.0, 0.0));
+  EXPECT_TRUE(IsNearPose(tl[4].T_world_robot, truthAt(tl, 4, 5.0), 0.0, 0.0));
+  // At a frame's own time, its truth.
+  EXPECT_TRUE(IsNearPose(tl[1].T_world_robot, truthAt(tl, 1, 1.0), 0.0, 0.0));
+  EXPECT_TRUE(IsNearPose(tl[2].T_world_robot, truthAt(tl, 2, 1.0), 0.0, 0.0));
+  EXPECT_TRUE(throwsError([&] { truthAt(tl, 5, 0.0); }, ErrorKind::kInvalidArgument, {"truth timeline"}));
+}
+
+TEST(LogPerturber, AConstantLagReadsTheOdometryOneScanLate) {
+  // A log at 10 Hz and a lag of one period, no noise: each scan's odometry step is the truth's step
+  // one scan later, and the odometry error does not grow over the log.
+  const auto in = simulatedLog("office", 600);
+  ASSERT_NEAR(in[1].time - in[0].time, 0.1, 1e-9);
+  LogPerturbationOptions o;
+  o.odometry = OdometryNoise::constant(0, 0, 0);
+  o.odometry_lag.mean_s = in[1].time - in[0].time;
+  const auto out = perturbLog(in, o);
+  ASSERT_EQ(out.size(), in.size());
+  double worst_turn_error = 0.0, worst_step = 0.0;
+  for (std::size_t k = 1; k + 1 < in.size(); ++k) {
+    const SE2 odom_step = out[k - 1].T_odom_robot->inverse() * *out[k].T_odom_robot;
+    const SE2 next_truth_step = in[k].T_world_robot->inverse() * *in[k + 1].T_world_robot;
+    EXPECT_TRUE(IsNearPose(next_truth_step, odom_step, 1e-9, 1e-9)) << "scan " << k;
+    const SE2 truth_step = in[k - 1].T_world_robot->inverse() * *in[k].T_world_robot;
+    worst_turn_error = std::max(worst_turn_error, std::abs(angleDiff(odom_step.theta(), truth_step.theta())));
+    worst_step = std::max(worst_step, std::abs(truth_step.theta()));
+  }
+  EXPECT_GT(worst_turn_error, 0.5 * kDeg);  // the route turns: a step late is a heading error there
+  // Without noise the odometry stays one scan ahead of the truth: its heading error never exceeds
+  // one step's turn.
+  for (std::size_t k = 0; k < in.size(); ++k)
+    EXPECT_LE(std::abs(angleDiff(out[k].T_odom_robot->theta(), in[k].T_world_robot->theta())), worst_step + 1e-9);
+}
+
+TEST(LogPerturber, ARandomLagHasItsSigmaAndLeavesTheNoiseDrawsAlone) {
+  const auto in = simulatedLog("office", 3000);
+  LogPerturbationOptions o;
+  o.odometry = OdometryNoise::constant(0, 0, 0);
+  o.odometry_lag.sigma_s = 0.02;
+  const auto out = perturbLog(in, o);
+  ASSERT_EQ(out.size(), in.size());
+  // Inside a straight stretch at constant speed the odometry's step k is the path driven between
+  // t_(k-1) + lag_(k-1) and t_k + lag_k: its length over the speed, less the period, is
+  // lag_k - lag_(k-1), of std sqrt(2) sigma.
+  const double speed = PathOptions{}.speed_mps;
+  Stats d;
+  for (std::size_t k = 2; k + 1 < in.size(); ++k) {
+    bool straight = true;
+    for (std::size_t m = k - 1; m <= k + 1; ++m) {
+      const SE2 step = in[m - 1].T_world_robot->inverse() * *in[m].T_world_robot;
+      straight = straight && std::abs(step.theta()) < 1e-12 && std::abs(step.y()) < 1e-12 &&
+                 std::abs(step.x() - speed * (in[m].time - in[m - 1].time)) < 1e-9;
+    }
+    if (!straight) continue;
+    const SE2 odom_step = out[k - 1].T_odom_robot->inverse() * *out[k].T_odom_robot;
+    d.add(odom_step.translation().norm() / speed - (in[k].time - in[k - 1].time));
+  }
+  ASSERT_GT(d.n, 500.0);
+  EXPECT_NEAR(d.mean(), 0.0, 0.003);
+  EXPECT_NEAR(d.stddev(), std::sqrt(2.0) * 0.02, 0.003);
+  // With noise: a lag far too small to move a pose leaves the odometry as it is without one, so the
+  // lag draws from its own stream, not from the noise's.
+  LogPerturbationOptions noisy;
+  noisy.odometry = realisticOdometryNoise();
+  const auto plain = perturbLog(in, noisy);
+  noisy.odometry_lag.sigma_s = 1e-300;
+  ASSERT_TRUE(noisy.odometry_lag.enabled());
+  const auto lagged = perturbLog(in, noisy);
+  ASSERT_EQ(plain.size(), lagged.size());
+  for (std::size_t k = 0; k < plain.size(); ++k)
+    EXPECT_TRUE(IsNearPose(*plain[k].T_odom_robot, *lagged[k].T_odom_robot, 1e-12, 1e-12)) << "scan " << k;
+}
+
 TEST(LogPerturber, BurstsCarryTheirLastScansStamp) {
   const auto in = simulatedLog("office");
   for (std::size_t n : {2u, 5u, 7u}) {
@@ -521,6 +614,21 @@ TEST(LogPerturber, BadInput) {
         planGaps({{1, GapPlacement::kAtOffset, -2}}, s);
       },
       ErrorKind::kInvalidArgument, {"start"}));
+
+  LogPerturbationOptions lag;
+  lag.odometry_lag.sigma_s = 0.01;
+  EXPECT_TRUE(throwsError([&] { LogPerturber p(lag); }, ErrorKind::kInvalidArgument, {"truth timeline"}));
+  lag.truth_timeline = s;
+  lag.odometry_source = OdometrySource::kKeepLog;
+  EXPECT_TRUE(throwsError([&] { LogPerturber p(lag); }, ErrorKind::kInvalidArgument, {"made from the truth"}));
+  lag.odometry_source = OdometrySource::kNoisyFromTruth;
+  for (double bad : {-1.0, std::nan("")}) {
+    lag.odometry_lag.sigma_s = bad;
+    EXPECT_TRUE(throwsError([&] { LogPerturber p(lag); }, ErrorKind::kInvalidArgument, {"lag sigma"}));
+  }
+  lag.odometry_lag.sigma_s = 0;
+  lag.odometry_lag.mean_s = std::numeric_limits<double>::infinity();
+  EXPECT_TRUE(throwsError([&] { LogPerturber p(lag); }, ErrorKind::kInvalidArgument, {"odometry lag must be finite"}));
 
   LogPerturbationOptions o;
   o.keyframes.min_distance_m = -1;

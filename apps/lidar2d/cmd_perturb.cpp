@@ -36,14 +36,19 @@
 // instead (no noise, no truth needed: keyframes and @turn then use the truth if the log has it, else
 // the odometry).
 //
+// Odometry lag. --odom-lag MEAN_S[,SIGMA_S] reads each kept scan's odometry at its time plus
+// MEAN_S + N(0, SIGMA_S^2) (sim::OdometryLag): truth_k above is the truth at that time, interpolated
+// between the log's scans (dropped ones included, from a first pass over the log); in a turn the
+// heading is off by the turn rate times the offset, without accumulating.
+//
 // Stamps. --time-jitter SIGMA_S adds N(0, SIGMA_S^2) to each kept scan's stamp (its odometry and
 // truth stay with it); --time-bursts N then gives each group of N consecutive kept scans the stamp of
 // its last scan (the last group may be shorter).
 //
 // Random numbers: --seed N seeds the odometry noise (sim::Rng(N), three Gaussians per kept step) and
-// the jitter (sim::Rng(N ^ sim::kJitterSeedSalt)); same seed, same output. Without any of the options
-// above besides --odom-noise and --seed, the output (file and summary line) is what perturb wrote
-// before they existed.
+// the jitter (sim::Rng(N ^ sim::kJitterSeedSalt)) and the lag (sim::Rng(N ^ sim::kLagSeedSalt)); same seed, same
+// output. Without any of the options above besides --odom-noise and --seed, the output (file and summary line) is what
+// perturb wrote before they existed.
 //
 // Exit codes: a malformed or out-of-range option value (negative, non-finite, --keyframes 0,0,
 // --time-bursts 0, odometry options with --keep-odometry) is a usage error (2); a log without ground
@@ -160,6 +165,7 @@ struct PerturbArgs {
   std::vector<std::string> gaps;
   std::vector<std::string> kidnaps;
   double time_jitter_s = 0.0;
+  std::string odom_lag;  // MEAN_S[,SIGMA_S]
   std::size_t time_bursts = 1;
   double synthesize_hz = 0.0;
   // What was given on the command line.
@@ -168,9 +174,24 @@ struct PerturbArgs {
   bool legacy() const {
     return odom_model == "constant" && !trans_given && !rot_rad_given && !rot_m_given && !scale_given && !drift_given &&
            !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && !jitter_given && !bursts_given &&
-           !synth_given;
+           !synth_given && odom_lag.empty();
   }
 };
+
+// MEAN_S[,SIGMA_S] of --odom-lag: a finite mean of either sign, a finite sigma >= 0 (0 when absent).
+std::optional<sim::OdometryLag> parseLag(const std::string& v) {
+  const std::size_t comma = v.find(',');
+  sim::OdometryLag lag;
+  const auto mean = parseNumber(v.substr(0, comma));
+  if (!mean) return std::nullopt;
+  lag.mean_s = *mean;
+  if (comma != std::string::npos) {
+    const auto sigma = parseNumber(v.substr(comma + 1));
+    if (!sigma || *sigma < 0) return std::nullopt;
+    lag.sigma_s = *sigma;
+  }
+  return lag;
+}
 
 sim::OdometryNoise odometryModel(const PerturbArgs& a) {
   sim::OdometryNoise n = a.odom_model == "realistic" ? sim::realisticOdometryNoise() : [&] {
@@ -269,6 +290,7 @@ void run(const PerturbArgs& a) {
   o.time.synthesize_rate_hz = a.synthesize_hz;
   o.time.jitter_sigma_s = a.time_jitter_s;
   o.time.burst_size = a.time_bursts;
+  if (!a.odom_lag.empty()) o.odometry_lag = *parseLag(a.odom_lag);  // validated by the option's check
   std::vector<sim::GapRequest> requests;
   for (const std::string& g : a.gaps) requests.push_back(*parseGap(g));  // validated by the option's check
   for (const std::string& g : a.kidnaps) {
@@ -276,9 +298,9 @@ void run(const PerturbArgs& a) {
     requests.back().carried = true;
   }
 
-  // First pass: place the gaps on the log's times and poses.
+  // First pass: place the gaps on the log's times and poses; keep the truth for the odometry lag.
   double t_first = 0.0;
-  if (!requests.empty()) {
+  if (!requests.empty() || o.odometry_lag.enabled()) {
     sim::GapPlanner planner(requests, o.odometry_source, o.time);
     auto source = io::openLog(a.log, a.reader);
     aboutLog(a.log, [&] {
@@ -291,6 +313,7 @@ void run(const PerturbArgs& a) {
     if (planner.samples().empty()) throw badInput("log has no scans", ErrorLocation(a.log));
     t_first = planner.samples().front().time_s;
     o.gaps = aboutLog(a.log, [&] { return planner.plan(); });
+    if (o.odometry_lag.enabled()) o.truth_timeline = planner.samples();
   }
 
   // Second pass: the derived log.
@@ -304,7 +327,11 @@ void run(const PerturbArgs& a) {
       "lidar2d perturb: source={} seed={} odometry={} keyframes={} gaps={} synthesize_hz={} time_jitter_s={} "
       "time_bursts={} (model: docs/perturb.md)",
       a.log, a.seed,
-      a.keep_odometry ? "kept from the log" : fmt::format("{} {}", a.odom_model, describeNoise(o.odometry)),
+      a.keep_odometry ? "kept from the log"
+                      : fmt::format("{} {}{}", a.odom_model, describeNoise(o.odometry),
+                                    o.odometry_lag.enabled()
+                                        ? fmt::format(" lag_s={},{}", o.odometry_lag.mean_s, o.odometry_lag.sigma_s)
+                                        : std::string()),
       a.keyframes.empty() ? "none"
                           : fmt::format("{} m,{} deg", o.keyframes.min_distance_m, o.keyframes.min_turn_rad / kDeg),
       gaps_desc.empty() ? "none" : gaps_desc.substr(1), a.synthesize_hz, a.time_jitter_s, a.time_bursts));
@@ -397,6 +424,18 @@ void addPerturbCommand(CLI::App& app) {
                             return !x || *x > -1 ? std::string()
                                                  : fmt::format("must be a finite number > -1, got {}", v);
                           })));
+  odom_opts.push_back(
+      sub->add_option("--odom-lag", a->odom_lag,
+                      "MEAN_S[,SIGMA_S]: read each kept scan's odometry at its time plus MEAN_S + N(0, SIGMA_S^2) [s] "
+                      "(a laser and odometry on clocks out of step: in a turn the heading is off by the turn rate "
+                      "times the offset; interpolated in the log's truth, seeded; default: at the scan's time)")
+          ->check(check("MEAN_S[,SIGMA_S]", [](const std::string& v) -> std::string {
+            return parseLag(v) ? std::string()
+                               : fmt::format(
+                                     "expected MEAN_S[,SIGMA_S]: a finite number, optionally a comma and a "
+                                     "non-negative number, got '{}'",
+                                     v);
+          })));
   odom_opts.push_back(sub->add_option("--odom-drift-deg-per-m", a->drift_deg_per_m,
                                       "h: systematic heading drift per metre of the step [deg/m], either sign (default 0)"));
   auto* keep = sub->add_flag("--keep-odometry", a->keep_odometry,
@@ -430,7 +469,8 @@ void addPerturbCommand(CLI::App& app) {
                   "HZ: replace the stamp of input scan i by t0 + i / HZ (logs whose stamps repeat or are missing; default: "
                   "the log's stamps)")
       ->check(positiveNumber());
-  sub->add_option("--seed", a->seed, "random seed of the odometry noise and the time jitter (std::mt19937_64)")
+  sub->add_option("--seed", a->seed,
+                  "random seed of the odometry noise, the time jitter and the odometry lag (std::mt19937_64)")
       ->capture_default_str();
   addReaderOptions(sub, a->reader);
   sub->callback([a, sub] {

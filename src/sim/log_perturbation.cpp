@@ -167,8 +167,52 @@ void TimeFaults::validate() const {
   if (burst_size == 0) throw invalidArgument("burst size must be >= 1", ErrorLocation({}, 0, "burst_size"));
 }
 
+void OdometryLag::validate() const {
+  if (!std::isfinite(mean_s))
+    throw invalidArgument(fmt::format("odometry lag must be finite, got {}", mean_s), ErrorLocation({}, 0, "mean_s"));
+  if (!std::isfinite(sigma_s) || sigma_s < 0)
+    throw invalidArgument(fmt::format("odometry lag sigma must be finite and >= 0, got {}", sigma_s),
+                          ErrorLocation({}, 0, "sigma_s"));
+}
+
+SE2 truthAt(const std::vector<TimedPose>& timeline, std::size_t index, double t_s) {
+  if (index >= timeline.size())
+    throw invalidArgument(fmt::format("frame {} is not in the truth timeline of {} frames", index, timeline.size()),
+                          ErrorLocation({}, 0, "truth_timeline"));
+  auto between = [&](std::size_t a, std::size_t b) {
+    const TimedPose& p = timeline[a];
+    const TimedPose& q = timeline[b];
+    const double f = (t_s - p.time_s) / (q.time_s - p.time_s);
+    const Eigen::Vector2d xy =
+        p.T_world_robot.translation() + f * (q.T_world_robot.translation() - p.T_world_robot.translation());
+    return SE2(xy.x(), xy.y(),
+               p.T_world_robot.theta() + f * angleDiff(q.T_world_robot.theta(), p.T_world_robot.theta()));
+  };
+  std::size_t j = index;
+  if (t_s == timeline[j].time_s) return timeline[j].T_world_robot;
+  if (t_s > timeline[j].time_s) {
+    // Forward to the first frame later than t_s; the one before it opens the bracket.
+    while (j + 1 < timeline.size() && timeline[j + 1].time_s <= t_s) ++j;
+    if (j + 1 < timeline.size() && timeline[j + 1].time_s > timeline[j].time_s) return between(j, j + 1);
+    return timeline[j].T_world_robot;
+  }
+  // Back to the last frame of the run later than t_s; the one before it opens the bracket.
+  while (j > 0 && timeline[j - 1].time_s > t_s) --j;
+  if (j > 0) return between(j - 1, j);
+  return timeline[0].T_world_robot;
+}
+
 void LogPerturbationOptions::validate() const {
   if (odometry_source == OdometrySource::kNoisyFromTruth) odometry.validate();
+  odometry_lag.validate();
+  if (odometry_lag.enabled()) {
+    if (odometry_source != OdometrySource::kNoisyFromTruth)
+      throw invalidArgument("an odometry lag needs odometry made from the truth, not the log's own",
+                            ErrorLocation({}, 0, "odometry_lag"));
+    if (truth_timeline.empty())
+      throw invalidArgument("an odometry lag needs the log's truth timeline (GapPlanner::samples)",
+                            ErrorLocation({}, 0, "truth_timeline"));
+  }
   keyframes.validate();
   time.validate();
   for (const GapWindow& g : gaps)
@@ -279,7 +323,10 @@ std::vector<GapWindow> GapPlanner::plan() const {
 }
 
 LogPerturber::LogPerturber(LogPerturbationOptions options)
-    : options_(std::move(options)), odom_rng_(options_.seed), jitter_rng_(options_.seed ^ kJitterSeedSalt) {
+    : options_(std::move(options)),
+      odom_rng_(options_.seed),
+      jitter_rng_(options_.seed ^ kJitterSeedSalt),
+      lag_rng_(options_.seed ^ kLagSeedSalt) {
   options_.validate();
   stats_.dropped_per_gap.assign(options_.gaps.size(), 0);
 }
@@ -291,11 +338,14 @@ std::vector<Frame> LogPerturber::push(Frame f) {
     first_stamp_s_ = f.time;
     use_truth_ = from_truth || f.T_world_robot.has_value();
   }
+  const double t = clockTime(options_.time, first_stamp_s_, i, f.time);
   if (from_truth) {
     const SE2& truth = requireTruth(f);
-    if (i == 0) prev_truth_ = odom_ = truth;  // odom_0 = truth_0, whether frame 0 is kept or not
+    if (i == 0) {  // odom_0 = truth_0, whether frame 0 is kept or not
+      odom_ = truth;
+      prev_truth_ = odometryReadingPoint(f, i, t);
+    }
   }
-  const double t = clockTime(options_.time, first_stamp_s_, i, f.time);
 
   bool in_gap = false;
   for (std::size_t k = 0; k < options_.gaps.size(); ++k)
@@ -326,7 +376,7 @@ std::vector<Frame> LogPerturber::push(Frame f) {
   }
 
   if (from_truth) {
-    const SE2 truth = *f.T_world_robot;
+    const SE2 truth = odometryReadingPoint(f, i, t);
     // One noisy step from the last integration point: across dropped frames, the whole motion;
     // across a carried gap, none.
     const SE2 step = carried_ ? SE2() : prev_truth_.inverse() * truth;
@@ -348,6 +398,13 @@ std::vector<Frame> LogPerturber::push(Frame f) {
   return {};
 }
 
+SE2 LogPerturber::odometryReadingPoint(const Frame& frame, std::size_t index, double t) {
+  const OdometryLag& lag = options_.odometry_lag;
+  if (!lag.enabled()) return *frame.T_world_robot;
+  const double offset = lag.mean_s + (lag.sigma_s > 0 ? lag_rng_.gaussian(lag.sigma_s) : 0.0);
+  return truthAt(options_.truth_timeline, index, t + offset);
+}
+
 std::vector<Frame> LogPerturber::finish() { return flush(); }
 
 std::vector<Frame> LogPerturber::flush() {
@@ -363,10 +420,12 @@ std::vector<Frame> LogPerturber::flush() {
 
 std::vector<Frame> perturbLog(const std::vector<Frame>& frames, LogPerturbationOptions options,
                               const std::vector<GapRequest>& gaps, PerturbationStats* stats) {
-  if (!gaps.empty()) {
+  const bool lag = options.odometry_lag.enabled() && options.odometry_source == OdometrySource::kNoisyFromTruth;
+  if (!gaps.empty() || lag) {
     GapPlanner planner(gaps, options.odometry_source, options.time);
     for (const Frame& f : frames) planner.add(f);
     for (const GapWindow& w : planner.plan()) options.gaps.push_back(w);
+    if (lag) options.truth_timeline = planner.samples();
   }
   LogPerturber perturber(std::move(options));
   std::vector<Frame> out;

@@ -22,7 +22,9 @@
 ///     with j the previously kept frame (or frame 0 while none was kept): the noise model applies to
 ///     the step between kept frames, and the first frame after a gap gets one step for the whole
 ///     motion across the gap (the wheels kept turning); after a carried gap (a kidnapping), one
-///     step of no motion. `kKeepLog` leaves the log's odometry as it is, but for the carried gaps'
+///     step of no motion. With an `OdometryLag`, truth_k (and truth_0 as the first integration
+///     point) is the truth at t_k + lag_k instead (`truthAt`): the odometry read at another time
+///     than the scan. `kKeepLog` leaves the log's odometry as it is, but for the carried gaps'
 ///     jumps, which it removes (the odometry continues from where it was before the gap).
 ///  5. Stamps of the kept frames: t_i + N(0, jitter_sigma^2); then, with bursts of N, each group of N
 ///     consecutive kept frames (the last group may be shorter) carries the stamp of its last frame.
@@ -33,7 +35,9 @@
 ///
 /// Deterministic per seed: the odometry noise draws from `Rng(seed)` (three Gaussians per kept step,
 /// as `noisyOdometryStep` says), the jitter from a second stream `Rng(seed ^ kJitterSeedSalt)` (one
-/// Gaussian per kept frame), so enabling jitter leaves the odometry unchanged.
+/// Gaussian per kept frame), so enabling jitter leaves the odometry unchanged; the odometry lag from
+/// a third, `Rng(seed ^ kLagSeedSalt)` (one Gaussian for frame 0 and one per later kept frame, when
+/// its sigma is above 0), so it leaves the noise's draws unchanged too.
 
 #include <cstddef>
 #include <cstdint>
@@ -112,6 +116,30 @@ struct TimeFaults {
   void validate() const;
 };
 
+/// The odometry read at another time than its scan (see the file comment, step 4): a laser and an
+/// odometry on clocks out of step, or a driver that stamps scans by a varying delay. Kept frame k's
+/// odometry is integrated to the truth at t_k + lag_k, lag_k = mean_s + N(0, sigma_s^2). In a turn
+/// its heading is then off by the turn rate times lag_k; the error does not accumulate, as each
+/// frame's odometry is read at its own time (docs/perturb.md, Odometry lag: what the raw bags show).
+struct OdometryLag {
+  double mean_s = 0.0;   ///< constant part [s], finite; positive: the odometry is read after the scan
+  double sigma_s = 0.0;  ///< std of the part drawn per frame [s], finite and >= 0
+
+  /// True when the odometry is read at another time than the scan.
+  bool enabled() const { return mean_s != 0.0 || sigma_s > 0.0; }
+  /// Throws `lidar2d::Error` (kInvalidArgument) for a non-finite value or a negative sigma.
+  void validate() const;
+};
+
+/// The truth at clock time `t_s`, interpolated in `timeline` (every frame's clock time and truth,
+/// file order) from frame `index`: its own truth at its own time; for a later time, between the
+/// first frame after `index` stamped later than `t_s` and the frame before that one; for an earlier
+/// time, between the first frame back from `index` stamped at or before `t_s` and the frame after
+/// it (so stamps that repeat or go backwards are walked past); the first or last frame's truth
+/// beyond the log's ends. Linear in translation, the shorter way round in heading.
+/// Throws `lidar2d::Error` (kInvalidArgument) when `index` is not in `timeline`.
+SE2 truthAt(const std::vector<TimedPose>& timeline, std::size_t index, double t_s);
+
 /// Where odometry comes from.
 enum class OdometrySource {
   kNoisyFromTruth,  ///< integrated from the truth with `LogPerturbationOptions::odometry` noise (needs truth)
@@ -120,6 +148,8 @@ enum class OdometrySource {
 
 /// Salt of the jitter's random stream: `Rng(seed ^ kJitterSeedSalt)`.
 inline constexpr std::uint64_t kJitterSeedSalt = 0x9E3779B97F4A7C15ULL;
+/// Salt of the odometry lag's random stream: `Rng(seed ^ kLagSeedSalt)`.
+inline constexpr std::uint64_t kLagSeedSalt = 0xD1B54A32D192ED03ULL;
 
 /// Everything `LogPerturber` does. The defaults reproduce `lidar2d perturb` without options: every
 /// frame kept, stamps unchanged, odometry from the truth with constant per-step noise
@@ -130,6 +160,10 @@ struct LogPerturbationOptions {
   KeyframeOptions keyframes;
   std::vector<GapWindow> gaps;  ///< placed gaps (from `planGaps` / `GapPlanner`); may overlap
   TimeFaults time;
+  OdometryLag odometry_lag;  ///< for kNoisyFromTruth; needs `truth_timeline`
+  /// With `odometry_lag`: the clock time and truth of every frame of the log, file order, dropped
+  /// ones included (`GapPlanner::samples` of a kNoisyFromTruth pass; `perturbLog` fills it).
+  std::vector<TimedPose> truth_timeline;
   std::uint64_t seed = 1;
 
   /// Validates every part; throws `lidar2d::Error` (kInvalidArgument) naming the field.
@@ -219,8 +253,11 @@ class LogPerturber {
   std::vector<Frame> flush();
 
   const LogPerturbationOptions options_;
+  SE2 odometryReadingPoint(const Frame& frame, std::size_t index, double t);
+
   Rng odom_rng_;
   Rng jitter_rng_;
+  Rng lag_rng_;
   PerturbationStats stats_;
   double first_stamp_s_ = 0.0;
   bool use_truth_ = true;  // reference poses: truth, or (kKeepLog without truth) odometry
