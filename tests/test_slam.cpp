@@ -609,6 +609,56 @@ TEST(SlamMotionPrior, SmallNoisyOdometryStepsAreMeasuredOverSpans) {
   EXPECT_EQ(broken.factor(), 1.0);
 }
 
+TEST(SlamMotionPrior, AnImplausibleOdometryStepIsCarriedIntoTheNext) {
+  // 30 Hz, the robot driving straight at 0.9 m/s; the odometry of scan 2 read off its stamp in a
+  // wiggle reads a 15 degree turn in 33 ms (beyond 360 deg/s: implausible), scan 3's is back on the
+  // track. Scan 2 is placed by the constant-velocity prior; scan 3's prediction is the odometry
+  // from scan 1 less the step scan 2 took: back on the odometry's track, the dropped step's motion
+  // not lost.
+  const SlamOptions opt;
+  internal::MotionPrior prior(opt);
+  std::vector<std::string> events;
+  auto sink = [&](std::string e) { events.push_back(std::move(e)); };
+  auto frame = [](double t, const SE2& odom) {
+    Frame f;
+    f.time = t;
+    f.T_odom_robot = odom;
+    return f;
+  };
+  const double dt = 1.0 / 30.0;
+  const std::vector<Frame> frames = {frame(0, SE2()), frame(dt, SE2(0.03, 0, 0)),
+                                     frame(2 * dt, SE2(0.06, 0, 15.0 * kDeg)), frame(3 * dt, SE2(0.09, 0, 0))};
+  SE2 pose;
+  std::vector<SE2> poses;
+  std::vector<internal::MotionPrediction> predictions;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const internal::MotionPrediction p = prior.predict(frames[k], sink);
+    predictions.push_back(p);
+    const SE2 step = k == 0 ? SE2() : p.delta;  // unmatched: placed at the prediction
+    pose = pose * step;
+    poses.push_back(pose);
+    prior.remember(frames[k], step, k == 0, p.time_ok, false);
+  }
+  EXPECT_EQ(predictions[1].source, internal::PriorSource::kOdometry);
+  EXPECT_EQ(predictions[2].source, internal::PriorSource::kConstantVelocity);
+  ASSERT_TRUE(predictions[2].implausible_odometry.has_value());
+  EXPECT_EQ(predictions[3].source, internal::PriorSource::kOdometry);
+  EXPECT_TRUE(test::IsNearPose(SE2(0.09, 0, 0), poses[3], 1e-12, 1e-9));
+  // A reading that stays off (an odometry jump, implausible over both steps too) is not carried:
+  // the step after it is the odometry's own from the jumped reading.
+  internal::MotionPrior jumped(opt);
+  const std::vector<Frame> jump = {frame(0, SE2()), frame(dt, SE2(0.03, 0, 0)),
+                                   frame(2 * dt, SE2(0.06, 0, 60.0 * kDeg)),
+                                   frame(3 * dt, SE2(0.06, 0, 60.0 * kDeg) * SE2(0.03, 0, 0))};
+  std::vector<internal::MotionPrediction> pj;
+  for (std::size_t k = 0; k < jump.size(); ++k) {
+    pj.push_back(jumped.predict(jump[k], sink));
+    jumped.remember(jump[k], k == 0 ? SE2() : pj.back().delta, k == 0, pj.back().time_ok, false);
+  }
+  EXPECT_EQ(pj[3].source, internal::PriorSource::kOdometry);
+  EXPECT_TRUE(test::IsNearPose(SE2(0.03, 0, 0), pj[3].delta, 1e-12, 1e-9));
+}
+
 TEST(SlamMotionPrior, WithoutOdometryKeyframesAreBoundByTheirOwnStepsDenseLogsByTime) {
   SlamOptions o;
   o.use_odometry = false;

@@ -139,22 +139,49 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       odometry_missing_ = false;
     }
     odometry_seen_ = true;
+    // Plausible against the time the step took, not against fixed per-step limits: a gap of
+    // seconds during a turn is a long step, and keyframe logs hold metres between scans. At least
+    // the usual interval: a scan stamped a millisecond after the previous one (the Intel bag has
+    // runs of them) was not taken then.
+    auto plausibleOver = [&](const SE2& d, double took) {
+      if (!d.isFinite()) return false;
+      return !(took > 0.0) || (d.translation().norm() <= opt_.max_speed_m_per_s * took &&
+                               std::abs(d.theta()) <= opt_.max_turn_rate_rad_per_s * took);
+    };
+    std::optional<SE2> step_used = step;
+    bool plausible = step && plausibleOver(*step, std::max(p.dt, usual));
+    // After an implausible step that this reading takes back (since the reading before it the
+    // odometry turned less than in that step alone, if the turn made it implausible, and moved less,
+    // if the distance did; and plausibly over both steps' time): the odometry since then, less the
+    // step the previous scan took. Odometry read off its scan's time in a turn (a lag) errs one way
+    // on one step and back on the next, and the motion of the step it was dropped for is not lost.
+    // A jump the odometry keeps is not taken back.
+    if (anchor_ && step) {
+      const SE2 span = anchor_->odom.inverse() * *f.T_odom_robot;
+      const SE2& bad = anchor_->implausible;
+      const bool too_far = bad.translation().norm() > opt_.max_speed_m_per_s * anchor_->took;
+      const bool too_turned = std::abs(bad.theta()) > opt_.max_turn_rate_rad_per_s * anchor_->took;
+      const bool taken_back = (!too_far || span.translation().norm() < bad.translation().norm()) &&
+                              (!too_turned || std::abs(span.theta()) < std::abs(bad.theta()));
+      if (taken_back && plausibleOver(span, std::max(f.time - anchor_->time, usual))) {
+        step_used = anchor_->taken.inverse() * span;
+        plausible = step_used->isFinite();
+      }
+    }
+    anchor_.reset();
+    implausible_step_.reset();
+    if (step && !plausible && step->isFinite()) {
+      implausible_step_ = *step;
+      implausible_took_ = std::max(p.dt, usual);
+    }
     if (step) {
-      const SE2& d = *step;
+      const SE2& d = *step_used;
       const double dist = d.translation().norm(), turn = std::abs(d.theta());
-      bool plausible = d.isFinite();
-      // Plausible against the time the step took, not against fixed per-step limits: a gap of
-      // seconds during a turn is a long step, and keyframe logs hold metres between scans. At
-      // least the usual interval: a scan stamped a millisecond after the previous one (the Intel
-      // bag has runs of them) was not taken then.
-      const double took = std::max(p.dt, usual);
-      if (plausible && took > 0.0)
-        plausible = dist <= opt_.max_speed_m_per_s * took && turn <= opt_.max_turn_rate_rad_per_s * took;
       if (plausible) {
         const bool time_ok = p.time_ok;
         const double step_dt = p.dt;
         const std::optional<SE2> scaled = p.T_odom_scaled;
-        p = odometryPrediction(opt_, scaled_step, step_dt);
+        p = odometryPrediction(opt_, SE2(appliedScale() * d.translation(), d.theta()), step_dt);
         p.odometry_step = d;
         p.T_odom_scaled = scaled;
         p.time_ok = time_ok;
@@ -186,6 +213,9 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
 }
 
 void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool time_ok, bool pinned) {
+  if (!first && implausible_step_ && odom_prev_)
+    anchor_ = OdometryAnchor{*odom_prev_, time_prev_, *implausible_step_, implausible_took_, step};
+  implausible_step_.reset();
   if (!first) {
     // A gap: the robot may have stopped, so the velocity starts again from a standstill. A scan
     // stamped before the previous one says nothing of the velocity (it may have been taken earlier,
