@@ -377,7 +377,8 @@ void addPerturbCommand(CLI::App& app) {
       "perturb",
       "Derive a log for robustness tests from a log with truth; writes a CARMEN log with TRUEPOS lines (scans, "
       "truth and laser mounting kept). Steps: --synthesize-times (clock), --gap (drop time windows), --keyframes "
-      "(drop scans too close to the last kept one), odometry (replaced, or kept with --keep-odometry), "
+      "(drop scans too close to the last kept one), odometry (replaced, read --odom-lag off each scan's time, or "
+      "kept with --keep-odometry), "
       "--time-jitter and --time-bursts (stamps). Odometry: odom_0 = truth_0; each kept scan k after the previously "
       "kept j: odom_k = odom_j * SE2(dx(1+s), dy(1+s), dth + h d) * SE2(n), (dx,dy,dth) = truth_j^-1 * truth_k, "
       "d = |(dx,dy)|, n ~ N(0, diag(sx^2, sy^2, sth^2)), sx = SX + T d, sy = SY + T d, sth = STH + R |dth| + M d: "
