@@ -166,6 +166,9 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       if (taken_back && plausibleOver(span, std::max(f.time - anchor_->time, usual))) {
         step_used = anchor_->taken.inverse() * span;
         plausible = step_used->isFinite();
+        notes_.push_back(
+            "the odometry takes back the previous scan's implausible step: this step is taken from "
+            "the reading before it");
       }
     }
     anchor_.reset();
