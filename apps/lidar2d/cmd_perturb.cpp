@@ -45,10 +45,10 @@
 // truth stay with it); --time-bursts N then gives each group of N consecutive kept scans the stamp of
 // its last scan (the last group may be shorter).
 //
-// Random numbers: --seed N seeds the odometry noise (sim::Rng(N), three Gaussians per kept step) and
-// the jitter (sim::Rng(N ^ sim::kJitterSeedSalt)) and the lag (sim::Rng(N ^ sim::kLagSeedSalt)); same seed, same
-// output. Without any of the options above besides --odom-noise and --seed, the output (file and summary line) is what
-// perturb wrote before they existed.
+// Random numbers: --seed N seeds the odometry noise (sim::Rng(N), three Gaussians per kept step),
+// the jitter (sim::Rng(N ^ sim::kJitterSeedSalt)) and the lag (sim::Rng(N ^ sim::kLagSeedSalt));
+// same seed, same output. Without any of the options above besides --odom-noise and --seed, the
+// output (file and summary line) is what perturb wrote before they existed.
 //
 // Exit codes: a malformed or out-of-range option value (negative, non-finite, --keyframes 0,0,
 // --time-bursts 0, odometry options with --keep-odometry) is a usage error (2); a log without ground

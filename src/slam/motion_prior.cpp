@@ -143,13 +143,18 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     // seconds during a turn is a long step, and keyframe logs hold metres between scans. At least
     // the usual interval: a scan stamped a millisecond after the previous one (the Intel bag has
     // runs of them) was not taken then.
-    auto plausibleOver = [&](const SE2& d, double took) {
-      if (!d.isFinite()) return false;
-      return !(took > 0.0) || (d.translation().norm() <= opt_.max_speed_m_per_s * took &&
-                               std::abs(d.theta()) <= opt_.max_turn_rate_rad_per_s * took);
+    auto tooFar = [&](const SE2& d, double took) {
+      return took > 0.0 && d.translation().norm() > opt_.max_speed_m_per_s * took;
     };
+    auto tooTurned = [&](const SE2& d, double took) {
+      return took > 0.0 && std::abs(d.theta()) > opt_.max_turn_rate_rad_per_s * took;
+    };
+    auto plausibleOver = [&](const SE2& d, double took) {
+      return d.isFinite() && !tooFar(d, took) && !tooTurned(d, took);
+    };
+    const double took = std::max(p.dt, usual);
     std::optional<SE2> step_used = step;
-    bool plausible = step && plausibleOver(*step, std::max(p.dt, usual));
+    bool plausible = step && plausibleOver(*step, took);
     // After an implausible step that this reading takes back (since the reading before it the
     // odometry turned less than in that step alone, if the turn made it implausible, and moved less,
     // if the distance did; and plausibly over both steps' time): the odometry since then, less the
@@ -159,10 +164,8 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     if (anchor_ && step) {
       const SE2 span = anchor_->odom.inverse() * *f.T_odom_robot;
       const SE2& bad = anchor_->implausible;
-      const bool too_far = bad.translation().norm() > opt_.max_speed_m_per_s * anchor_->took;
-      const bool too_turned = std::abs(bad.theta()) > opt_.max_turn_rate_rad_per_s * anchor_->took;
-      const bool taken_back = (!too_far || span.translation().norm() < bad.translation().norm()) &&
-                              (!too_turned || std::abs(span.theta()) < std::abs(bad.theta()));
+      const bool taken_back = (!anchor_->too_far || span.translation().norm() < bad.translation().norm()) &&
+                              (!anchor_->too_turned || std::abs(span.theta()) < std::abs(bad.theta()));
       if (taken_back && plausibleOver(span, std::max(f.time - anchor_->time, usual))) {
         step_used = anchor_->taken.inverse() * span;
         plausible = step_used->isFinite();
@@ -172,11 +175,10 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       }
     }
     anchor_.reset();
-    implausible_step_.reset();
-    if (step && !plausible && step->isFinite()) {
-      implausible_step_ = *step;
-      implausible_took_ = std::max(p.dt, usual);
-    }
+    pending_anchor_.reset();
+    if (step && !plausible && step->isFinite() && odom_prev_)
+      pending_anchor_ =
+          OdometryAnchor{*odom_prev_, time_prev_, *step, tooFar(*step, took), tooTurned(*step, took), SE2()};
     if (step) {
       const SE2& d = *step_used;
       const double dist = d.translation().norm(), turn = std::abs(d.theta());
@@ -216,9 +218,11 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
 }
 
 void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool time_ok, bool pinned) {
-  if (!first && implausible_step_ && odom_prev_)
-    anchor_ = OdometryAnchor{*odom_prev_, time_prev_, *implausible_step_, implausible_took_, step};
-  implausible_step_.reset();
+  if (!first && pending_anchor_) {
+    anchor_ = std::move(pending_anchor_);
+    anchor_->taken = step;
+  }
+  pending_anchor_.reset();
   if (!first) {
     // A gap: the robot may have stopped, so the velocity starts again from a standstill. A scan
     // stamped before the previous one says nothing of the velocity (it may have been taken earlier,

@@ -251,10 +251,11 @@ class LogPerturber {
 
  private:
   std::vector<Frame> flush();
-
-  const LogPerturbationOptions options_;
+  /// Where frame `index` (clock time `t`) has its odometry read: its truth, or with an odometry lag
+  /// the truth at the lagged time (draws the lag).
   SE2 odometryReadingPoint(const Frame& frame, std::size_t index, double t);
 
+  const LogPerturbationOptions options_;
   Rng odom_rng_;
   Rng jitter_rng_;
   Rng lag_rng_;

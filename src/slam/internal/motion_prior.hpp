@@ -165,19 +165,18 @@ class MotionPrior {
   std::optional<SE2> odom_scaled_;       // the predicted frame's pose on it
   OdometryScale scale_;
   std::optional<SE2> heading_override_;  // the previous scan's override, when it contradicted the heading (overridden)
-  // The previous scan's odometry step was implausible (predictImpl): the odometry reading and time
-  // before it, that step, and the step the scan took (remember). The next step's odometry is taken
-  // from there, less the step taken, when the odometry took the implausible step back.
+  // An implausible odometry step (predictImpl): the odometry reading and time before it, the step,
+  // which limits it broke, and the step its scan took (remember). The next step's odometry is taken
+  // from the reading before it, less the step taken, when the odometry took the implausible step back.
   struct OdometryAnchor {
     SE2 odom;
     double time = 0.0;
     SE2 implausible;
-    double took = 0.0;  // the time it was judged over [s]
+    bool too_far = false, too_turned = false;
     SE2 taken;
   };
-  std::optional<OdometryAnchor> anchor_;
-  std::optional<SE2> implausible_step_;  // the frame being predicted had this implausible odometry step ...
-  double implausible_took_ = 0.0;        // ... judged over this time [s]
+  std::optional<OdometryAnchor> pending_anchor_;  // the frame being predicted had an implausible step
+  std::optional<OdometryAnchor> anchor_;          // the previous frame had one
   bool odometry_seen_ = false, odometry_missing_ = false;
   std::size_t odometry_missing_count_ = 0;
   // The front end's last few steps the scans pinned (robot frame), oldest first; a gap leaves only
