@@ -2,17 +2,20 @@
 // when declining), the JSON summary, a database from another map, and bad input (exit 1, one line,
 // no output file).
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <string>
-#include <vector>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <string>
+#include <vector>
 
+#include "lidar2d/io/image.hpp"
+#include "lidar2d/io/map_file.hpp"
 #include "support/table_rows.hpp"
 #include "support/test_support.hpp"
 
@@ -42,12 +45,36 @@ class CliLocalize : public ::testing::Test {
     r = runCli({"map", path("sym.log"), "-o", path("sym"), "-q"});
     ASSERT_EQ(r.exit_code, 0) << r.err;
   }
+  // The open world (its rooms are not their own mirror images, as the office's are): a map, query
+  // scans, and the map's image with its rows in reverse order (as an array written row = y is).
+  static void needOpen() {
+    if (fs::exists(path("open-rev.png"))) return;
+    auto r = runCli({"simulate", "--world", "open", "--scans", "200", "--seed", "5", "-o", path("open.log")});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    r = runCli({"simulate", "--world", "open", "--scans", "24", "--seed", "9", "-o", path("openq.log")});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    r = runCli({"map", path("open.log"), "-o", path("open"), "-q"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const io::MapFile m = io::readMap(path("open.yaml"));
+    const io::GreyImage g = io::readGreyImage(m.image_path);
+    std::vector<std::uint8_t> rev(g.value.size());
+    const auto w = static_cast<std::size_t>(g.width), h = static_cast<std::size_t>(g.height);
+    for (std::size_t row = 0; row < h; ++row)
+      std::copy_n(g.value.begin() + static_cast<std::ptrdiff_t>((h - 1 - row) * w), w,
+                  rev.begin() + static_cast<std::ptrdiff_t>(row * w));
+    const auto png = io::encodePng(rev.data(), g.width, g.height, 1, w, path("open-rev.png"));
+    test::writeFile(path("open-rev.png"), std::string(png.begin(), png.end()));
+    open_resolution_ = fmt::format("{}", m.yaml.resolution);
+    open_origin_ = fmt::format("{},{},{}", m.yaml.origin.x(), m.yaml.origin.y(), m.yaml.origin.theta());
+  }
   static void TearDownTestSuite() { delete dir_; }
   static std::string path(const std::string& name) { return (*dir_ / name).string(); }
   static std::vector<std::vector<std::string>> rows(const std::string& file) { return test::tableRows(file); }
   static test::TempDir* dir_;
+  static std::string open_resolution_, open_origin_;  ///< open.yaml's, as the command line gives them
 };
 test::TempDir* CliLocalize::dir_ = nullptr;
+std::string CliLocalize::open_resolution_, CliLocalize::open_origin_;
 
 TEST_F(CliLocalize, IndexThenLocalizeWritesOneLinePerScanAndJson) {
   ASSERT_NO_FATAL_FAILURE(needOffice());
@@ -166,6 +193,44 @@ TEST_F(CliLocalize, BadInputIsOneLineAndExitOne) {
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.err.find("--ambiguity-nats"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(path("a.txt")));
+}
+
+// A bare image stored with its first row at the lowest y reads, with --image-rows-up, as the map it
+// is (the same database, byte for byte, as the map's own YAML). Read without it, the map is the
+// room's mirror image: no scan is placed, and the command says why (their mirror images are).
+TEST_F(CliLocalize, AMapImageWithItsRowsUpIsReadWithImageRowsUpAndOtherwiseToldMirrored) {
+  ASSERT_NO_FATAL_FAILURE(needOpen());
+  const std::string rev = path("open-rev.png");
+  auto r = runCli({"localize-index", path("open.yaml"), "-o", path("open.db"), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runCli({"localize-index", rev, "--resolution", open_resolution_, "--origin", open_origin_, "--image-rows-up",
+              "-o", path("open-rev.db"), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(test::readFile(path("open.db")) == test::readFile(path("open-rev.db")));
+
+  r = runCli({"localize", rev, path("openq.log"), "--resolution", open_resolution_, "--origin", open_origin_, "-o",
+              path("mirrored.txt"), "--json", path("mirrored.json"), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto j = nlohmann::json::parse(test::readFile(path("mirrored.json")));
+  EXPECT_LE(j.at("answered").get<int>(), 4) << j.dump();
+  EXPECT_TRUE(j.at("mirror_check").at("mirrored").get<bool>()) << j.dump();
+  EXPECT_NE(r.err.find("mirror images of each other"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--image-rows-up"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("flipped"), std::string::npos) << r.err;
+
+  r = runCli({"localize", rev, path("openq.log"), "--resolution", open_resolution_, "--origin", open_origin_,
+              "--image-rows-up", "-o", path("rows-up.txt"), "--json", path("rows-up.json"), "--eval", "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  j = nlohmann::json::parse(test::readFile(path("rows-up.json")));
+  EXPECT_GE(j.at("success_rate").get<double>(), 0.8) << j.dump();
+  EXPECT_FALSE(j.contains("mirror_check")) << j.dump();
+  EXPECT_EQ(r.err.find("mirror"), std::string::npos) << r.err;
+
+  // The option belongs to a bare image: with a YAML (which states map_server's row order) it is a usage error.
+  r = runCli({"localize", path("open.yaml"), path("openq.log"), "--image-rows-up", "-o", path("x.txt")});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("--image-rows-up"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(path("x.txt")));
 }
 
 // A bare PNG/PGM map (no YAML) with its resolution and origin on the command line reads as the

@@ -58,6 +58,33 @@ class CliTrack : public ::testing::Test {
 };
 test::TempDir* CliTrack::dir_ = nullptr;
 
+// Scans read mirrored (an upright laser given as upside down, `--laser-mount 0,0,0,flipped`) are
+// never placed in the open world's map (its rooms are not their own mirror images, as the office's
+// are); the command says that their mirror images would be, and how to fix it.
+TEST_F(CliTrack, ScansReadMirroredAreLostAndToldSo) {
+  auto r = runCli({"simulate", "--world", "open", "--scans", "200", "--seed", "5", "-o", path("open.log")});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runCli({"simulate", "--world", "open", "--scans", "30", "--seed", "9", "-o", path("open-run.log")});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runCli({"map", path("open.log"), "-o", path("open"), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runCli({"track", path("open.yaml"), path("open-run.log"), "--laser-mount", "0,0,0,flipped", "-o",
+              path("mirrored.txt"), "--json", path("mirrored.json"), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto j = nlohmann::json::parse(test::readFile(path("mirrored.json")));
+  EXPECT_GE(j["status"]["lost"].get<double>(), 0.9) << j.dump();
+  EXPECT_TRUE(j["mirror_check"]["mirrored"].get<bool>()) << j.dump();
+  EXPECT_NE(r.err.find("mirror images of each other"), std::string::npos) << r.err;
+  // Read as they are, they track, and nothing is said about mirrors.
+  r = runCli({"track", path("open.yaml"), path("open-run.log"), "-o", path("upright.txt"), "--json",
+              path("upright.json"), "-q"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  j = nlohmann::json::parse(test::readFile(path("upright.json")));
+  EXPECT_GE(j["status"]["tracking"].get<double>(), 0.9) << j.dump();
+  EXPECT_FALSE(j.contains("mirror_check"));
+  EXPECT_EQ(r.err.find("mirror"), std::string::npos) << r.err;
+}
+
 TEST_F(CliTrack, WritesOneLinePerScanAndTheSummary) {
   auto r = runCli({"track", path("office.yaml"), path("run.log"), "-o", path("t.txt"), "--json", path("t.json"),
                    "--eval"});

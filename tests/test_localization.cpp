@@ -17,6 +17,7 @@
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/localization/lines.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/localization/mirror_check.hpp"
 #include "lidar2d/mapping/export.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/sim/path.hpp"
@@ -132,6 +133,16 @@ DatabaseOptions fastDb() {
 
 const SimMap& office() {
   static const SimMap s = simMap("office", 120);
+  return s;
+}
+
+const SimMap& openWorld() {
+  static const SimMap s = simMap("open", 120);
+  return s;
+}
+
+const SimMap& corridorWorld() {
+  static const SimMap s = simMap("corridor", 120);
   return s;
 }
 
@@ -310,6 +321,66 @@ TEST(Localization, ScanWithFewerThanTenBeamsIsUnknown) {
   const auto r = loc.localize(pts);
   EXPECT_TRUE(r.declined);
   EXPECT_EQ(r.reason, "no points");
+}
+
+// The map's mirror image: its rows in reverse order (a map image read with its rows the wrong way up).
+OccupancyImage mirroredRows(const OccupancyImage& m) {
+  const auto w = static_cast<std::size_t>(m.width()), h = static_cast<std::size_t>(m.height());
+  std::vector<std::int8_t> cells(m.cells().size());
+  for (std::size_t row = 0; row < h; ++row)
+    std::copy_n(m.cells().begin() + static_cast<std::ptrdiff_t>((h - 1 - row) * w), w,
+                cells.begin() + static_cast<std::ptrdiff_t>(row * w));
+  return OccupancyImage::create(m.width(), m.height(), m.resolution(), m.origin(), std::move(cells));
+}
+
+// Scans in the mirror image of their map are not placed, but their mirror images are: the check
+// says so. Scans of another building are not placed either way: it does not.
+TEST(LocalizationMirror, ScansInTheMirroredMapAreToldFromScansOfAnotherPlace) {
+  const SimMap& s = openWorld();
+  const Localizer mirrored_map(mirroredRows(s.map), {}, fastDb());
+  localization::MirrorCheck in_mirror;
+  std::size_t n = 0, placed = 0;
+  for (std::size_t i = 3; i < s.frames.size(); i += 6, ++n) {
+    const Frame& f = s.frames[i];
+    if (mirrored_map.localize(f.scan, f.T_robot_laser).declined)
+      in_mirror.add(f.scan, f.T_robot_laser);
+    else
+      ++placed;
+  }
+  EXPECT_LE(placed, n / 5) << "of " << n << " scans in the mirrored map";
+  const localization::MirrorCheckResult r = in_mirror.run(mirrored_map);
+  EXPECT_EQ(r.tried, 12u);
+  EXPECT_TRUE(r.mirrored()) << r.placed << " of " << r.tried << " mirror images placed";
+
+  // The corridor world's scans in the open world's map (upright): few mirror images placed.
+  const SimMap& other = corridorWorld();
+  const Localizer upright_map(s.map, {}, fastDb());
+  localization::MirrorCheck elsewhere;
+  for (std::size_t i = 3; i < other.frames.size(); i += 6) {
+    const Frame& f = other.frames[i];
+    if (upright_map.localize(f.scan, f.T_robot_laser).declined) elsewhere.add(f.scan, f.T_robot_laser);
+  }
+  const localization::MirrorCheckResult e = elsewhere.run(upright_map);
+  EXPECT_GE(e.tried, localization::MirrorCheckResult::kMinTried);
+  EXPECT_FALSE(e.mirrored()) << e.placed << " of " << e.tried << " mirror images placed";
+}
+
+// The sample spans the whole log, whatever its length: half the scans from the mirrored map, then
+// half from elsewhere, give about half the sample placed mirrored; and at most twice the sample
+// size is kept.
+TEST(LocalizationMirror, TheSampleSpansTheWholeLog) {
+  const SimMap& s = openWorld();
+  const SimMap& other = corridorWorld();
+  const Localizer mirrored_map(mirroredRows(s.map), {}, fastDb());
+  localization::MirrorCheck check(8);
+  for (std::size_t i = 0; i < 100; ++i) check.add(s.frames[i].scan, s.frames[i].T_robot_laser);
+  for (std::size_t i = 0; i < 100; ++i) check.add(other.frames[i].scan, other.frames[i].T_robot_laser);
+  EXPECT_EQ(check.added(), 200u);
+  const localization::MirrorCheckResult r = check.run(mirrored_map);
+  EXPECT_EQ(r.tried, 8u);
+  EXPECT_GE(r.placed, 2u);
+  EXPECT_LE(r.placed, 6u);
+  EXPECT_THROW(localization::MirrorCheck(0), Error);
 }
 
 TEST(LocalizationDatabase, CoverageIsTheShareOfFreeSpaceIndexed) {

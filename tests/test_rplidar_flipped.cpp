@@ -2,7 +2,8 @@
 // under a plate; its config.yaml gives the mounting x 0.2 m, 180 degrees about y). `lidar2d slam`
 // with `--laser-mount 0.2,0,0,flipped` must build a map of the room that agrees with the course's
 // gridmap.png; read as upright, the mirrored scans must not. `lidar2d map` with the SLAM poses must
-// agree as well (its walls are where gridmap.png's are).
+// agree as well (its walls are where gridmap.png's are). Global localization of its scans in gridmap.png, read with
+// its rows up as the course wrote it, places them; read as map_server would, the map is mirrored.
 //
 // The comparison: the occupied cells of our map (value >= 65, as map_server reads them) and the
 // dark pixels of gridmap.png (grey < 89, i.e. map_server's occupied_thresh 0.65) as point sets; the
@@ -16,12 +17,18 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
-#include <vector>
+#include <numbers>
+#include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
+#include "lidar2d/core/laser_mount.hpp"
+#include "lidar2d/io/frame_source.hpp"
 #include "lidar2d/io/image.hpp"
 #include "lidar2d/io/map_file.hpp"
+#include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/localization/mirror_check.hpp"
 #include "lidar2d/registration/correlative.hpp"
 #include "support/test_support.hpp"
 
@@ -132,6 +139,59 @@ TEST(RplidarFlipped, SlamMapAgreesWithTheGridmapOnlyWithTheFlip) {
   EXPECT_GT(remap.ours_near_theirs, 0.7);
   EXPECT_GT(with.ours_near_theirs, without.ours_near_theirs + 0.2);
   EXPECT_GT(with.theirs_near_ours, without.theirs_near_ours + 0.2);
+}
+
+// One scan in 25 of the bag, read with the config's mounting, each localized on its own in
+// gridmap.png. The course's code reads the image with its row growing with y (gridmapWalls above),
+// i.e. its first row is the lowest y: read so (`rows_up`), every scan is placed and consecutive
+// answers agree with the odometry; read as map_server reads an image (first row at the top), the map
+// is the room's mirror image: none is, and their mirror images are (localization::MirrorCheck).
+TEST(RplidarFlipped, GlobalLocalizationInTheGridmapReadWithItsRowsUp) {
+  LIDAR2D_REQUIRE_DATA(kBag);
+  LIDAR2D_REQUIRE_DATA(kGridmap);
+  io::ReaderOptions ro;
+  ro.laser_mount = LaserMount::fromRollPitchYaw(0.2, 0.0, 0.0, 0.0, std::numbers::pi, 0.0);
+  auto source = io::openLog(test::dataFile(kBag).string(), ro);
+  std::vector<Frame> frames;
+  while (auto f = source->next())
+    if (f->index % 25 == 0) frames.push_back(std::move(*f));
+  ASSERT_GE(frames.size(), 20u);
+  io::MapYaml y;
+  y.resolution = kGridRes;
+  y.origin = SE2(-7.5, -9.5, 0.0);
+  y.rows_up = true;
+  const localization::Localizer rows_up(io::readMapImage(test::dataFile(kGridmap).string(), y).map);
+  y.rows_up = false;
+  const localization::Localizer as_map_server(io::readMapImage(test::dataFile(kGridmap).string(), y).map);
+
+  std::size_t placed = 0, pairs = 0, consistent = 0, placed_mirrored_map = 0;
+  std::optional<std::pair<SE2, SE2>> previous;  // (answer, odometry)
+  localization::MirrorCheck mirror;
+  for (const Frame& f : frames) {
+    const auto r = rows_up.localize(f.scan, f.T_robot_laser);
+    if (!r.declined) {
+      ++placed;
+      if (previous && f.T_odom_robot) {
+        const SE2 e =
+            (previous->second.inverse() * *f.T_odom_robot).inverse() * (previous->first.inverse() * r.T_world_robot);
+        ++pairs;
+        consistent += e.translation().norm() <= 0.3 && std::abs(e.theta()) <= 5.0 * std::numbers::pi / 180.0;
+      }
+      previous = std::make_pair(r.T_world_robot, f.T_odom_robot.value_or(SE2()));
+    }
+    if (as_map_server.localize(f.scan, f.T_robot_laser).declined)
+      mirror.add(f.scan, f.T_robot_laser);
+    else
+      ++placed_mirrored_map;
+  }
+  std::printf(
+      "rows up: %zu of %zu placed, %zu of %zu consecutive pairs agree with the odometry; as map_server "
+      "reads it: %zu placed\n",
+      placed, frames.size(), consistent, pairs, placed_mirrored_map);
+  EXPECT_GE(placed, frames.size() * 95 / 100);
+  EXPECT_GE(consistent, pairs * 95 / 100);
+  EXPECT_LE(placed_mirrored_map, frames.size() / 10);
+  EXPECT_TRUE(mirror.run(as_map_server).mirrored());
 }
 
 }  // namespace

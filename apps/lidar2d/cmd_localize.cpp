@@ -24,8 +24,6 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "map_input.hpp"
-#include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/localization_score.hpp"
 #include "lidar2d/eval/metrics.hpp"
@@ -33,6 +31,9 @@
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/io/map_file.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/localization/mirror_check.hpp"
+#include "map_input.hpp"
+#include "progress.hpp"
 
 namespace lidar2d::cli {
 namespace {
@@ -150,6 +151,7 @@ void runLocalize(const LocArgs& a) {
   std::vector<double> times_ms;
   std::map<std::string, std::size_t> reasons;
   eval::LocalizationTally tally;
+  localization::MirrorCheck mirror_check;
   tally.tolerance = {a.success_m, a.success_deg * kDeg};
   // Progress on a terminal (a long log takes minutes at tens of milliseconds per scan).
   RateProgress progress(a.quiet, "localizing", "scans", source->sizeHint());
@@ -166,6 +168,7 @@ void runLocalize(const LocArgs& a) {
       }
     if (r.declined) {
       ++reasons[r.reason];
+      mirror_check.add(f->scan, f->T_robot_laser);
       out.stream() << fmt::format("{:.9f} nan nan nan 0\n", f->time);
     } else {
       const SE2& T = r.T_world_robot;
@@ -184,6 +187,16 @@ void runLocalize(const LocArgs& a) {
   out.commit();
   const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
   if (cand_out) cand_out->commit();
+  // A log of which almost nothing is placed: are the scans and the map mirror images of each other?
+  // (Checked only then: it localizes a dozen more scans.)
+  constexpr double kMirrorCheckBelow = 0.2;
+  std::optional<localization::MirrorCheckResult> mirrored;
+  if (static_cast<double>(tally.answered) < kMirrorCheckBelow * static_cast<double>(scans) &&
+      mirror_check.added() >= localization::MirrorCheckResult::kMinTried) {
+    mirrored = mirror_check.run(*loc);
+    if (mirrored->mirrored())
+      std::cerr << mirroredScansWarning(a.map, tally.declined, scans, mirrored->placed, mirrored->tried);
+  }
   const double total_s = seconds(t0);
   nlohmann::json j;
   j["map"] = a.map;
@@ -200,6 +213,8 @@ void runLocalize(const LocArgs& a) {
   j["declined"] = tally.declined;
   j["decline_rate"] = static_cast<double>(tally.declined) / static_cast<double>(scans);
   j["decline_reasons"] = reasons;
+  if (mirrored)
+    j["mirror_check"] = {{"tried", mirrored->tried}, {"placed", mirrored->placed}, {"mirrored", mirrored->mirrored()}};
   j["query_ms"] = {{"median", eval::percentile(times_ms, 0.5)},
                    {"p95", eval::percentile(times_ms, 0.95)},
                    {"max", eval::percentile(times_ms, 1.0)},

@@ -31,8 +31,11 @@ struct MapArgs {
   std::string prefix;
   std::string poses_file;
   std::string prior;
-  BareMapOptions prior_bare{
-      .resolution_flag = "--prior-resolution", .origin_flag = "--prior-origin", .resolution = {}, .origin = {}};
+  BareMapOptions prior_bare{.resolution_flag = "--prior-resolution",
+                            .origin_flag = "--prior-origin",
+                            .rows_up_flag = "--prior-image-rows-up",
+                            .resolution = {},
+                            .origin = {}};
   mapping::MapModel model = mapping::MapModel::kLogOdds;
   mapping::PoseSource pose_source = mapping::PoseSource::kAuto;
   mapping::MapOptions options;

@@ -10,8 +10,8 @@
 #include <fmt/format.h>
 
 #include <chrono>
-#include <fstream>
 #include <cmath>
+#include <fstream>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -21,17 +21,18 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "map_input.hpp"
-#include "progress.hpp"
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/io/map_file.hpp"
+#include "lidar2d/localization/mirror_check.hpp"
 #include "lidar2d/localization/tracker.hpp"
 #include "lidar2d/mapping/export.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/slam/state_file.hpp"
+#include "map_input.hpp"
+#include "progress.hpp"
 
 namespace lidar2d::cli {
 namespace {
@@ -113,6 +114,7 @@ void runTrack(const TrackArgs& a) {
   std::optional<std::size_t> scans_to_first_fix;
   bool time_advances = true;
   std::vector<double> track_ms, global_ms, fix_ms, scan_ms;
+  localization::MirrorCheck mirror_check;
   RateProgress progress(a.quiet, "tracking", "scans", source->sizeHint());
   while (auto f = source->next()) {
     progress.update(f->index);
@@ -138,6 +140,7 @@ void runTrack(const TrackArgs& a) {
     if (r.status == localization::TrackStatus::kGlobal) fix_ms.push_back(r.global_ms);
     scan_ms.push_back(r.track_ms + r.global_ms);
     if (r.status == localization::TrackStatus::kLost) {
+      mirror_check.add(f->scan, f->T_robot_laser);
       out.stream() << fmt::format("{:.9f} nan nan nan lost 0\n", f->time);
     } else {
       const SE2& T = r.T_world_robot;
@@ -160,6 +163,15 @@ void runTrack(const TrackArgs& a) {
   if (scans == 0) throw badInput("the log has no scan to track", ErrorLocation(a.log));
   out.commit();
   const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
+  // A log of which almost nothing is placed: are the scans and the map mirror images of each other?
+  constexpr double kMirrorCheckBelow = 0.2;
+  std::optional<localization::MirrorCheckResult> mirrored;
+  if (static_cast<double>(scans - counts[2]) < kMirrorCheckBelow * static_cast<double>(scans) &&
+      mirror_check.added() >= localization::MirrorCheckResult::kMinTried) {
+    mirrored = mirror_check.run(tracker->localizer());
+    if (mirrored->mirrored())
+      std::cerr << mirroredScansWarning(a.map, counts[2], scans, mirrored->placed, mirrored->tried);
+  }
 
   const auto share = [&](std::size_t n) { return static_cast<double>(n) / static_cast<double>(scans); };
   nlohmann::json j;
@@ -180,6 +192,8 @@ void runTrack(const TrackArgs& a) {
         "no time to it (time_to_first_fix_s null), only the {} scans before it (scans_to_first_fix)\n",
         a.log, *scans_to_first_fix);
   j["relocalizations"] = relocalizations;
+  if (mirrored)
+    j["mirror_check"] = {{"tried", mirrored->tried}, {"placed", mirrored->placed}, {"mirrored", mirrored->mirrored()}};
   j["tracking_beyond_map"] = {{"scans", beyond_map}, {"share", share(beyond_map)}};
   j["tracked_scan_ms"] = timing(track_ms);
   j["global_fix_ms"] = timing(fix_ms);

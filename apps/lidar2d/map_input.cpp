@@ -1,5 +1,7 @@
 #include "map_input.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -13,7 +15,7 @@ namespace lidar2d::cli {
 io::MapFile readMapChecked(const std::string& path, const BareMapOptions& bare) {
   if (!io::isMapImage(path)) {
     if (bare.given())
-      throw CLI::ValidationError(bare.resolution_flag + "/" + bare.origin_flag,
+      throw CLI::ValidationError(bare.resolution_flag + "/" + bare.origin_flag + "/" + bare.rows_up_flag,
                                  "apply to a bare map image; " + path + " states its own in its YAML");
     return io::readMap(path);
   }
@@ -24,7 +26,18 @@ io::MapFile readMapChecked(const std::string& path, const BareMapOptions& bare) 
   io::MapYaml y;
   y.resolution = *bare.resolution;
   y.origin = bare.origin.value_or(SE2());
+  y.rows_up = bare.rows_up;
   return io::readMapImage(path, y);
+}
+
+std::string mirroredScansWarning(const std::string& map, std::size_t declined, std::size_t scans,
+                                 std::size_t mirrored_placed, std::size_t mirrored_tried) {
+  return fmt::format(
+      "lidar2d: warning: {}: {} of {} scans could not be placed, but {} of {} tried as their mirror image were: the "
+      "scans and the map are mirror images of each other. Either the laser is mounted the other way up from how it "
+      "is read (an upside-down laser: --laser-mount X,Y,THETA,flipped; docs/file-formats.md, laser mounting) or the "
+      "map image is mirrored (a bare image whose first row is its lowest y: --image-rows-up)\n",
+      map, declined, scans, mirrored_placed, mirrored_tried);
 }
 
 void addBareMapOptions(CLI::App* sub, BareMapOptions& bare, const std::string& what) {
@@ -56,6 +69,10 @@ void addBareMapOptions(CLI::App* sub, BareMapOptions& bare, const std::string& w
          what + " as a bare image: world pose of its lower-left pixel's corner, x,y [m],yaw [rad], as a map_server "
                 "YAML's origin (default 0,0,0)")
       ->type_name("X,Y,YAW");
+  sub->add_flag(bare.rows_up_flag, bare.rows_up,
+                what +
+                    " as a bare image stored with its first row at the lowest y (an array written as it is "
+                    "indexed, row = y); a map_server image's first row is its top");
 }
 
 }  // namespace lidar2d::cli

@@ -16,20 +16,31 @@ namespace lidar2d::cli {
 struct BareMapOptions {
   std::string resolution_flag = "--resolution";
   std::string origin_flag = "--origin";
+  std::string rows_up_flag = "--image-rows-up";
   std::optional<double> resolution;  ///< [m/cell]
   std::optional<SE2> origin;         ///< lower-left pixel's corner in the world [m, m, rad]
-  /// Whether either option was given.
-  bool given() const { return resolution || origin; }
+  /// The image's first row is its lowest y (an array written as it is indexed, row = y), where a
+  /// map_server image's first row is its top: read it upside down.
+  bool rows_up = false;
+  /// Whether any of the options was given.
+  bool given() const { return resolution || origin || rows_up; }
 };
 
-/// Adds `bare.resolution_flag` and `bare.origin_flag` to `sub`; `what` names the map in their help
+/// Adds `bare.resolution_flag`, `bare.origin_flag` and `bare.rows_up_flag` to `sub`; `what` names the map in their help
 /// ("MAP", "--prior"). `bare` must outlive parsing.
 void addBareMapOptions(CLI::App* sub, BareMapOptions& bare, const std::string& what);
 
 /// The map at `path`: a map_server YAML, or, when the file starts like an image, a bare image read
 /// with `bare`'s resolution and origin (default 0,0,0) as a YAML with map_server's defaults would
-/// read it. A bare image without the resolution, or the options with a YAML, is a usage error
-/// (CLI::ValidationError, exit 2); bad content is lidar2d::Error naming the file and field.
+/// read it (with `rows_up`, the image's rows in reverse order: its first row the bottom one). A bare image without the
+/// resolution, or the options with a YAML, is a usage error (CLI::ValidationError, exit 2); bad content is
+/// lidar2d::Error naming the file and field.
 io::MapFile readMapChecked(const std::string& path, const BareMapOptions& bare);
+
+/// The warning for a log whose scans the localizer could not place but whose mirror images it did
+/// (localization::MirrorCheck): the laser's mounting or the map image is mirrored, and how to say
+/// which. `declined` of `scans` were not placed; `map` names the map.
+std::string mirroredScansWarning(const std::string& map, std::size_t declined, std::size_t scans,
+                                 std::size_t mirrored_placed, std::size_t mirrored_tried);
 
 }  // namespace lidar2d::cli

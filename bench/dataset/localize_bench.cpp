@@ -6,8 +6,8 @@
 //   database build time and size. Baseline: exhaustive branch-and-bound correlative search over the
 //   whole map and all orientations (registration::matchCorrelativeGlobal) on a subset of the scans.
 // - the simulator's `symmetric` world: the localizer must decline or list every symmetric pose.
-// - the ROS2 bag in ros2/ localized in ros2/maps/mac_1st_floor_final: no truth, so the consistency
-//   of consecutive answers with odometry.
+// - the ROS2 bag in ros2/ localized in ros2/maps/mac_1st_floor_final, and the rplidar-flipped bag
+//   in its room's gridmap.png: no truth, so the consistency of consecutive answers with odometry.
 
 #include <fmt/format.h>
 
@@ -23,11 +23,13 @@
 #include <stdexcept>
 
 #include "dataset_bench.hpp"
+#include "lidar2d/core/laser_mount.hpp"
 #include "lidar2d/eval/metrics.hpp"
 #include "lidar2d/io/frame_source.hpp"
 #include "lidar2d/io/localization_db.hpp"
 #include "lidar2d/io/map_file.hpp"
 #include "lidar2d/localization/localizer.hpp"
+#include "lidar2d/localization/mirror_check.hpp"
 #include "lidar2d/mapping/export.hpp"
 #include "lidar2d/mapping/occupancy_map.hpp"
 #include "lidar2d/registration/correlative.hpp"
@@ -102,6 +104,56 @@ std::string calibrationCurve(const std::string& name, const std::vector<Answer>&
   if (std::isnan(t99)) return out + " none | - |\n";
   const auto [a, ok] = at(t99);
   return out + fmt::format(" {:.2f} | {:.1f}% |\n", t99, 100.0 * static_cast<double>(ok) / n);
+}
+
+// Every `bo.stride`-th scan of `log` localized in `map` on its own: the share answered, how many
+// consecutive answered pairs agree with the odometry (0.3 m, 5 deg), and, when under 20% are
+// answered, whether their mirror images would be (localization::MirrorCheck). Printed as one line.
+void localizeWithOdometry(const std::string& name, const OccupancyImage& map, const std::string& log,
+                          const io::ReaderOptions& ro, const LocalizeBenchOptions& bo) {
+  const auto tb = Clock::now();
+  localization::Database db = localization::Database::build(map, bo.db);
+  const double build_s = sec(tb);
+  localization::Localizer loc(map, std::move(db), bo.loc);
+  auto src = io::openLog(log, ro);
+  std::size_t n = 0, answered = 0, pairs = 0, consistent = 0;
+  std::vector<double> ms;
+  SE2 prev_pose, prev_odom;
+  bool have_pose = false, have_odom = false;
+  std::size_t idx = 0;
+  localization::MirrorCheck mirror;
+  while (auto f = src->next()) {
+    if (idx++ % bo.stride != 0) continue;
+    const auto r = loc.localize(f->scan, f->T_robot_laser);
+    ++n;
+    ms.push_back(r.total_ms);
+    if (!r.declined) {
+      ++answered;
+      if (have_pose && have_odom && f->T_odom_robot) {
+        const SE2 e = (prev_odom.inverse() * *f->T_odom_robot).inverse() * (prev_pose.inverse() * r.T_world_robot);
+        ++pairs;
+        consistent += e.translation().norm() <= 0.3 && std::abs(e.theta()) <= 5.0 * kDeg;
+      }
+      prev_pose = r.T_world_robot;
+    } else {
+      mirror.add(f->scan, f->T_robot_laser);
+    }
+    have_pose = !r.declined;
+    have_odom = f->T_odom_robot.has_value();
+    if (have_odom) prev_odom = *f->T_odom_robot;
+  }
+  std::string mirrored;
+  if (5 * answered < n && mirror.added() >= localization::MirrorCheckResult::kMinTried) {
+    const auto m = mirror.run(loc);
+    mirrored = fmt::format("; mirror images of the declined placed: {} of {}", m.placed, m.tried);
+  }
+  std::cout << fmt::format(
+      "\n{} ({}x{} cells at {} m; database {:.2f} s, {:.1f} MB): {} scans (every {}), answered {:.1f}%, consecutive "
+      "answered pairs consistent with odometry (0.3 m, 5 deg) {} of {} ({:.1f}%), median {:.1f} ms, p95 {:.1f} ms{}\n",
+      name, map.width(), map.height(), map.resolution(), build_s, loc.database().memoryBytes() / 1e6, n, bo.stride,
+      100.0 * static_cast<double>(answered) / static_cast<double>(n), consistent, pairs,
+      pairs ? 100.0 * static_cast<double>(consistent) / static_cast<double>(pairs) : 0.0, eval::percentile(ms, 0.5),
+      eval::percentile(ms, 0.95), mirrored);
 }
 
 }  // namespace
@@ -308,47 +360,29 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
         100.0 * static_cast<double>(answered_one) / static_cast<double>(n), eval::percentile(ms, 0.5));
   }
 
-  // ROS2 bag in its map: consistency of consecutive answers with odometry.
+  // Real bags in maps from elsewhere, no truth: consistency of consecutive answers with odometry.
   const auto bag = std::filesystem::path(data_dir) / "ros2" / "macfirst_floor_take_2";
   const auto yaml = std::filesystem::path(data_dir) / "ros2" / "maps" / "mac_1st_floor_final.yaml";
-  if (std::filesystem::exists(bag) && std::filesystem::exists(yaml)) {
-    const io::MapFile mf = io::readMap(yaml.string());
-    const auto tb = Clock::now();
-    localization::Database db = localization::Database::build(mf.map, bo.db);
-    const double build_s = sec(tb);
-    localization::Localizer loc(mf.map, std::move(db), bo.loc);
-    auto src = io::openLog(bag.string());
-    std::size_t n = 0, answered = 0, pairs = 0, consistent = 0;
-    std::vector<double> ms;
-    SE2 prev_pose, prev_odom;
-    bool have_pose = false, have_odom = false;
-    std::size_t idx = 0;
-    while (auto f = src->next()) {
-      if (idx++ % bo.stride != 0) continue;
-      const auto r = loc.localize(f->scan, f->T_robot_laser);
-      ++n;
-      ms.push_back(r.total_ms);
-      if (!r.declined) {
-        ++answered;
-        if (have_pose && have_odom && f->T_odom_robot) {
-          const SE2 e = (prev_odom.inverse() * *f->T_odom_robot).inverse() * (prev_pose.inverse() * r.T_world_robot);
-          ++pairs;
-          consistent += e.translation().norm() <= 0.3 && std::abs(e.theta()) <= 5.0 * kDeg;
-        }
-        prev_pose = r.T_world_robot;
-      }
-      have_pose = !r.declined;
-      have_odom = f->T_odom_robot.has_value();
-      if (have_odom) prev_odom = *f->T_odom_robot;
+  if (std::filesystem::exists(bag) && std::filesystem::exists(yaml))
+    localizeWithOdometry("ros2 bag macfirst_floor_take_2 in mac_1st_floor_final", io::readMap(yaml.string()).map,
+                         bag.string(), {}, bo);
+  // The rplidar-flipped room's hand-made gridmap.png, read with its rows up as its course wrote it
+  // (docs/file-formats.md, bare map images), the laser as config.yaml mounts it (upside down); and
+  // read as map_server reads an image, where the map is the room's mirror image.
+  const auto room = std::filesystem::path(data_dir) / "bags" / "rplidar-flipped";
+  if (std::filesystem::exists(room / "hw2_data.bag") && std::filesystem::exists(room / "gridmap.png")) {
+    io::MapYaml y;
+    y.resolution = 0.05;
+    y.origin = SE2(-7.5, -9.5, 0.0);
+    io::ReaderOptions ro;
+    ro.laser_mount = LaserMount::fromRollPitchYaw(0.2, 0.0, 0.0, 0.0, std::numbers::pi, 0.0);
+    for (const bool rows_up : {true, false}) {
+      y.rows_up = rows_up;
+      localizeWithOdometry(rows_up ? "rplidar-flipped bag in gridmap.png (rows up)"
+                                   : "rplidar-flipped bag in gridmap.png read as map_server reads it (mirrored)",
+                           io::readMapImage((room / "gridmap.png").string(), y).map, (room / "hw2_data.bag").string(),
+                           ro, bo);
     }
-    std::cout << fmt::format(
-        "\nros2 bag macfirst_floor_take_2 in mac_1st_floor_final ({}x{} cells at {} m; database {:.2f} s, "
-        "{:.1f} MB): {} scans (every {}), answered {:.1f}%, consecutive answered pairs consistent with "
-        "odometry (0.3 m, 5 deg) {} of {} ({:.1f}%), median {:.1f} ms, p95 {:.1f} ms\n",
-        mf.map.width(), mf.map.height(), mf.map.resolution(), build_s, loc.database().memoryBytes() / 1e6, n, bo.stride,
-        100.0 * static_cast<double>(answered) / static_cast<double>(n), consistent, pairs,
-        pairs ? 100.0 * static_cast<double>(consistent) / static_cast<double>(pairs) : 0.0, eval::percentile(ms, 0.5),
-        eval::percentile(ms, 0.95));
   }
 }
 

@@ -116,7 +116,7 @@ void readImageInto(MapFile& out, const std::string& field) {
   const GreyImage g = readGreyImage(out.image_path, field);
   std::vector<std::int8_t> cells(g.value.size());
   for (int r = 0; r < g.height; ++r) {
-    const int row = g.height - 1 - r;  // image top row = map's top (largest y)
+    const int row = out.yaml.rows_up ? r : g.height - 1 - r;  // map_server: image top row = map's top (largest y)
     for (int c = 0; c < g.width; ++c) {
       const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(c);
       cells[static_cast<std::size_t>(row) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(c)] =

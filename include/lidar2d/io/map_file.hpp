@@ -34,6 +34,10 @@ struct MapYaml {
   double occupied_thresh = 0.65;   ///< p > occupied_thresh -> occupied
   double free_thresh = 0.196;      ///< p < free_thresh -> free
   MapMode mode = MapMode::kTrinary;
+  /// Not a map_server key (readMap leaves it false; readMapImage takes it): the image's first row
+  /// is its lowest y, as an array written as it is indexed (row = y) is stored. map_server's first
+  /// row is the top. Read the other way, such a map is the room's mirror image.
+  bool rows_up = false;
 };
 
 /// A map read from disk.
@@ -57,7 +61,8 @@ MapFile readMap(const std::string& yaml_path);
 bool isMapImage(const std::string& path);
 
 /// Reads a bare map image (PGM or PNG, no YAML: a map drawn or exported by hand) as readMap reads
-/// the image of a YAML holding `yaml`'s fields (its `image` is ignored). The resolution and origin
+/// the image of a YAML holding `yaml`'s fields (its `image` is ignored), its rows in the order
+/// `yaml.rows_up` says. The resolution and origin
 /// are checked as readMap checks them, with the error naming `image_path` and the field
 /// ("resolution", "origin"). Throws `lidar2d::Error` as readMap does.
 MapFile readMapImage(const std::string& image_path, const MapYaml& yaml);
