@@ -571,45 +571,56 @@ TEST(Localization, PointsInKnownFreeSpaceCountAgainstAPoseAndUnknownSpaceDoesNot
 // against 0.98), so the single-alternative ratio test (0.95) answers, but the 24 of them together
 // are more likely than the true pose (odds 24 x exp(-0.12 x 180 x 0.06) = 6): one scan cannot tell
 // the rooms apart with confidence. A pillar 0.7 m wide (each look-alike 16% worse) tells them apart.
+// Ten identical 4 m rooms in a row, a pillar of `pillar_radius_m` in the first. The map: walls and
+// pillar occupied, the rooms' insides free, the rest unknown (5 cm cells); and a noise-free scan of
+// 180 beams over 360 degrees from the first room, at `kTenRoomsTruth`.
+const SE2 kTenRoomsTruth(1.0 + 1.5, 1.0 + 2.0, 0.3);
+std::pair<OccupancyImage, Frame> tenRooms(double pillar_radius_m) {
+  constexpr int kRooms = 10;
+  constexpr double kSide = 4.0, kPitch = 5.0;
+  std::vector<sim::Segment> walls;
+  for (int k = 0; k < kRooms; ++k) {
+    const double x0 = 1.0 + k * kPitch, y0 = 1.0;
+    const Eigen::Vector2d c[4] = {{x0, y0}, {x0 + kSide, y0}, {x0 + kSide, y0 + kSide}, {x0, y0 + kSide}};
+    for (int i = 0; i < 4; ++i) walls.push_back({c[i], c[(i + 1) % 4]});
+  }
+  const Eigen::Vector2d pillar(1.0 + 3.0, 1.0 + 2.0);
+  const sim::World world(walls, {sim::Arc::circle(pillar, pillar_radius_m)});
+  const double res = 0.05;
+  auto map = OccupancyImage::filled(1060, 120, res, SE2(), OccupancyImage::kUnknown);
+  for (int r = 0; r < 120; ++r)
+    for (int col = 0; col < 1060; ++col) {
+      const Eigen::Vector2d p((col + 0.5) * res, (r + 0.5) * res);
+      const double u = std::fmod(p.x() - 1.0, kPitch), v = p.y() - 1.0;
+      if (p.x() < 1.0 - res || p.x() > 1.0 + (kRooms - 1) * kPitch + kSide + res || v < -res || v > kSide + res ||
+          u > kSide + res)
+        continue;
+      const bool wall = u < res || u > kSide - res || v < res || v > kSide - res;
+      const bool in_pillar = (p - pillar).norm() < pillar_radius_m + 0.5 * res;
+      map.set(col, r, wall || in_pillar ? OccupancyImage::kOccupied : OccupancyImage::kFree);
+    }
+  sim::SimulatorOptions so;
+  so.laser.beams = 180;
+  so.laser.fov_rad = 2.0 * std::numbers::pi;
+  auto frames = sim::simulate(world, {{0.0, kTenRoomsTruth}}, so.noiseFree());
+  return {std::move(map), std::move(frames[0])};
+}
+
+DatabaseOptions tenRoomsDb() {
+  DatabaseOptions db = fastDb();
+  db.step_m = 0.25;
+  return db;
+}
+
 TEST(Localization, ManyLookAlikesEachALittleWorseTogetherDecline) {
   auto answer = [](double pillar_radius_m, double nats) {
-    constexpr int kRooms = 10;
-    constexpr double kSide = 4.0, kPitch = 5.0;
-    std::vector<sim::Segment> walls;
-    for (int k = 0; k < kRooms; ++k) {
-      const double x0 = 1.0 + k * kPitch, y0 = 1.0;
-      const Eigen::Vector2d c[4] = {{x0, y0}, {x0 + kSide, y0}, {x0 + kSide, y0 + kSide}, {x0, y0 + kSide}};
-      for (int i = 0; i < 4; ++i) walls.push_back({c[i], c[(i + 1) % 4]});
-    }
-    const Eigen::Vector2d pillar(1.0 + 3.0, 1.0 + 2.0);
-    const sim::World world(walls, {sim::Arc::circle(pillar, pillar_radius_m)});
-    // The map: walls and pillar occupied, the rooms' insides free, the rest unknown (5 cm cells).
-    const double res = 0.05;
-    auto map = OccupancyImage::filled(1060, 120, res, SE2(), OccupancyImage::kUnknown);
-    for (int r = 0; r < 120; ++r)
-      for (int col = 0; col < 1060; ++col) {
-        const Eigen::Vector2d p((col + 0.5) * res, (r + 0.5) * res);
-        const double u = std::fmod(p.x() - 1.0, kPitch), v = p.y() - 1.0;
-        if (p.x() < 1.0 - res || p.x() > 1.0 + (kRooms - 1) * kPitch + kSide + res || v < -res || v > kSide + res ||
-            u > kSide + res)
-          continue;
-        const bool wall = u < res || u > kSide - res || v < res || v > kSide - res;
-        const bool in_pillar = (p - pillar).norm() < pillar_radius_m + 0.5 * res;
-        map.set(col, r, wall || in_pillar ? OccupancyImage::kOccupied : OccupancyImage::kFree);
-      }
-    sim::SimulatorOptions so;
-    so.laser.beams = 180;
-    so.laser.fov_rad = 2.0 * std::numbers::pi;
-    const SE2 T_world_robot(1.0 + 1.5, 1.0 + 2.0, 0.3);
-    const auto frames = sim::simulate(world, {{0.0, T_world_robot}}, so.noiseFree());
+    const auto [map, frame] = tenRooms(pillar_radius_m);
     LocalizerOptions o;
     o.ambiguity_nats_per_point = nats;
-    DatabaseOptions db = fastDb();
-    db.step_m = 0.25;
-    const Localizer loc(map, o, db);
-    const auto r = loc.localize(frames[0].scan, frames[0].T_robot_laser);
+    const Localizer loc(map, o, tenRoomsDb());
+    const auto r = loc.localize(frame.scan, frame.T_robot_laser);
     std::size_t near_truth = 0;
-    for (const auto& c : r.candidates) near_truth += near(c.T_world_robot, T_world_robot);
+    for (const auto& c : r.candidates) near_truth += near(c.T_world_robot, kTenRoomsTruth);
     EXPECT_EQ(near_truth, 1u) << "the first room is a candidate";
     return r;
   };
@@ -629,6 +640,45 @@ TEST(Localization, ManyLookAlikesEachALittleWorseTogetherDecline) {
     o.ambiguity_nats_per_point = bad;
     EXPECT_TRUE(test::throwsError([&] { o.validate(); }, ErrorKind::kInvalidArgument, {"ambiguity_nats_per_point"}));
   }
+}
+
+// Rivals scoring under min_score still count against the best: the ten rooms' scan with a share of
+// its beams ending 0.6 m away (an object the map lacks, in free space in every room) fits one room
+// just over min_score and the others just under it. None of those may be answered (no alternative),
+// but together they are as likely as the best: "ambiguous". Without the look-alikes' odds the best
+// is answered, and here it is not even the pillar's room (40-44% of the beams cluttered: the
+// pillar's few points weigh less than where the clutter falls).
+TEST(Localization, RivalsUnderTheMinimumScoreCountAgainstTheBest) {
+  const auto [map, frame] = tenRooms(0.15);
+  const Localizer loc(map, {}, tenRoomsDb());
+  LocalizerOptions ratio_only;
+  ratio_only.ambiguity_nats_per_point = 0.0;
+  const Localizer loc_ratio_only(map, ratio_only, tenRoomsDb());
+  std::size_t cases = 0, declined = 0;
+  for (int percent = 10; percent <= 45; ++percent) {
+    LaserScanFields fs = frame.scan.fields();
+    for (std::size_t i = 0; i < fs.ranges.size() * static_cast<std::size_t>(percent) / 100; ++i) fs.ranges[i] = 0.6;
+    const LaserScan cluttered = LaserScan::create(fs);
+    const auto r0 = loc_ratio_only.localize(cluttered, frame.T_robot_laser);
+    if (r0.declined || r0.candidates.size() < 2) continue;
+    bool rivals_under = true;
+    for (std::size_t c = 1; c < r0.candidates.size(); ++c) rivals_under = rivals_under && r0.candidates[c].score < 0.5;
+    if (!rivals_under) continue;
+    ++cases;
+    EXPECT_TRUE(r0.alternatives.empty()) << percent << "%";
+    double odds = 0.0;
+    for (std::size_t c = 1; c < r0.candidates.size(); ++c)
+      odds += std::exp(-LocalizerOptions{}.ambiguity_nats_per_point * static_cast<double>(r0.num_points) *
+                       (r0.candidates[0].fit - r0.candidates[c].fit));
+    const auto r = loc.localize(cluttered, frame.T_robot_laser);
+    EXPECT_EQ(r.declined, odds >= 1.0) << percent << "%: odds " << odds;
+    if (r.declined) {
+      EXPECT_EQ(r.reason, "ambiguous");
+      ++declined;
+    }
+  }
+  EXPECT_GE(cases, 1u) << "no share of cluttered beams leaves the best over min_score and every rival under it";
+  EXPECT_EQ(declined, cases);
 }
 
 TEST(Localization, ScanWithNoValidBeamsIsUnknown) {

@@ -105,6 +105,9 @@ struct LocalizeBenchOptions {
   /// Also the calibration curve of each map: for score thresholds, the share of queries answered
   /// with a score at least the threshold, the success rate and the precision among those answers.
   bool calibration = false;
+  /// Scans from other buildings: each log's map (its even scans) queried with this many scans,
+  /// evenly spread, of every other log; every answer is wrong (0: skip, and the rest runs as usual).
+  std::size_t other_buildings = 0;
   localization::DatabaseOptions db;
   localization::LocalizerOptions loc;
 };

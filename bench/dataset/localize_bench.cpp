@@ -156,9 +156,51 @@ void localizeWithOdometry(const std::string& name, const OccupancyImage& map, co
       eval::percentile(ms, 0.95), mirrored);
 }
 
+// Each log's map (its even scans at truth poses) queried with `bo.other_buildings` scans, evenly
+// spread, of every other log: a map of another building holds none of their places, so every
+// answer is wrong. One table row per map.
+void runOtherBuildings(const std::string& data_dir, const LocalizeBenchOptions& bo) {
+  std::vector<std::pair<std::string, std::vector<Frame>>> logs;
+  for (const std::string& log : bo.logs) {
+    const std::string path = (std::filesystem::path(data_dir) / log).string();
+    if (!std::filesystem::exists(path)) continue;
+    logs.emplace_back(path, loadFrames(path));
+  }
+  std::cout << fmt::format(
+      "\nScans of other buildings ({} of each other log, evenly spread) in each log's even-scan map; every "
+      "answer is wrong\n\n| map | queries | answered | score >= 0.7 | score >= 0.8 | declined ambiguous |\n"
+      "|---|---|---|---|---|---|\n",
+      bo.other_buildings);
+  for (const auto& [path, frames] : logs) {
+    const OccupancyImage map = mapping::toOccupancyImage(*evenFramesMap(frames, path));
+    const localization::Localizer loc(map, localization::Database::build(map, bo.db), bo.loc);
+    std::size_t n = 0, answered = 0, over07 = 0, over08 = 0, ambiguous = 0;
+    for (const auto& [other, queries] : logs) {
+      if (other == path || queries.empty()) continue;
+      const std::size_t k = std::min(bo.other_buildings, queries.size());
+      for (std::size_t i = 0; i < k; ++i) {
+        const Frame& f = queries[i * queries.size() / k];
+        const auto r = loc.localize(f.scan, f.T_robot_laser);
+        ++n;
+        ambiguous += r.declined && r.reason == "ambiguous";
+        if (r.declined) continue;
+        ++answered;
+        over07 += r.score >= 0.7;
+        over08 += r.score >= 0.8;
+      }
+    }
+    const auto pct = [n](std::size_t v) {
+      return fmt::format("{} ({:.1f}%)", v, n ? 100.0 * static_cast<double>(v) / static_cast<double>(n) : 0.0);
+    };
+    std::cout << fmt::format("| {} | {} | {} | {} | {} | {} |\n", std::filesystem::path(path).stem().stem().string(), n,
+                             pct(answered), pct(over07), pct(over08), pct(ambiguous));
+  }
+}
+
 }  // namespace
 
 void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOptions& bo) {
+  if (bo.other_buildings > 0) return runOtherBuildings(data_dir, bo);
   std::cout << "| dataset | method | queries | success | precision | declined | median ms | p95 ms | median CPU ms "
                "| database |\n";
   std::cout << "|---|---|---|---|---|---|---|---|---|---|\n";
@@ -169,7 +211,7 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
     if (!queries) throw std::runtime_error(fmt::format("{}: cannot write", bo.queries));
     queries
         << "map\tscan\tmapped\toutcome\treason\tscore\tfit\trunner_up_score\trunner_up_fit\ttruth_fit\tcandidate_near_"
-           "truth\talternative_fits\tpoints\tregions\tlookup_ms\tverify_ms\twall_ms\n";
+           "truth\talternative_fits\tpoints\tregions\tlookup_ms\tverify_ms\twall_ms\tcandidate_scores_fits\n";
   }
   for (const std::string& log : bo.logs) {
     const std::string path = (std::filesystem::path(data_dir) / log).string();
@@ -256,16 +298,18 @@ void runLocalizeBenchmark(const std::string& data_dir, const LocalizeBenchOption
       if (queries.is_open()) {
         std::string alts;
         for (const auto& a : r.alternatives) alts += fmt::format("{}{:.4f}", alts.empty() ? "" : ",", a.fit);
+        std::string cands;
+        for (const auto& c : r.candidates)
+          cands += fmt::format("{}{:.4f}:{:.4f}", cands.empty() ? "" : ",", c.score, c.fit);
         const bool two = r.candidates.size() > 1;
         queries << fmt::format(
-            "{}\t{}\t{}\t{}\t{}\t{:.4f}\t{:.4f}\t{:.4f}\t{:.4f}\t{}\t{}\t{}\t{}\t{}\t{:.2f}\t{:.2f}\t{:.2f}\n", name,
-            odd[k], int(mapped_place),
-            r.declined ? "declined" : (at_truth ? "right" : "wrong"), r.reason.empty() ? "-" : r.reason, r.score,
-            r.candidates.empty() ? 0.0 : r.candidates.front().fit, two ? r.candidates[1].score : 0.0,
-            two ? r.candidates[1].fit : 0.0,
+            "{}\t{}\t{}\t{}\t{}\t{:.4f}\t{:.4f}\t{:.4f}\t{:.4f}\t{}\t{}\t{}\t{}\t{}\t{:.2f}\t{:.2f}\t{:.2f}\t{}\n",
+            name, odd[k], int(mapped_place), r.declined ? "declined" : (at_truth ? "right" : "wrong"),
+            r.reason.empty() ? "-" : r.reason, r.score, r.candidates.empty() ? 0.0 : r.candidates.front().fit,
+            two ? r.candidates[1].score : 0.0, two ? r.candidates[1].fit : 0.0,
             truth == r.candidates.end() ? std::string("-") : fmt::format("{:.4f}", truth->fit),
             truth == r.candidates.end() ? -1 : truth - r.candidates.begin(), alts.empty() ? "-" : alts, r.num_points,
-            r.num_regions, r.lookup_ms, r.verify_ms, ms.back());
+            r.num_regions, r.lookup_ms, r.verify_ms, ms.back(), cands.empty() ? "-" : cands);
       }
       if (bo.verbose && !right)
         std::cerr << fmt::format(

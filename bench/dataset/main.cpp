@@ -122,6 +122,9 @@ int main(int argc, char** argv) {
   loc->add_flag("--calibration", loc_options.calibration,
                 "also the score-threshold curve per map (answered, success, precision)");
   loc->add_flag("!--no-extras", loc_options.extras, "only the logs (not the symmetric world and the ROS2 bag)");
+  loc->add_option("--other-buildings", loc_options.other_buildings,
+                  "only this: each log's even-scan map queried with N scans of every other log (all answers are "
+                  "wrong); answered, and answered with a score >= 0.7 / 0.8");
   loc->add_option("--budget-ms", loc_options.loc.budget_ms, "whole-map search budget per query [ms] (0: none)")->capture_default_str();
   loc->add_option("--regions", loc_options.loc.max_regions, "candidate regions searched by branch and bound (0: none)")->capture_default_str();
   loc->add_option("--confident", loc_options.loc.confident_score, "answers scoring this skip the region search")->capture_default_str();

@@ -465,10 +465,16 @@ LocalizationResult Localizer::localize(const Points2& points_robot, const Eigen:
   // Evidence per point, a fit gap times the points behind it: on the Infinite Corridor's map the 45
   // wrong answers had a median of 18 distinct alternatives, the first within 10% of the best on 33
   // of them, and the truth scored below the answer on 39 (BENCHMARK.md, Global localization).
+  // Every distinct candidate is a rival here, those scoring under min_score too: the threshold says
+  // what may be answered, not what may compete. A scan from a place the map lacks (another
+  // building, the unmapped half of a map) fits many places about equally badly, most of them under
+  // min_score; a right answer's rivals under it lie far below it (on the benchmark's seven maps and
+  // half maps no right answer has them worth 1 in all).
   if (o.ambiguity_nats_per_point > 0.0) {
     double odds = 0.0;
-    for (const Candidate& a : res.alternatives)
-      odds += std::exp(-o.ambiguity_nats_per_point * static_cast<double>(pts.size()) * (best.fit - a.fit));
+    for (std::size_t c = 1; c < res.candidates.size(); ++c)
+      odds +=
+          std::exp(-o.ambiguity_nats_per_point * static_cast<double>(pts.size()) * (best.fit - res.candidates[c].fit));
     if (odds >= 1.0) return finish("ambiguous");
   }
   res.declined = false;

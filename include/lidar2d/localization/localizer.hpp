@@ -169,10 +169,12 @@ struct LocalizerOptions {
   /// A distinct alternative scoring at least this fraction of the best declines the answer
   /// (ambiguous, e.g. a symmetric building), in [0, 1].
   double ambiguity_ratio = 0.95;
-  /// ... and when the distinct alternatives together are at least as likely as the best: each one's
-  /// odds against the best are exp(-ambiguity_nats_per_point x points scored x (best fit - its
-  /// fit)), and they sum to 1 or more (many look-alike places, each a little worse than the best, as
-  /// along a repetitive corridor; a fit gap weighs more on a scan with more points). >= 0; 0 = off.
+  /// ... and when the distinct candidates (LocalizationResult::candidates, whatever their score)
+  /// together are at least as likely as the best: each one's odds against the best are
+  /// exp(-ambiguity_nats_per_point x points scored x (best fit - its fit)), and they sum to 1 or
+  /// more (many look-alike places, each a little worse than the best, as along a repetitive
+  /// corridor or for a scan from a place the map lacks; a fit gap weighs more on a scan with more
+  /// points). >= 0; 0 = off.
   double ambiguity_nats_per_point = 0.12;
   double distinct_distance_m = 1.0;  ///< alternatives farther than this from the best are distinct [m]
   double distinct_angle_rad = 20.0 * std::numbers::pi / 180.0;  ///< ... or turned by more than this [rad]
