@@ -666,10 +666,11 @@ TEST(Localization, RivalsUnderTheMinimumScoreCountAgainstTheBest) {
     if (!rivals_under) continue;
     ++cases;
     EXPECT_TRUE(r0.alternatives.empty()) << percent << "%";
+    const LocalizerOptions o;
+    const double nats = r0.score >= o.confident_score ? o.ambiguity_nats_per_point : o.unconfident_nats_per_point;
     double odds = 0.0;
     for (std::size_t c = 1; c < r0.candidates.size(); ++c)
-      odds += std::exp(-LocalizerOptions{}.ambiguity_nats_per_point * static_cast<double>(r0.num_points) *
-                       (r0.candidates[0].fit - r0.candidates[c].fit));
+      odds += std::exp(-nats * static_cast<double>(r0.num_points) * (r0.candidates[0].fit - r0.candidates[c].fit));
     const auto r = loc.localize(cluttered, frame.T_robot_laser);
     EXPECT_EQ(r.declined, odds >= 1.0) << percent << "%: odds " << odds;
     if (r.declined) {
@@ -679,6 +680,39 @@ TEST(Localization, RivalsUnderTheMinimumScoreCountAgainstTheBest) {
   }
   EXPECT_GE(cases, 1u) << "no share of cluttered beams leaves the best over min_score and every rival under it";
   EXPECT_EQ(declined, cases);
+}
+
+// A best pose under confident_score must stand further above its rivals: the ten rooms with a wide
+// pillar, and part of the scan cluttered (0.6 m returns the map lacks). Answers scoring under 0.8
+// that the confident weight (0.12 nats per point) keeps, the unconfident one (0.08) declines as
+// ambiguous; answers scoring 0.8 or more are decided alike by both.
+TEST(Localization, AnUnconfidentAnswerMustStandFurtherAboveItsRivals) {
+  const auto [map, frame] = tenRooms(0.35);
+  const Localizer loc(map, {}, tenRoomsDb());
+  LocalizerOptions same;
+  same.unconfident_nats_per_point = same.ambiguity_nats_per_point;
+  const Localizer loc_same(map, same, tenRoomsDb());
+  std::size_t confident = 0, unconfident_declined = 0;
+  for (int percent = 0; percent <= 30; percent += 2) {
+    LaserScanFields fs = frame.scan.fields();
+    for (std::size_t i = 0; i < fs.ranges.size() * static_cast<std::size_t>(percent) / 100; ++i) fs.ranges[i] = 0.6;
+    const LaserScan cluttered = LaserScan::create(fs);
+    const auto r = loc.localize(cluttered, frame.T_robot_laser);
+    const auto r_same = loc_same.localize(cluttered, frame.T_robot_laser);
+    if (r_same.declined) continue;
+    if (r_same.score >= LocalizerOptions{}.confident_score) {
+      ++confident;
+      EXPECT_FALSE(r.declined) << percent << "%: " << r.reason;
+    } else if (r.declined) {
+      EXPECT_EQ(r.reason, "ambiguous") << percent << "%";
+      ++unconfident_declined;
+    }
+  }
+  EXPECT_GE(confident, 1u);
+  EXPECT_GE(unconfident_declined, 1u);
+  LocalizerOptions bad;
+  bad.unconfident_nats_per_point = -1.0;
+  EXPECT_TRUE(test::throwsError([&] { bad.validate(); }, ErrorKind::kInvalidArgument, {"unconfident_nats_per_point"}));
 }
 
 TEST(Localization, ScanWithNoValidBeamsIsUnknown) {

@@ -298,6 +298,11 @@ void addLocalizeCommands(CLI::App& app) {
                   "exp(-NATS x points scored x its fit gap to the best), summed (docs/localization.md); 0: off")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
+  sub->add_option("--unconfident-nats", a->options.unconfident_nats_per_point,
+                  "the same weight for a best pose scoring under 0.8, which must stand further above its rivals "
+                  "(docs/localization.md)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
   sub->add_option("--candidates", a->candidates,
                   "also write the best K distinct candidate poses of every scan, whatever their score, to OUTPUT.candidates "
                   "('t rank x y theta score fit' per line, ranked by fit; 0: none)")

@@ -125,6 +125,7 @@ def load_localization_db(path: _Path) -> LocalizationDatabase: ...
 class Localizer:
     def __init__(self, map: MapImage, database: Union[None, LocalizationDatabase, _Path] = None, *,
                  min_score: float = 0.5, ambiguity_ratio: float = 0.95, ambiguity_nats_per_point: float = 0.12,
+                 unconfident_nats_per_point: float = 0.08,
                  budget_ms: float = 150.0, max_regions: int = 24, profile_candidates: int = 64,
                  max_candidates: int = 5000, fallback_branch_and_bound: bool = False,
                  threads: int = 2) -> None: ...

@@ -89,16 +89,16 @@ void bindLocalization(py::module_& m) {
         return PyDatabase{io::readLocalizationDatabase(p)};
       }, py::arg("path"), "Reads a database file written by save() or `lidar2d localize-index`.");
 
-  py::class_<localization::Localizer>(m, "Localizer",
-                                      "Global localization of single scans in a map, no initial pose.")
+  py::class_<localization::Localizer>(m, "Localizer", "Global localization of single scans in a map, no initial pose.")
       .def(py::init([](const OccupancyImage& map, const py::handle& database, double min_score, double ambiguity_ratio,
-                       double ambiguity_nats_per_point, double budget_ms, std::size_t max_regions,
-                       std::size_t profile_candidates, std::size_t max_candidates, bool fallback_branch_and_bound,
-                       std::size_t threads) {
+                       double ambiguity_nats_per_point, double unconfident_nats_per_point, double budget_ms,
+                       std::size_t max_regions, std::size_t profile_candidates, std::size_t max_candidates,
+                       bool fallback_branch_and_bound, std::size_t threads) {
              localization::LocalizerOptions o;
              o.min_score = min_score;
              o.ambiguity_ratio = ambiguity_ratio;
              o.ambiguity_nats_per_point = ambiguity_nats_per_point;
+             o.unconfident_nats_per_point = unconfident_nats_per_point;
              o.budget_ms = budget_ms;
              o.max_regions = max_regions;
              o.profile_candidates = profile_candidates;
@@ -114,6 +114,7 @@ void bindLocalization(py::module_& m) {
            py::arg("map"), py::arg("database") = py::none(), py::kw_only(),
            py::arg("min_score") = loc_defaults.min_score, py::arg("ambiguity_ratio") = loc_defaults.ambiguity_ratio,
            py::arg("ambiguity_nats_per_point") = loc_defaults.ambiguity_nats_per_point,
+           py::arg("unconfident_nats_per_point") = loc_defaults.unconfident_nats_per_point,
            py::arg("budget_ms") = loc_defaults.budget_ms, py::arg("max_regions") = loc_defaults.max_regions,
            py::arg("profile_candidates") = loc_defaults.profile_candidates,
            py::arg("max_candidates") = loc_defaults.max_candidates,
@@ -122,11 +123,14 @@ void bindLocalization(py::module_& m) {
            "map: a MapImage; database: None (built here), a LocalizationDatabase (which the localizer\n"
            "takes over) or a database file path. A database of another map raises lidar2d.Error.\n"
            "Options as `lidar2d localize` (docs/localization.md): min_score (--min-score), ambiguity_ratio\n"
-           "(--ambiguity), ambiguity_nats_per_point (--ambiguity-nats), budget_ms (--budget-ms), max_regions\n"
+           "(--ambiguity), ambiguity_nats_per_point (--ambiguity-nats), unconfident_nats_per_point\n"
+           "(--unconfident-nats), budget_ms (--budget-ms), max_regions\n"
            "(--regions), profile_candidates (--profile-candidates), max_candidates (--prescored),\n"
            "fallback_branch_and_bound (--fallback), threads (1: all on the calling thread); a bad one raises\n"
            "lidar2d.Error naming it.")
-      .def("localize", [](const localization::Localizer& self, const py::handle& scan) {
+      .def(
+          "localize",
+          [](const localization::Localizer& self, const py::handle& scan) {
             localization::LocalizationResult r;
             if (py::isinstance<Frame>(scan)) {
               const Frame& f = scan.cast<const Frame&>();
@@ -138,7 +142,8 @@ void bindLocalization(py::module_& m) {
               r = self.localize(p);
             }
             return resultDict(r);
-          }, py::arg("scan"),
+          },
+          py::arg("scan"),
           "Localizes one scan (a Frame, or (N, 2) points in the robot frame) on its own. Returns a dict:\n"
           "declined, reason, pose (SE2 T_world_robot or None), score in [0, 1], alternatives [(SE2, score)]\n"
           "(distinct poses scoring at least min_score), candidates [(SE2, score, fit)] (every verified distinct\n"

@@ -176,6 +176,12 @@ struct LocalizerOptions {
   /// corridor or for a scan from a place the map lacks; a fit gap weighs more on a scan with more
   /// points). >= 0; 0 = off.
   double ambiguity_nats_per_point = 0.12;
+  /// The same weight for a best pose scoring under `confident_score`, which leaves more of its scan
+  /// unexplained: it must stand further above its rivals (a smaller weight per point makes each
+  /// rival likelier). A scan from a place the map lacks is answered, if at all, by such a pose
+  /// (BENCHMARK.md, global localization: other buildings and half maps). >= 0; used only while
+  /// `ambiguity_nats_per_point` > 0.
+  double unconfident_nats_per_point = 0.08;
   double distinct_distance_m = 1.0;  ///< alternatives farther than this from the best are distinct [m]
   double distinct_angle_rad = 20.0 * std::numbers::pi / 180.0;  ///< ... or turned by more than this [rad]
   /// Candidates from the range-profile signature (database positions whose profile, turned in
