@@ -351,6 +351,11 @@ TEST(LocalizationMirror, ScansInTheMirroredMapAreToldFromScansOfAnotherPlace) {
   const localization::MirrorCheckResult r = in_mirror.run(mirrored_map);
   EXPECT_EQ(r.tried, 12u);
   EXPECT_TRUE(r.mirrored()) << r.placed << " of " << r.tried << " mirror images placed";
+  // The check runs on a log of which fewer than a fifth of the scans were placed, and only then.
+  const auto few_placed = in_mirror.runIfFewPlaced(mirrored_map, n);
+  ASSERT_TRUE(few_placed.has_value());
+  EXPECT_EQ(few_placed->placed, r.placed);
+  EXPECT_FALSE(in_mirror.runIfFewPlaced(mirrored_map, 5 * in_mirror.added()).has_value()) << "80% placed";
 
   // The corridor world's scans in the open world's map (upright): few mirror images placed.
   const SimMap& other = corridorWorld();

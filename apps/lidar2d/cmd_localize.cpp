@@ -188,15 +188,9 @@ void runLocalize(const LocArgs& a) {
   const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
   if (cand_out) cand_out->commit();
   // A log of which almost nothing is placed: are the scans and the map mirror images of each other?
-  // (Checked only then: it localizes a dozen more scans.)
-  constexpr double kMirrorCheckBelow = 0.2;
-  std::optional<localization::MirrorCheckResult> mirrored;
-  if (static_cast<double>(tally.answered) < kMirrorCheckBelow * static_cast<double>(scans) &&
-      mirror_check.added() >= localization::MirrorCheckResult::kMinTried) {
-    mirrored = mirror_check.run(*loc);
-    if (mirrored->mirrored())
-      std::cerr << mirroredScansWarning(a.map, tally.declined, scans, mirrored->placed, mirrored->tried);
-  }
+  const std::optional<localization::MirrorCheckResult> mirrored = mirror_check.runIfFewPlaced(*loc, scans);
+  if (mirrored && mirrored->mirrored())
+    std::cerr << mirroredScansWarning(a.map, tally.declined, scans, mirrored->placed, mirrored->tried);
   const double total_s = seconds(t0);
   nlohmann::json j;
   j["map"] = a.map;

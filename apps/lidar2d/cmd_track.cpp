@@ -164,14 +164,10 @@ void runTrack(const TrackArgs& a) {
   out.commit();
   const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
   // A log of which almost nothing is placed: are the scans and the map mirror images of each other?
-  constexpr double kMirrorCheckBelow = 0.2;
-  std::optional<localization::MirrorCheckResult> mirrored;
-  if (static_cast<double>(scans - counts[2]) < kMirrorCheckBelow * static_cast<double>(scans) &&
-      mirror_check.added() >= localization::MirrorCheckResult::kMinTried) {
-    mirrored = mirror_check.run(tracker->localizer());
-    if (mirrored->mirrored())
-      std::cerr << mirroredScansWarning(a.map, counts[2], scans, mirrored->placed, mirrored->tried);
-  }
+  const std::optional<localization::MirrorCheckResult> mirrored =
+      mirror_check.runIfFewPlaced(tracker->localizer(), scans);
+  if (mirrored && mirrored->mirrored())
+    std::cerr << mirroredScansWarning(a.map, counts[2], scans, mirrored->placed, mirrored->tried);
 
   const auto share = [&](std::size_t n) { return static_cast<double>(n) / static_cast<double>(scans); };
   nlohmann::json j;

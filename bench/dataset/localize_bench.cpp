@@ -107,7 +107,7 @@ std::string calibrationCurve(const std::string& name, const std::vector<Answer>&
 }
 
 // Every `bo.stride`-th scan of `log` localized in `map` on its own: the share answered, how many
-// consecutive answered pairs agree with the odometry (0.3 m, 5 deg), and, when under 20% are
+// consecutive answered pairs agree with the odometry (0.3 m, 5 deg), and, when almost none are
 // answered, whether their mirror images would be (localization::MirrorCheck). Printed as one line.
 void localizeWithOdometry(const std::string& name, const OccupancyImage& map, const std::string& log,
                           const io::ReaderOptions& ro, const LocalizeBenchOptions& bo) {
@@ -143,10 +143,8 @@ void localizeWithOdometry(const std::string& name, const OccupancyImage& map, co
     if (have_odom) prev_odom = *f->T_odom_robot;
   }
   std::string mirrored;
-  if (5 * answered < n && mirror.added() >= localization::MirrorCheckResult::kMinTried) {
-    const auto m = mirror.run(loc);
-    mirrored = fmt::format("; mirror images of the declined placed: {} of {}", m.placed, m.tried);
-  }
+  if (const auto m = mirror.runIfFewPlaced(loc, n))
+    mirrored = fmt::format("; mirror images of the declined placed: {} of {}", m->placed, m->tried);
   std::cout << fmt::format(
       "\n{} ({}x{} cells at {} m; database {:.2f} s, {:.1f} MB): {} scans (every {}), answered {:.1f}%, consecutive "
       "answered pairs consistent with odometry (0.3 m, 5 deg) {} of {} ({:.1f}%), median {:.1f} ms, p95 {:.1f} ms{}\n",

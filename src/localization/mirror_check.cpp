@@ -38,4 +38,12 @@ MirrorCheckResult MirrorCheck::run(const Localizer& localizer) const {
   return r;
 }
 
+std::optional<MirrorCheckResult> MirrorCheck::runIfFewPlaced(const Localizer& localizer, std::size_t scans) const {
+  const std::size_t placed = scans > added_ ? scans - added_ : 0;
+  if (!(static_cast<double>(placed) < kCheckBelow * static_cast<double>(scans)) ||
+      added_ < MirrorCheckResult::kMinTried)
+    return std::nullopt;
+  return run(localizer);
+}
+
 }  // namespace lidar2d::localization

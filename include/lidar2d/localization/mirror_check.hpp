@@ -12,6 +12,7 @@
 /// are placed and the scans were not, the caller says so (`lidar2d localize`, `lidar2d track`).
 
 #include <cstddef>
+#include <optional>
 #include <vector>
 
 #include "lidar2d/core/laser_scan.hpp"
@@ -48,6 +49,12 @@ class MirrorCheck {
   /// Localizes the mirror image of up to `max_samples` of the kept scans, spread evenly. Thread-safe
   /// as Localizer::localize is.
   MirrorCheckResult run(const Localizer& localizer) const;
+  /// `run`, for a log of `scans` scans of which every one not placed was given to `add`, when fewer
+  /// than `kCheckBelow` of them were placed and at least MirrorCheckResult::kMinTried were not
+  /// (a log most of whose scans are placed is neither mirrored nor worth a dozen more queries);
+  /// otherwise std::nullopt.
+  std::optional<MirrorCheckResult> runIfFewPlaced(const Localizer& localizer, std::size_t scans) const;
+  static constexpr double kCheckBelow = 0.2;  ///< share of the scans placed
 
  private:
   struct Sample {
