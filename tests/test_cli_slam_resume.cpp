@@ -129,6 +129,14 @@ TEST_F(CliSlamResume, TrackLocalizesInAStateWithoutAnInitialPose) {
   EXPECT_EQ(j["eval"]["wrong_while_tracking"], 0);
   EXPECT_GT(j["eval"]["tracking_within_share"].get<double>(), 0.95);
   EXPECT_LT(j["time_to_first_fix_s"].get<double>(), 1.0);
+  // A bare image's options do not apply to a state: usage errors, no output.
+  for (const char* option : {"--origin=1,2,0", "--image-rows-up"}) {
+    const auto bad = runCli({"track", (second() / "state.l2d").string(), log().string(), option, "-o",
+                             (t.path() / "bad.txt").string(), "-q"});
+    EXPECT_EQ(bad.exit_code, 2) << option << ": " << bad.err;
+    EXPECT_NE(bad.err.find("not to a SLAM state"), std::string::npos) << bad.err;
+    EXPECT_FALSE(std::filesystem::exists(t.path() / "bad.txt")) << option;
+  }
 }
 
 }  // namespace

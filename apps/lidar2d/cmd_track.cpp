@@ -75,6 +75,8 @@ OccupancyImage readTrackMap(const TrackArgs& a) {
   if (!isStateFile(a.map)) return readMapChecked(a.map, a.bare).map;
   if (a.bare.origin)
     throw CLI::ValidationError(a.bare.origin_flag, "applies to a bare image MAP, not to a SLAM state");
+  if (a.bare.rows_up)
+    throw CLI::ValidationError(a.bare.rows_up_flag, "applies to a bare image MAP, not to a SLAM state");
   const slam::State state = slam::readStateFile(a.map);
   mapping::MapOptions mo;
   mo.resolution_m = a.bare.resolution.value_or(0.05);
