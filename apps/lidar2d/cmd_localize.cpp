@@ -188,9 +188,8 @@ void runLocalize(const LocArgs& a) {
   const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
   if (cand_out) cand_out->commit();
   // A log of which almost nothing is placed: are the scans and the map mirror images of each other?
-  const std::optional<localization::MirrorCheckResult> mirrored = mirror_check.runIfFewPlaced(*loc, scans);
-  if (mirrored && mirrored->mirrored())
-    std::cerr << mirroredScansWarning(a.map, tally.declined, scans, mirrored->placed, mirrored->tried);
+  const nlohmann::json mirror_check_json =
+      reportMirrorCheck(mirror_check.runIfFewPlaced(*loc, scans), a.map, tally.declined, scans);
   const double total_s = seconds(t0);
   nlohmann::json j;
   j["map"] = a.map;
@@ -207,8 +206,7 @@ void runLocalize(const LocArgs& a) {
   j["declined"] = tally.declined;
   j["decline_rate"] = static_cast<double>(tally.declined) / static_cast<double>(scans);
   j["decline_reasons"] = reasons;
-  if (mirrored)
-    j["mirror_check"] = {{"tried", mirrored->tried}, {"placed", mirrored->placed}, {"mirrored", mirrored->mirrored()}};
+  if (!mirror_check_json.is_null()) j["mirror_check"] = mirror_check_json;
   j["query_ms"] = {{"median", eval::percentile(times_ms, 0.5)},
                    {"p95", eval::percentile(times_ms, 0.95)},
                    {"max", eval::percentile(times_ms, 1.0)},

@@ -166,10 +166,8 @@ void runTrack(const TrackArgs& a) {
   out.commit();
   const std::vector<std::string> log_warnings = warnAboutLog(a.log, *source);
   // A log of which almost nothing is placed: are the scans and the map mirror images of each other?
-  const std::optional<localization::MirrorCheckResult> mirrored =
-      mirror_check.runIfFewPlaced(tracker->localizer(), scans);
-  if (mirrored && mirrored->mirrored())
-    std::cerr << mirroredScansWarning(a.map, counts[2], scans, mirrored->placed, mirrored->tried);
+  const nlohmann::json mirror_check_json =
+      reportMirrorCheck(mirror_check.runIfFewPlaced(tracker->localizer(), scans), a.map, counts[2], scans);
 
   const auto share = [&](std::size_t n) { return static_cast<double>(n) / static_cast<double>(scans); };
   nlohmann::json j;
@@ -190,8 +188,7 @@ void runTrack(const TrackArgs& a) {
         "no time to it (time_to_first_fix_s null), only the {} scans before it (scans_to_first_fix)\n",
         a.log, *scans_to_first_fix);
   j["relocalizations"] = relocalizations;
-  if (mirrored)
-    j["mirror_check"] = {{"tried", mirrored->tried}, {"placed", mirrored->placed}, {"mirrored", mirrored->mirrored()}};
+  if (!mirror_check_json.is_null()) j["mirror_check"] = mirror_check_json;
   j["tracking_beyond_map"] = {{"scans", beyond_map}, {"share", share(beyond_map)}};
   j["tracked_scan_ms"] = timing(track_ms);
   j["global_fix_ms"] = timing(fix_ms);

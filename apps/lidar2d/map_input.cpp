@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <iostream>
 #include <system_error>
 #include <vector>
 
@@ -30,14 +31,17 @@ io::MapFile readMapChecked(const std::string& path, const BareMapOptions& bare) 
   return io::readMapImage(path, y);
 }
 
-std::string mirroredScansWarning(const std::string& map, std::size_t declined, std::size_t scans,
-                                 std::size_t mirrored_placed, std::size_t mirrored_tried) {
-  return fmt::format(
-      "lidar2d: warning: {}: {} of {} scans could not be placed, but {} of {} tried as their mirror image were: the "
-      "scans and the map are mirror images of each other. Either the laser is mounted the other way up from how it "
-      "is read (an upside-down laser: --laser-mount X,Y,THETA,flipped; docs/file-formats.md, laser mounting) or the "
-      "map image is mirrored (a bare image whose first row is its lowest y: --image-rows-up)\n",
-      map, declined, scans, mirrored_placed, mirrored_tried);
+nlohmann::json reportMirrorCheck(const std::optional<localization::MirrorCheckResult>& check, const std::string& map,
+                                 std::size_t unplaced, std::size_t scans) {
+  if (!check) return nullptr;
+  if (check->mirrored())
+    std::cerr << fmt::format(
+        "lidar2d: warning: {}: {} of {} scans could not be placed, but {} of {} tried as their mirror image were: "
+        "the scans and the map are mirror images of each other. Either the laser is mounted the other way up from "
+        "how it is read (an upside-down laser: --laser-mount X,Y,THETA,flipped; docs/file-formats.md, laser "
+        "mounting) or the map image is mirrored (a bare image whose first row is its lowest y: --image-rows-up)\n",
+        map, unplaced, scans, check->placed, check->tried);
+  return {{"tried", check->tried}, {"placed", check->placed}, {"mirrored", check->mirrored()}};
 }
 
 void addBareMapOptions(CLI::App* sub, BareMapOptions& bare, const std::string& what) {

@@ -1,14 +1,18 @@
 #pragma once
 // A map given on the command line: a map_server YAML, or a bare PGM/PNG image (a map drawn or
-// exported by hand) whose resolution and origin the command line states. Shared by every command
-// that reads a map (localize-index, localize, simulate --map, map --prior).
+// exported by hand) whose resolution, origin and row order the command line states. Shared by every
+// command that reads a map (localize-index, localize, track, simulate --map, map --prior); and what
+// localize and track say when the scans and the map are mirror images of each other.
 
 #include <CLI/CLI.hpp>
+#include <cstddef>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 
 #include "lidar2d/core/se2.hpp"
 #include "lidar2d/io/map_file.hpp"
+#include "lidar2d/localization/mirror_check.hpp"
 
 namespace lidar2d::cli {
 
@@ -37,10 +41,11 @@ void addBareMapOptions(CLI::App* sub, BareMapOptions& bare, const std::string& w
 /// lidar2d::Error naming the file and field.
 io::MapFile readMapChecked(const std::string& path, const BareMapOptions& bare);
 
-/// The warning for a log whose scans the localizer could not place but whose mirror images it did
-/// (localization::MirrorCheck): the laser's mounting or the map image is mirrored, and how to say
-/// which. `declined` of `scans` were not placed; `map` names the map.
-std::string mirroredScansWarning(const std::string& map, std::size_t declined, std::size_t scans,
-                                 std::size_t mirrored_placed, std::size_t mirrored_tried);
+/// What `localize` and `track` say of their localization::MirrorCheck: nothing (null) when it did
+/// not run; else its `mirror_check` JSON object ({tried, placed, mirrored}), and, when the scans and
+/// the map are mirror images of each other, a warning on stderr naming `map` (`unplaced` of `scans`
+/// were not placed) and how to tell which is mirrored.
+nlohmann::json reportMirrorCheck(const std::optional<localization::MirrorCheckResult>& check, const std::string& map,
+                                 std::size_t unplaced, std::size_t scans);
 
 }  // namespace lidar2d::cli
