@@ -1,5 +1,7 @@
 """Scan matching, maps, degeneracy, global localization and evaluation through the bindings."""
 import math
+import os
+import sys
 
 import numpy as np
 import pytest
@@ -195,3 +197,21 @@ def test_evaluation(tmp_path, office_frames):
         lidar2d.evaluate_trajectory(tmp_path / "nope.txt", truth)
     with pytest.raises(ValueError, match="not finite"):
         lidar2d.evaluate_trajectory([(0.0, (math.nan, 0, 0))], truth)
+
+
+def test_map_coverage_bench(office_log, office_frames, office_map):
+    # python/bench/map_coverage.py: the share of scans a map explains at their truth poses.
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "python", "bench"))
+    from map_coverage import explained_shares
+
+    whole = explained_shares(office_map, office_log)
+    assert whole.shape == (len(office_frames),)
+    assert np.mean(whole >= 0.5) > 0.95
+    # A map of the walls within 5 m of the first 20 scans lacks the rest of the route: the scans
+    # that built it are explained, half the others are not.
+    grid = lidar2d.OccupancyMap(resolution=0.05, max_range=5.0)
+    for frame in office_frames[:20]:
+        grid.insert(frame)
+    part = explained_shares(grid.to_image(), office_log)
+    assert np.all(part[:20] >= 0.5)
+    assert np.mean(part >= 0.5) < 0.7
