@@ -198,6 +198,11 @@ bool FrontEnd::replaces(const Candidate& c, const Candidate& best) {
   return c.res.final_cost < 0.8 * best.res.final_cost;
 }
 
+bool FrontEnd::priorVouchesFor(const Candidate& c, double min_explained) {
+  return c.sigmas <= kVouchSigmas && c.overlap.overlap >= kMinOverlap &&
+         c.overlap.explained_in_overlap >= min_explained;
+}
+
 /// Front-end match of `pts` against the local map from `T_pred`, the prediction `p` after the
 /// previous pose. `alternatives`: other starting points, tried when the prediction is not
 /// confirmed. `earlier`: the poses of earlier scans, tried when the best match still explains
@@ -292,9 +297,11 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // sees new ground (keyframes metres apart): the share explained counts only the points that
   // overlap the local map, as long as enough of them do. Not under a prior that only time widened, nor
   // after a gap: there a partial match may be another place (a robot carried while nothing was
-  // logged, whose odometry does not know, matched a look-alike part of the old place).
-  const bool vouched = in_gate && (!wide || p.from_spread) && p.time_ok && in_gate->overlap.overlap >= kMinOverlap &&
-                       in_gate->overlap.explained_in_overlap >= opt.min_explained_fraction;
+  // logged, whose odometry does not know, matched a look-alike part of the old place). Nor far from
+  // the prediction (kVouchSigmas): the prior vouches for what lies near it, and a weak match out at
+  // the gate's edge is ICP settled in a wrong minimum of a sparse scan.
+  const bool vouched =
+      in_gate && (!wide || p.from_spread) && p.time_ok && priorVouchesFor(*in_gate, opt.min_explained_fraction);
   if (in_gate && (in_gate->explained >= opt.min_explained_fraction || vouched))
     win = &*in_gate;
   // A match beyond the gate wins when the evidence outweighs the prior: a higher log-posterior

@@ -91,6 +91,12 @@ class FrontEnd {
   /// keeps the prediction along the corridor, a guess after a gap); or about as much with a
   /// clearly lower residual cost.
   static bool replaces(const Candidate& c, const Candidate& best);
+  /// Whether a prior that may vouch (frontEndMatch: narrow or drawn from the robot's own steps, no
+  /// gap) vouches for `c`, the best match within its gate, where `c` explains under
+  /// `min_explained` of the scan because the scan sees new ground: at least kMinOverlap of the scan
+  /// overlaps the local map, `min_explained` of those points are explained, and `c` lies within
+  /// kVouchSigmas of the prediction.
+  static bool priorVouchesFor(const Candidate& c, double min_explained);
 
  private:
   // Two matches explaining about as much: the prior prefers one when its log-density is this much
@@ -107,6 +113,11 @@ class FrontEnd {
   // kMinOverlap of the scan overlaps.
   static constexpr double kOverlapM = 0.5;
   static constexpr double kMinOverlap = 0.3;
+  // The prior vouches for such a match only this near the prediction (Mahalanobis distance): a
+  // match explaining under min_explained_fraction of the scan is weak evidence, and one 2-4 sigmas
+  // out was further from the truth than the prediction on every such scan of the corrected logs
+  // (26 of 26; docs/slam.md, step 4).
+  static constexpr double kVouchSigmas = 2.0;
   // An unmatched scan under an odometry prior of which less than this overlaps the local map at the
   // prediction sees only new ground (FrontEnd::track).
   static constexpr double kNewGroundOverlap = 0.1;
