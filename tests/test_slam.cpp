@@ -790,6 +790,12 @@ TEST(SlamFrontEnd, ThePriorVouchesForAWeakMatchOnlyNearThePrediction) {
   weak.overlap = {.explained = 0.21, .overlap = 0.39, .explained_in_overlap = 0.54};
   weak.sigmas = 3.9;
   EXPECT_FALSE(internal::FrontEnd::priorVouchesFor(weak, 0.5));
+  // The same match found by the correlative search, which weighed every pose of the window
+  // (belgioioso's corrected log read as it is, scan 282: the prediction 11 degrees off, the search's
+  // answer 4 sigmas out and right): vouched for.
+  weak.searched = true;
+  EXPECT_TRUE(internal::FrontEnd::priorVouchesFor(weak, 0.5));
+  weak.searched = false;
   // The same match near the prediction: the prior vouches for it (keyframes that see new ground).
   weak.sigmas = 1.5;
   EXPECT_TRUE(internal::FrontEnd::priorVouchesFor(weak, 0.5));

@@ -199,7 +199,7 @@ bool FrontEnd::replaces(const Candidate& c, const Candidate& best) {
 }
 
 bool FrontEnd::priorVouchesFor(const Candidate& c, double min_explained) {
-  return c.sigmas <= kVouchSigmas && c.overlap.overlap >= kMinOverlap &&
+  return (c.sigmas <= kVouchSigmas || c.searched) && c.overlap.overlap >= kMinOverlap &&
          c.overlap.explained_in_overlap >= min_explained;
 }
 
@@ -288,7 +288,11 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
                    std::max(opt.fallback_angular_window_rad, opt.search_max_angular_window_rad));
     const auto cr = registration::matchCorrelative(local_grid, pts, T_pred, window);
     out.used_fallback = true;
-    if (cr.T_search.isFinite()) consider(tryFrom(cr.T_search));
+    if (cr.T_search.isFinite()) {
+      Candidate c = tryFrom(cr.T_search);
+      c.searched = true;
+      consider(std::move(c));
+    }
   }
   out.explained_in_gate = bestExplained();
   const Candidate* win = nullptr;
@@ -298,8 +302,10 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // overlap the local map, as long as enough of them do. Not under a prior that only time widened, nor
   // after a gap: there a partial match may be another place (a robot carried while nothing was
   // logged, whose odometry does not know, matched a look-alike part of the old place). Nor far from
-  // the prediction (kVouchSigmas): the prior vouches for what lies near it, and a weak match out at
-  // the gate's edge is ICP settled in a wrong minimum of a sparse scan.
+  // the prediction (kVouchSigmas) unless the correlative search found it: a weak match out at the
+  // gate's edge that ICP reached from a start is a wrong minimum of a sparse scan, while the search
+  // weighed every pose of the window (a prediction 11 degrees off, odometry interpolated at repeated
+  // stamps: the search's answer, 4 sigmas out, was right).
   const bool vouched =
       in_gate && (!wide || p.from_spread) && p.time_ok && priorVouchesFor(*in_gate, opt.min_explained_fraction);
   if (in_gate && (in_gate->explained >= opt.min_explained_fraction || vouched))
