@@ -47,6 +47,9 @@ double rssMb() {
 struct PassStats {
   std::size_t scans = 0, tracking = 0, within = 0, wrong = 0, relocalizations = 0;
   std::optional<double> first_fix_s;   ///< log seconds from the pass's first scan to its first placed scan
+  std::size_t scans_to_first_fix = 0;  ///< scans before it
+  bool clock_advances = true;          ///< every stamp before the first fix later than the one before
+  std::optional<double> last_time;
   std::vector<double> ms;              ///< CPU ms per scan
   std::vector<double> tracked_ms;      ///< CPU ms per tracked scan (Tracker only)
   std::vector<double> err_m, err_deg;  ///< errors of the scans reported as tracking [m], [deg]
@@ -54,7 +57,14 @@ struct PassStats {
   void add(const Frame& f, double t0, bool placed, bool tracking_now, const SE2& pose, double cpu_ms) {
     ++scans;
     ms.push_back(cpu_ms);
-    if (placed && !first_fix_s) first_fix_s = f.time - t0;
+    if (!first_fix_s) {
+      if (last_time && !(f.time > *last_time)) clock_advances = false;
+      last_time = f.time;
+      if (placed) {
+        first_fix_s = f.time - t0;
+        scans_to_first_fix = scans - 1;
+      }
+    }
     if (!tracking_now) return;
     ++tracking;
     const SE2 e = f.T_world_robot->inverse() * pose;
@@ -68,7 +78,12 @@ struct PassStats {
     if (err_m.empty()) return "-";
     return fmt::format("{:.1f} / {:.2f}", 100.0 * eval::percentile(err_m, 0.5), eval::percentile(err_deg, 0.5));
   }
-  std::string firstFix() const { return first_fix_s ? fmt::format("{:.2f}", *first_fix_s) : std::string("never"); }
+  // As `lidar2d track` does: where the log's clock repeats or goes backwards before the fix, its time
+  // says nothing (the Infinite Corridor's clock wraps), and the scan's index stands for it.
+  std::string firstFix() const {
+    if (!first_fix_s) return "never";
+    return clock_advances ? fmt::format("{:.2f}", *first_fix_s) : fmt::format("scan {}", scans_to_first_fix);
+  }
 };
 
 PassStats trackPass(localization::Tracker& tracker, const std::vector<Frame>& frames) {
