@@ -489,8 +489,7 @@ TEST(Slam, ANarrowFieldOfViewTurningOntoAWallIsPlacedByOdometryNotLost) {
 // room, whose closures contradict the odometry across the lost track. Where the odometry puts the
 // scans, hardly any of them lies in the free space of the map before: the view there is ground the
 // submaps lack, not evidence of a carried robot, so the closures are refused and the odometry kept
-// (2.7 m ATE when it was dropped as a kidnapping; seeds 9 and 10 likewise 4.0 and 2.4 m, which no
-// longer lose their track: the prior vouches for a weak match only near its prediction).
+// (2.7 m ATE when it was dropped as a kidnapping).
 TEST(Slam, ARelocalizationShowsTheRobotCarriedOnlyWhereTheScanContradictsTheOdometrysPose) {
   const auto frames = depthCameraInTheIdenticalRooms(11);
   Slam* slam = nullptr;

@@ -19,7 +19,10 @@ import lidar2d
 
 
 def explained_shares(image: lidar2d.MapImage, log: str, max_range: float = 30.0, near_m: float = 0.1) -> np.ndarray:
-    """Per scan of `log`, the share of its returns under `max_range` within `near_m` of an occupied cell."""
+    """Per scan of `log`, the share of its returns under `max_range` within `near_m` of an occupied cell.
+
+    The hit term of the localizer's score alone (Localizer::score, not bound to Python, also counts
+    beams through walls against a pose): an upper bound on that score."""
     cells = np.asarray(image.cells)  # row 0 at the map's lowest y
     occupied = cells == 100
     reach = int(round(near_m / image.resolution))

@@ -304,8 +304,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // logged, whose odometry does not know, matched a look-alike part of the old place). Nor far from
   // the prediction (kVouchSigmas) unless the correlative search found it: a weak match out at the
   // gate's edge that ICP reached from a start is a wrong minimum of a sparse scan, while the search
-  // weighed every pose of the window (a prediction 11 degrees off, odometry interpolated at repeated
-  // stamps: the search's answer, 4 sigmas out, was right).
+  // weighed every pose of the window and is right where the odometry itself is wrong.
   const bool vouched =
       in_gate && (!wide || p.from_spread) && p.time_ok && priorVouchesFor(*in_gate, opt.min_explained_fraction);
   if (in_gate && (in_gate->explained >= opt.min_explained_fraction || vouched))
