@@ -253,6 +253,16 @@ void addTrackCommand(CLI::App& app) {
                   "direction it settles elsewhere scoring within this of it (0: off)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
+  sub->add_option("--prior-score-margin", a->options.prior_score_margin,
+                  "with odometry, a tracked match moved over 0.2 m from the prior gives way to the pose keeping the "
+                  "prior's position along that move when it scores within this of it (0: off)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  sub->add_option("--max-degenerate-path", a->options.max_degenerate_path_m,
+                  "with odometry, degenerate scans (a corridor) keep the odometry's position along it; after this "
+                  "much path over such scans in a row [m] they are reported lost (0: off, the map match places them)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   sub->add_option("--min-global-score", a->options.min_global_score,
                   "a global fix scoring below this is not taken (the scan stays lost)")
       ->capture_default_str();

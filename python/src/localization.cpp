@@ -159,8 +159,8 @@ void bindLocalization(py::module_& m) {
       .def(py::init([](const OccupancyImage& map, const py::handle& database, double min_track_score,
                        double min_global_score, std::size_t confirm_fixes, double sure_fix_score,
                        std::size_t max_lost_scans, std::size_t confirm_fixes_against_odometry,
-                       double correction_score_slope, double slide_score_margin, std::size_t recent_scans,
-                       double max_beyond_map_m) {
+                       double correction_score_slope, double slide_score_margin, double prior_score_margin,
+                       std::size_t recent_scans, double max_beyond_map_m, double max_degenerate_path_m) {
              localization::TrackerOptions o;
              o.min_track_score = min_track_score;
              o.min_global_score = min_global_score;
@@ -170,8 +170,10 @@ void bindLocalization(py::module_& m) {
              o.confirm_fixes_against_odometry = confirm_fixes_against_odometry;
              o.correction_score_slope = correction_score_slope;
              o.slide_score_margin = slide_score_margin;
+             o.prior_score_margin = prior_score_margin;
              o.recent_scans = recent_scans;
              o.max_beyond_map_m = max_beyond_map_m;
+             o.max_degenerate_path_m = max_degenerate_path_m;
              o.validate();  // before the database is taken over, so a bad option leaves it usable
              std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
@@ -179,17 +181,21 @@ void bindLocalization(py::module_& m) {
            }),
            py::arg("map"), py::arg("database") = py::none(), py::kw_only(),
            py::arg("min_track_score") = defaults.min_track_score,
-           py::arg("min_global_score") = defaults.min_global_score,
-           py::arg("confirm_fixes") = defaults.confirm_fixes, py::arg("sure_fix_score") = defaults.sure_fix_score,
-           py::arg("max_lost_scans") = defaults.max_lost_scans,
+           py::arg("min_global_score") = defaults.min_global_score, py::arg("confirm_fixes") = defaults.confirm_fixes,
+           py::arg("sure_fix_score") = defaults.sure_fix_score, py::arg("max_lost_scans") = defaults.max_lost_scans,
            py::arg("confirm_fixes_against_odometry") = defaults.confirm_fixes_against_odometry,
            py::arg("correction_score_slope") = defaults.correction_score_slope,
            py::arg("slide_score_margin") = defaults.slide_score_margin,
-           py::arg("recent_scans") = defaults.recent_scans, py::arg("max_beyond_map_m") = defaults.max_beyond_map_m,
+           py::arg("prior_score_margin") = defaults.prior_score_margin, py::arg("recent_scans") = defaults.recent_scans,
+           py::arg("max_beyond_map_m") = defaults.max_beyond_map_m,
+           py::arg("max_degenerate_path_m") = defaults.max_degenerate_path_m,
            "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md;\n"
-           "recent_scans: --recent-scans, max_beyond_map_m: --max-beyond-map);\n"
+           "recent_scans: --recent-scans, max_beyond_map_m: --max-beyond-map,\n"
+           "max_degenerate_path_m: --max-degenerate-path);\n"
            "bad options or a database of another map raise lidar2d.Error.")
-      .def("add", [](localization::Tracker& self, const Frame& frame) {
+      .def(
+          "add",
+          [](localization::Tracker& self, const Frame& frame) {
             localization::TrackResult r;
             {
               py::gil_scoped_release release;
@@ -206,11 +212,13 @@ void bindLocalization(py::module_& m) {
             d["track_seconds"] = r.track_ms / 1e3;
             d["global_seconds"] = r.global_ms / 1e3;
             return d;
-          }, py::arg("frame"),
+          },
+          py::arg("frame"),
           "Places the next scan (its odometry, when this and the previous frame have it, gives the\n"
           "prior's step; its truth is ignored). Returns a dict: status ('global', 'tracking' or 'lost'),\n"
           "pose (SE2 T_world_robot, None when lost), score in [0, 1], relocalized (a global fix after an\n"
-          "earlier one), beyond_map (tracked on the recent scans where the map explains too little), reason (why a scan was not tracked), iterations, track_seconds, global_seconds.")
+          "earlier one), beyond_map (tracked on the recent scans where the map explains too little), reason (why a "
+          "scan was not tracked), iterations, track_seconds, global_seconds.")
       .def("reset", &localization::Tracker::reset, "Forgets the pose: the next scan is placed by global localization.");
 }
 

@@ -1,5 +1,7 @@
 #include "lidar2d/localization/tracker.hpp"
 
+#include <fmt/format.h>
+
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
 #include <algorithm>
@@ -34,6 +36,7 @@ void TrackerOptions::validate() const {
   if (!(correction_score_slope >= 0 && correction_score_slope <= 1))
     throw badOption("correction_score_slope", correction_score_slope);
   if (!(slide_score_margin >= 0 && slide_score_margin <= 1)) throw badOption("slide_score_margin", slide_score_margin);
+  if (!(prior_score_margin >= 0 && prior_score_margin <= 1)) throw badOption("prior_score_margin", prior_score_margin);
   if (confirm_fixes < 1) throw badOption("confirm_fixes", static_cast<double>(confirm_fixes));
   if (confirm_fixes_against_odometry < 1)
     throw badOption("confirm_fixes_against_odometry", static_cast<double>(confirm_fixes_against_odometry));
@@ -45,6 +48,8 @@ void TrackerOptions::validate() const {
   if (max_lost_scans < 1) throw badOption("max_lost_scans", static_cast<double>(max_lost_scans));
   if (!(max_beyond_map_m > 0) || !std::isfinite(max_beyond_map_m))
     throw badOption("max_beyond_map_m", max_beyond_map_m);
+  if (!(max_degenerate_path_m >= 0) || std::isnan(max_degenerate_path_m))
+    throw badOption("max_degenerate_path_m", max_degenerate_path_m);
 }
 
 const char* toString(TrackStatus status) {
@@ -104,6 +109,10 @@ struct Tracker::State {
   std::unique_ptr<registration::IcpTarget> recent_target;
   /// Odometry path since the map alone last explained a scan (a fix or a map match) [m].
   double beyond_map_path_m = 0.0;
+  /// Odometry path since the map last pinned the position in every direction: over degenerate
+  /// scans tracked in a row (their position along the corridor from odometry alone) and, once that
+  /// passed max_degenerate_path_m, until a scan's match agrees with global localization [m].
+  double unpinned_path_m = 0.0;
 
   /// Remembers the points (robot frame) of a scan placed at `T`.
   void remember(Points2 points, const SE2& T) {
@@ -132,6 +141,7 @@ struct Tracker::State {
     recent.clear();
     recent_target.reset();
     beyond_map_path_m = 0.0;
+    unpinned_path_m = 0.0;
   }
 
   /// A checked pose: the new pose and the new start of dead reckoning.
@@ -223,7 +233,12 @@ TrackResult Tracker::add(const Frame& frame) {
     // Without odometry the prior may be metres off along a direction the scan does not constrain
     // (a corridor: the match slides along it and still explains the scan), so a degenerate scan
     // (degeneracy::analyze) is not tracked; with odometry the prior holds that direction.
-    const bool unconstrained = !with_odometry && degeneracy::analyze(points).degenerate();
+    const degeneracy::Result shape = degeneracy::analyze(points);
+    const bool unconstrained = !with_odometry && shape.degenerate();
+    // With odometry, along a degenerate scan's weak direction the map match has no say: the match
+    // would drift to wherever the field's last few cells pull it (the simulator's corridor: held
+    // back at its entrance while the robot drove 30 m on), so the prior's position is kept there.
+    const bool along_prior = with_odometry && o.max_degenerate_path_m > 0.0 && shape.degenerate();
     // Without odometry a match the scan's own lines pin may still have a rival along the map (a
     // corridor with a few doors): matched again from the pose moved 0.5 or 1 m either way along the
     // match's weakest direction, it settles elsewhere and explains the scan nearly as well.
@@ -244,7 +259,9 @@ TrackResult Tracker::add(const Frame& frame) {
     for (const SE2& init : priors) {
       m = registration::matchLikelihoodField(s.field, sub, init, o.field);
       r.iterations += m.iterations;
-      const SE2 correction = init.inverse() * m.T_target_source;
+      if (along_prior && m.T_target_source.isFinite())
+        m.T_target_source = degeneracy::constrainMatch(m.T_target_source, init, shape);
+      SE2 correction = init.inverse() * m.T_target_source;
       if (!m.T_target_source.isFinite() || m.num_inliers < o.field.min_points) {
         why = "no match";
       } else if (correction.translation().norm() > o.max_correction_m ||
@@ -254,6 +271,25 @@ TrackResult Tracker::add(const Frame& frame) {
         why = "unconstrained";
       } else {
         r.score = s.loc->score(sub, m.T_target_source, sensor);
+        if (with_odometry) {
+          // A map match may move a long way along a direction the map cannot tell (a corridor's
+          // look-alike doors): the pose that keeps the prior's position along the correction (the
+          // match's across it, and its heading) then explains the scan as well, and is taken. The
+          // score cannot tell poses within its hit distance of each other apart, so smaller
+          // corrections are the map's to make. Each slide is small enough to pass the checks below,
+          // and the next prior starts from it: on the Infinite Corridor they added up to a metre.
+          const Eigen::Vector2d c = m.T_target_source.translation() - init.translation();
+          if (o.prior_score_margin > 0.0 && c.norm() > 2.0 * s.loc->options().hit_distance_m) {
+            const SE2 near = degeneracy::remapPose(init, m.T_target_source,
+                                                   degeneracy::projectorRemovingDirection(std::atan2(c.y(), c.x())));
+            const double near_score = s.loc->score(sub, near, sensor);
+            if (near_score >= r.score - o.prior_score_margin) {
+              m.T_target_source = near;
+              r.score = near_score;
+              correction = init.inverse() * near;
+            }
+          }
+        }
         // With odometry a large correction is itself unlikely: the further the match moved from
         // the prior, the more of the scan it must explain (min_track_score at no correction, up to
         // min_track_score + correction_score_slope at max_correction). On freiburg-079 a scan in a
@@ -270,7 +306,7 @@ TrackResult Tracker::add(const Frame& frame) {
       // the match wherever it slid). Intel's half map: most lost scans were a robot turning in place
       // 1-3 m from mapped ground, facing a room the map lacks.
       if (!why.empty() && with_odometry && !s.recent.empty() && s.beyond_map_path_m <= o.max_beyond_map_m &&
-          !degeneracy::analyze(points).degenerate()) {
+          !shape.degenerate()) {
         const registration::IcpTarget& target = s.recentTarget();
         const registration::Result b = registration::alignIcp(target, sub, init, State::recentIcp());
         const SE2 c = init.inverse() * b.T_target_source;
@@ -302,10 +338,37 @@ TrackResult Tracker::add(const Frame& frame) {
       // The step is measured between checked poses only; carried priors are not evidence.
       if (s.lost == 0) s.step = s.pose->inverse() * m.T_target_source;
       if (!r.beyond_map) s.beyond_map_path_m = 0.0;
-      s.remember(sub, m.T_target_source);
-      s.placed(m.T_target_source);
       s.lost = 0;
       s.candidate.reset();
+      if (s.unpinned_path_m > o.max_degenerate_path_m && !along_prior) {
+        // The first scans the map pins again after a long corridor: their prior may be off along it
+        // by more than the match corrects (a few far points of the corridor's end hold it where it
+        // is). The match is taken when global localization, which ignores the prior, agrees with it.
+        const auto tg = Clock::now();
+        const LocalizationResult g = s.loc->localize(points, sensor);
+        r.global_ms = msSince(tg);
+        const SE2 e = g.T_world_robot.inverse() * m.T_target_source;
+        if (!g.declined && e.translation().norm() <= 2.0 * s.loc->options().hit_distance_m &&
+            std::abs(e.theta()) <= o.max_correction_rad / 3.0)
+          s.unpinned_path_m = 0.0;
+      }
+      if (along_prior || s.unpinned_path_m > o.max_degenerate_path_m)
+        s.unpinned_path_m += step.translation().norm();
+      else
+        s.unpinned_path_m = 0.0;
+      if (s.unpinned_path_m > o.max_degenerate_path_m) {
+        // Too far along a corridor on odometry alone to vouch for the position along it: the pose
+        // goes on (the map still holds the rest, and the corridor's end is matched from it), but it
+        // is not reported.
+        s.pose = m.T_target_source;
+        r.status = TrackStatus::kLost;
+        r.reason = fmt::format("{:.1f} m along a corridor on odometry alone{}", s.unpinned_path_m,
+                               along_prior ? "" : ", global localization does not confirm the match");
+        r.score = 0.0;
+        return r;
+      }
+      s.remember(sub, m.T_target_source);
+      s.placed(m.T_target_source);
       r.status = TrackStatus::kTracking;
       r.T_world_robot = m.T_target_source;
       return r;

@@ -163,6 +163,10 @@ def test_tracker(office_frames, office_map):
         lidar2d.Tracker(office_map, correction_score_slope=2.0)
     with pytest.raises(lidar2d.Error, match="max_beyond_map_m"):
         lidar2d.Tracker(office_map, max_beyond_map_m=0.0)
+    with pytest.raises(lidar2d.Error, match="prior_score_margin"):
+        lidar2d.Tracker(office_map, prior_score_margin=1.5)
+    with pytest.raises(lidar2d.Error, match="max_degenerate_path_m"):
+        lidar2d.Tracker(office_map, max_degenerate_path_m=float("nan"))
     # In the map of the whole run no scan needs the recent scans; with them off it tracks alike.
     assert not any(r["beyond_map"] for r in results)
     off = lidar2d.Tracker(office_map, recent_scans=0)

@@ -64,6 +64,13 @@ struct TrackerOptions {
   /// after a fix is the fix itself, a metre behind, and along a corridor with a few doors the match
   /// settles there. In [0, 1]; 0: off
   double slide_score_margin = 0.05;
+  /// With odometry, a tracked match whose position moved more than twice the localizer's
+  /// hit_distance_m from the prior is compared with the pose that keeps the prior's position along
+  /// that correction (the match's across it, and its heading): when that pose explains the scan
+  /// (Localizer::score) within this of the match, the map cannot tell them apart and it is taken
+  /// instead. Along a corridor with look-alike doors, small slides of the match each pass the other
+  /// checks and add up, since the next prior starts from the last. In [0, 1]; 0: off
+  double prior_score_margin = 0.05;
   /// A global fix scoring below this is not taken (the scan stays `lost`): stricter than the
   /// localizer's own min_score, because the scans after a fix are tracked from it, and a wrong fix
   /// in a part of the building the map lacks (a room like a mapped one) would be tracked on, in [0, 1]
@@ -106,6 +113,13 @@ struct TrackerOptions {
   /// not explain is no longer tracked on the recent scans (they drift by about 1-2% of the path),
   /// > 0
   double max_beyond_map_m = 10.0;
+  /// With odometry, a degenerate scan (degeneracy::analyze: a corridor) keeps its prior's position
+  /// along the corridor (degeneracy::constrainMatch); the map places it across. After this much
+  /// odometry path over such scans in a row [m], the position along the corridor is the odometry's
+  /// alone and the scans are reported `lost` (the pose goes on, and the first scan the map pins again
+  /// is tracked from it). The default allows the odometry 5% of drift before a pose 0.5 m off would be
+  /// reported. >= 0; 0: off (the map match places degenerate scans along the corridor too)
+  double max_degenerate_path_m = 10.0;
   void validate() const;
   static registration::LikelihoodFieldOptions trackingField() {
     registration::LikelihoodFieldOptions o;
