@@ -19,6 +19,11 @@
 /// localization runs until it answers. A pose is never reported as `tracking` unless its match
 /// passed the checks: an unchecked pose is `lost` (with a NaN pose).
 ///
+/// With odometry, where the map cannot tell a match from the pose at the prior's position along its
+/// correction, that pose is taken (`prior_score_margin`), and a degenerate scan (a corridor) keeps
+/// the odometry's position along the corridor, reported `lost` after `max_degenerate_path_m` of such
+/// path until global localization confirms a match.
+///
 /// With odometry, where the map explains too little of a scan (a place the map lacks, its edge),
 /// the scan is matched against the last few placed scans too (`recent_scans`) and tracked when the
 /// map and those scans together explain it, for up to `max_beyond_map_m` of path since the map
