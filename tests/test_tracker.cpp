@@ -84,6 +84,19 @@ std::size_t wrongWhileTracking(Tracker& tracker, const std::vector<Frame>& frame
   return n;
 }
 
+// The map (log-odds) of a noise-free run of `world` along `truth`, and the options of its runs.
+sim::SimulatorOptions worldOptions() {
+  sim::SimulatorOptions so;
+  so.laser.beams = 361;
+  return so;
+}
+OccupancyImage noiseFreeMap(const sim::World& world, const std::vector<sim::TimedPose>& truth) {
+  auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
+  for (const Frame& f : sim::simulate(world, truth, worldOptions().noiseFree()))
+    m->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
+  return mapping::toOccupancyImage(*m);
+}
+
 void expectAccurate(const std::vector<Frame>& frames, const std::vector<TrackResult>& res, double min_share) {
   std::size_t first_fix = res.size(), within = 0;
   for (std::size_t i = 0; i < res.size(); ++i) {
@@ -143,12 +156,8 @@ TEST(Tracker, WithoutOdometryAMatchWithARivalAlongTheMapIsNotTracked) {
   // then the noisy run as keyframes.
   const sim::Scenario sc = sim::builtinScenario("office");
   const auto truth = sim::samplePath(sc.waypoints, {}, 0);
-  sim::SimulatorOptions so;
-  so.laser.beams = 361;
-  auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
-  for (const Frame& f : sim::simulate(sc.world, truth, so.noiseFree()))
-    m->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
-  const Office o{mapping::toOccupancyImage(*m), {}};
+  const sim::SimulatorOptions so = worldOptions();
+  const Office o{noiseFreeMap(sc.world, truth), {}};
   sim::LogPerturbationOptions po;
   po.odometry_source = sim::OdometrySource::kKeepLog;
   po.keyframes.min_distance_m = 1.0;
@@ -326,12 +335,8 @@ TEST(Tracker, AMatchFarFromTheOdometryPriorNeedsMoreOfTheScanExplained) {
 TEST(Tracker, AlongABareCorridorTheOdometryHoldsAndThenTheScansAreLost) {
   const sim::Scenario sc = sim::builtinScenario("corridor");
   const auto truth = sim::samplePath(sc.waypoints, {}, 0);
-  sim::SimulatorOptions so;
-  so.laser.beams = 361;
-  auto m = mapping::makeMap(mapping::MapModel::kLogOdds, {});
-  for (const Frame& f : sim::simulate(sc.world, truth, so.noiseFree()))
-    m->insert(f.scan, *f.T_world_robot * f.T_robot_laser);
-  const OccupancyImage map = mapping::toOccupancyImage(*m);
+  const sim::SimulatorOptions so = worldOptions();
+  const OccupancyImage map = noiseFreeMap(sc.world, truth);
   sim::LogPerturbationOptions po;
   po.odometry = sim::realisticOdometryNoise();
   po.seed = 1;
