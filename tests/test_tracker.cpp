@@ -362,7 +362,7 @@ TEST(Tracker, AlongABareCorridorTheOdometryHoldsAndThenTheScansAreLost) {
 // track benchmark's realistic odometry (seed 1): map matches slid 0.3 m at a time along the corridor,
 // where a pose at the prior's position explained the scan as well, each slide passing the other
 // checks and the next prior starting from it, until scans 1776-1794 were tracked 0.55-1.04 m off.
-// Where the map cannot tell the match from the pose at the prior's position along its correction
+// Where the map cannot tell the match from the prior's position (with the match's heading)
 // (prior_score_margin), that pose is taken: none is wrong while tracking. (The office tests' coarser
 // database, for time: the same wrong scans arise without the rule.)
 TEST(Tracker, AMatchTheMapCannotTellFromThePriorKeepsThePriorAlongItsCorrection) {

@@ -254,8 +254,8 @@ void addTrackCommand(CLI::App& app) {
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--prior-score-margin", a->options.prior_score_margin,
-                  "with odometry, a tracked match moved over 0.2 m from the prior gives way to the pose keeping the "
-                  "prior's position along that move when it scores within this of it (0: off)")
+                  "with odometry, a tracked match moved over 0.2 m from the prior gives way to the prior's position "
+                  "(with the match's heading) when that scores within this of it (0: off)")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   sub->add_option("--max-degenerate-path", a->options.max_degenerate_path_m,

@@ -273,15 +273,14 @@ TrackResult Tracker::add(const Frame& frame) {
         r.score = s.loc->score(sub, m.T_target_source, sensor);
         if (with_odometry) {
           // A map match may move a long way along a direction the map cannot tell (a corridor's
-          // look-alike doors): the pose that keeps the prior's position along the correction (the
-          // match's across it, and its heading) then explains the scan as well, and is taken. The
-          // score cannot tell poses within its hit distance of each other apart, so smaller
-          // corrections are the map's to make. Each slide is small enough to pass the checks below,
-          // and the next prior starts from it: on the Infinite Corridor they added up to a metre.
+          // look-alike doors): the prior's position with the match's heading then explains the scan
+          // as well, and is taken. The score cannot tell poses within its hit distance of each other
+          // apart, so smaller corrections are the map's to make. Each slide is small enough to pass
+          // the checks below, and the next prior starts from it: on the Infinite Corridor they added
+          // up to a metre.
           const Eigen::Vector2d c = m.T_target_source.translation() - init.translation();
           if (o.prior_score_margin > 0.0 && c.norm() > 2.0 * s.loc->options().hit_distance_m) {
-            const SE2 near = degeneracy::remapPose(init, m.T_target_source,
-                                                   degeneracy::projectorRemovingDirection(std::atan2(c.y(), c.x())));
+            const SE2 near(init.x(), init.y(), m.T_target_source.theta());
             const double near_score = s.loc->score(sub, near, sensor);
             if (near_score >= r.score - o.prior_score_margin) {
               m.T_target_source = near;

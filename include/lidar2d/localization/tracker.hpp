@@ -19,8 +19,8 @@
 /// localization runs until it answers. A pose is never reported as `tracking` unless its match
 /// passed the checks: an unchecked pose is `lost` (with a NaN pose).
 ///
-/// With odometry, where the map cannot tell a match from the pose at the prior's position along its
-/// correction, that pose is taken (`prior_score_margin`), and a degenerate scan (a corridor) keeps
+/// With odometry, where the map cannot tell a match from the prior's position (with the match's
+/// heading), that pose is taken (`prior_score_margin`), and a degenerate scan (a corridor) keeps
 /// the odometry's position along the corridor, reported `lost` after `max_degenerate_path_m` of such
 /// path until global localization confirms a match.
 ///
@@ -70,8 +70,8 @@ struct TrackerOptions {
   /// settles there. In [0, 1]; 0: off
   double slide_score_margin = 0.05;
   /// With odometry, a tracked match whose position moved more than twice the localizer's
-  /// hit_distance_m from the prior is compared with the pose that keeps the prior's position along
-  /// that correction (the match's across it, and its heading): when that pose explains the scan
+  /// hit_distance_m from the prior is compared with the pose at the prior's position with the
+  /// match's heading: when that pose explains the scan
   /// (Localizer::score) within this of the match, the map cannot tell them apart and it is taken
   /// instead. Along a corridor with look-alike doors, small slides of the match each pass the other
   /// checks and add up, since the next prior starts from the last. In [0, 1]; 0: off
