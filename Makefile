@@ -7,11 +7,16 @@ DEMO_OUT ?= out
 
 # ccache, when installed (tools/install-deps.sh installs it), caches compilations across build
 # directories and clones: a clean clone rebuilds in a fraction of the time when the cache has seen
-# the same sources. CCACHE_BASEDIR makes its keys independent of where the clone lives.
+# the same sources. CCACHE_BASEDIR makes its keys independent of where the clone lives, and
+# CCACHE_NOHASHDIR keeps the working directory out of the keys of compilations with debug
+# information (the sanitizer build's -g1): otherwise every clone in another directory rebuilds
+# that build from scratch. The price: a cached object's debug information names the directory it
+# was first compiled in (sanitizer reports still give each file's path within the repository).
 CCACHE := $(shell command -v ccache 2>/dev/null)
 ifneq ($(CCACHE),)
 LAUNCHER := -DCMAKE_CXX_COMPILER_LAUNCHER=$(CCACHE) -DCMAKE_C_COMPILER_LAUNCHER=$(CCACHE)
 export CCACHE_BASEDIR := $(CURDIR)
+export CCACHE_NOHASHDIR := 1
 endif
 
 .PHONY: all build python test test-asan test-tsan-bags fuzz bench demo clean format
