@@ -227,26 +227,20 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
     const bool ok =
         c.res.status == registration::Status::kConverged || c.res.status == registration::Status::kMaxIterations;
     const bool finite = c.res.T_target_source.isFinite();
-    if (ok && finite)
-      c.overlap = overlapWith(*local_target, pts, c.res.T_target_source, opt.match_inlier_distance_m, kOverlapM);
-    c.explained = c.overlap.explained;
     c.T = c.res.T_target_source;
     if (finite) remapDegenerate(c, p, T_pred);
     // Weighed against the prior after remapping: along a corridor ICP slides anywhere, and that
     // slide says nothing against the prediction.
     c.sigmas = finite ? p.distance(T_local_prev.inverse() * c.T) : std::numeric_limits<double>::infinity();
-    // A match beyond the gate is weighed against the prior by what the scan explains at the pose
-    // it would take, the remapped one, not where ICP slid: ICP may slide metres along the weak
-    // direction and turn on the way, and the remapped pose keeps that turn at the prediction's
-    // place (edmonton's keyframes with a 5.6 m laser: slid 4.4 m and turned 38 degrees, 60% of
-    // the scan explained there, none of it at the remapped pose 5.6 sigmas from the prediction).
-    // Within the gate the slid match's share stands: rescored there too, 35 of 127 runs of the
-    // robustness benchmark ended worse, the Infinite Corridor's with a 5.6 m laser up to 2.7 times
-    // further off.
-    if (ok && finite && c.degenerate && c.sigmas > opt.prior_gate_sigmas) {
-      c.overlap = overlapWith(*local_target, pts, c.T, opt.match_inlier_distance_m, kOverlapM);
-      c.explained = c.overlap.explained;
-    }
+    // The share explained: where ICP slid, but for a degenerate match beyond the gate, which is
+    // weighed against the prior by what the scan explains at the pose it would take (the remapped
+    // one): ICP may slide metres along the weak direction and turn on the way, and the remapped
+    // pose keeps that turn at the prediction's place (edmonton's keyframes with a 5.6 m laser: 60%
+    // explained where ICP slid, none at the remapped pose). Within the gate the slid match's share
+    // stands (BENCHMARK.md, SLAM: rescored there, more runs ended further off).
+    const SE2& scored = c.degenerate && c.sigmas > opt.prior_gate_sigmas ? c.T : c.res.T_target_source;
+    if (ok && finite) c.overlap = overlapWith(*local_target, pts, scored, opt.match_inlier_distance_m, kOverlapM);
+    c.explained = c.overlap.explained;
     return c;
   };
   std::optional<Candidate> in_gate, beyond_gate;
