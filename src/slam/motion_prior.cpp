@@ -65,6 +65,38 @@ void OdometryScale::observe(const SE2& odometry_step, const SE2& matched_step) {
   if (odometry_m_ >= kMinEvidenceM) factor_ = std::clamp(scan_m_ / odometry_m_, kMinFactor, kMaxFactor);
 }
 
+void OdometryNoise::observe(const SE2& residual, double model_m, double model_rad, double floor_m, double floor_rad) {
+  if (!residual.isFinite()) return;
+  // Only steps whose sigma is mostly the distance and turn terms: on the short steps the constant
+  // terms dominate, and what strays there is the scan matching's own centimetres.
+  auto add = [](std::deque<double>& z, double value, double& factor) {
+    z.push_back(value);
+    if (z.size() > kSteps) z.pop_front();
+    if (z.size() < kMinSteps) return;
+    std::vector<double> v(z.begin(), z.end());
+    const auto k = static_cast<std::size_t>(kQuantile * static_cast<double>(v.size() - 1) + 0.5);
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+    factor = std::clamp(v[k], kMinFactor, 1.0);
+  };
+  if (model_m >= 2.0 * floor_m) add(z_m_, residual.translation().norm() / model_m, factor_m_);
+  if (model_rad >= 2.0 * floor_rad) add(z_rad_, std::abs(residual.theta()) / model_rad, factor_rad_);
+}
+
+void MotionPrior::observeOdometryNoise(const MotionPrediction& p, const SE2& matched_step) {
+  if (p.source != PriorSource::kOdometry) return;
+  const MotionPrediction model = odometryPrediction(opt_, p.delta, p.dt);
+  noise_.observe(p.delta.inverse() * matched_step, model.sigma_m, model.sigma_rad, opt_.prior_odometry_sigma_m,
+                 opt_.prior_odometry_sigma_rad);
+}
+
+void MotionPrior::narrowToOdometryNoise(MotionPrediction& p) const {
+  p.model_sigma_m = p.sigma_m;
+  p.model_sigma_rad = p.sigma_rad;
+  if (!opt_.prior_odometry_learn_noise) return;
+  p.sigma_m = std::max(opt_.prior_odometry_sigma_m, noise_.factorM() * p.sigma_m);
+  p.sigma_rad = std::max(opt_.prior_odometry_sigma_rad, noise_.factorRad() * p.sigma_rad);
+}
+
 void MotionPrior::observeOdometryStep(const MotionPrediction& p, const SE2& matched_step) {
   if (p.source == PriorSource::kOdometry) scale_.observe(p.odometry_step, matched_step);
 }
@@ -187,6 +219,7 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
         const double step_dt = p.dt;
         const std::optional<SE2> scaled = p.T_odom_scaled;
         p = odometryPrediction(opt_, SE2(appliedScale() * d.translation(), d.theta()), step_dt);
+        narrowToOdometryNoise(p);
         p.odometry_step = d;
         p.T_odom_scaled = scaled;
         p.time_ok = time_ok;

@@ -62,6 +62,7 @@ struct SlamOptions {
   double prior_odometry_sigma_per_turn = 0.1;
   double prior_odometry_sigma_rad_per_m = 2.0 * kDeg;
   bool scale_odometry = false;
+  bool prior_odometry_learn_noise = true;
   double prior_velocity_sigma_m = 0.1;
   double prior_velocity_sigma_m_per_s = 1.0;
   double prior_velocity_sigma_rad = 5.0 * kDeg;
@@ -267,6 +268,9 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "... plus this share of the turn ..."},
     {LIDAR2D_SLAM_FIELD(prior_odometry_sigma_rad_per_m), "motion prior", "deg/m", OptionRange::atLeast(0),
      "... plus this much per metre travelled"},
+    {LIDAR2D_SLAM_FIELD(prior_odometry_learn_noise), "motion prior", "flag", OptionRange::any(),
+     "narrow those sigmas (never below their constant terms) to what the odometry's long steps strayed "
+     "from the scans' matches: the upper decile of the last 30, in sigmas (docs/slam.md, motion prior)"},
     {LIDAR2D_SLAM_FIELD(scale_odometry), "motion prior", "flag", OptionRange::any(),
      "scale odometry distances by the ratio the scans measured over the recent steps they pinned, from "
      "10 m of such steps (summary.json's odometry_scale, measured either way; off: it moved the corrected "

@@ -33,6 +33,11 @@ struct MotionPrediction {
   SE2 delta;
   double sigma_m = 0.0;
   double sigma_rad = 0.0;
+  /// The sigmas before OdometryNoise narrowed them (the model's): how far the step may honestly be
+  /// off for whether the prior is wider than ICP's basin (FrontEnd::frontEndMatch), where learning
+  /// that the odometry strays less must not make a weak match's share count on its overlap alone.
+  double model_sigma_m = 0.0;
+  double model_sigma_rad = 0.0;
   PriorSource source = PriorSource::kNone;
   /// Odometry's step when it was present but not plausible over the time it took (a start the
   /// front end also tries, so the scan can decide); `source` is then constant velocity.
@@ -93,6 +98,34 @@ class OdometryScale {
   double factor_ = 1.0;
 };
 
+/// How far the odometry's steps actually stray from what the scans measured, against the model's
+/// sigmas (SlamOptions::prior_odometry_*): the model is set wide enough for poor wheel odometry,
+/// and on good odometry with scans metres apart its distance and turn terms make a prior so wide
+/// that the correlative search over it finds look-alikes (a room turned by 90 degrees, a corridor
+/// one door on) explaining as much of a sparse scan as the right pose. The factor each sigma is
+/// narrowed by is the upper decile of the recent steps' residuals in model sigmas (so that decile
+/// lies at one sigma and the gate at four), never above the model and never below its constant
+/// terms (MotionPrior::narrowToOdometryNoise).
+class OdometryNoise {
+ public:
+  /// A step both ends of which the scans pinned, or an override of the prediction: its residual
+  /// (prediction^-1 * matched) against the model's sigmas `model_m`, `model_rad`, whose constant
+  /// terms are `floor_m`, `floor_rad`.
+  void observe(const SE2& residual, double model_m, double model_rad, double floor_m, double floor_rad);
+  /// The factors (translation, rotation) in (0, 1]: 1 until kMinSteps residuals are known.
+  double factorM() const { return factor_m_; }
+  double factorRad() const { return factor_rad_; }
+
+  static constexpr std::size_t kSteps = 30;
+  static constexpr std::size_t kMinSteps = 10;
+  static constexpr double kQuantile = 0.9;
+  static constexpr double kMinFactor = 0.2;
+
+ private:
+  std::deque<double> z_m_, z_rad_;
+  double factor_m_ = 1.0, factor_rad_ = 1.0;
+};
+
 class MotionPrior {
  public:
   explicit MotionPrior(const SlamOptions& opt) : opt_(opt) {}
@@ -124,6 +157,10 @@ class MotionPrior {
   /// The scans matched step `matched_step` of a prediction `p` from odometry, pinning both its ends
   /// (OdometryScale::observe).
   void observeOdometryStep(const MotionPrediction& p, const SE2& matched_step);
+  /// The scans placed the frame of prediction `p` at `matched_step` from the previous frame, both
+  /// ends pinned or overriding `p` (OdometryNoise::observe).
+  void observeOdometryNoise(const MotionPrediction& p, const SE2& matched_step);
+  const OdometryNoise& odometryNoise() const { return noise_; }
   /// A step they did not pin (OdometryScale::interrupt).
   void interruptOdometryScale() { scale_.interrupt(); }
   const OdometryScale& odometryScale() const { return scale_; }
@@ -148,6 +185,7 @@ class MotionPrior {
   SE2 velocityStep() const;
   void narrowToSpread(MotionPrediction& p) const;
   void widenAfterOverride(MotionPrediction& p);
+  void narrowToOdometryNoise(MotionPrediction& p) const;
 
   static constexpr std::size_t kVelocitySteps = 5;  // steps behind the constant-velocity prediction
   static constexpr std::size_t kIntervals = 21;     // intervals behind the usual interval
@@ -164,6 +202,7 @@ class MotionPrior {
   std::optional<SE2> odom_scaled_prev_;  // odom_prev_ on the scaled chain (MotionPrediction::T_odom_scaled)
   std::optional<SE2> odom_scaled_;       // the predicted frame's pose on it
   OdometryScale scale_;
+  OdometryNoise noise_;
   std::optional<SE2> heading_override_;  // the previous scan's override, when it contradicted the heading (overridden)
   // An implausible odometry step (predictImpl): the odometry reading and time before it, the step,
   // which limits it broke, and the step its scan took (remember). The next step's odometry is taken
