@@ -283,11 +283,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // fallback window, at most the search cap), then ICP from its answer: when the matches so far
   // explain too little, or when the prior is wider than ICP's basin of convergence and nothing
   // confirmed a match yet.
-  // Wide by the model's sigmas, before the odometry's learnt noise narrowed them: that the odometry
-  // strayed little on earlier steps does not let a weak match on a long step count on its overlap
-  // alone (the vouching below; orebro's keyframes took wrong ones when it did, BENCHMARK.md).
-  const bool wide =
-      std::max(p.sigma_m, p.model_sigma_m) > kIcpBasinM || std::max(p.sigma_rad, p.model_sigma_rad) > kIcpBasinRad;
+  const bool wide = p.sigma_m > kIcpBasinM || p.sigma_rad > kIcpBasinRad;
   if (bestExplained() < opt.min_explained_fraction || (wide && bestExplained() < kConfirmExplained)) {
     if (!local_grid_built) {
       local_grid.rebuild(local_points, fallback);

@@ -90,8 +90,6 @@ void MotionPrior::observeOdometryNoise(const MotionPrediction& p, const SE2& mat
 }
 
 void MotionPrior::narrowToOdometryNoise(MotionPrediction& p) const {
-  p.model_sigma_m = p.sigma_m;
-  p.model_sigma_rad = p.sigma_rad;
   if (!opt_.prior_odometry_learn_noise) return;
   p.sigma_m = std::max(opt_.prior_odometry_sigma_m, noise_.factorM() * p.sigma_m);
   p.sigma_rad = std::max(opt_.prior_odometry_sigma_rad, noise_.factorRad() * p.sigma_rad);

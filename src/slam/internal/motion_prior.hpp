@@ -33,11 +33,6 @@ struct MotionPrediction {
   SE2 delta;
   double sigma_m = 0.0;
   double sigma_rad = 0.0;
-  /// The sigmas before OdometryNoise narrowed them (the model's): how far the step may honestly be
-  /// off for whether the prior is wider than ICP's basin (FrontEnd::frontEndMatch), where learning
-  /// that the odometry strays less must not make a weak match's share count on its overlap alone.
-  double model_sigma_m = 0.0;
-  double model_sigma_rad = 0.0;
   PriorSource source = PriorSource::kNone;
   /// Odometry's step when it was present but not plausible over the time it took (a start the
   /// front end also tries, so the scan can decide); `source` is then constant velocity.
