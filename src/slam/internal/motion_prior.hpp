@@ -96,7 +96,7 @@ class OdometryScale {
 /// How far the odometry's steps actually stray from what the scans measured, against the model's
 /// sigmas (SlamOptions::prior_odometry_*): the model is set wide enough for poor wheel odometry,
 /// and on good odometry with scans metres apart its distance and turn terms make a prior so wide
-/// that the correlative search over it finds look-alikes (a room turned by 90 degrees, a corridor
+/// that the correlative search over it finds look-alikes (a room turned by 45 degrees, a corridor
 /// one door on) explaining as much of a sparse scan as the right pose. The factor each sigma is
 /// narrowed by is the upper decile of the recent steps' residuals in model sigmas (so that decile
 /// lies at one sigma and the gate at four), never above the model and never below its constant
