@@ -80,9 +80,10 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
                             d.translation().norm(), std::abs(d.theta()) / kDeg, m.rejected->sigmas,
                             toString(p.source), 100.0 * m.rejected->explained));
   }
-  // Steps both ends of which the scans pinned (neither degenerate nor against the prior) measure the
-  // odometry's distance scale.
-  if (!(m.T && prev_matched && !m.degenerate && !m.overrode_prior && odometryTrusted(p))) {
+  // A step the scans measured at both ends (matched, neither degenerate) under trusted odometry;
+  // those not taken against the prior measure the odometry's distance scale.
+  const bool measured = m.T && prev_matched && !m.degenerate && odometryTrusted(p);
+  if (!(measured && !m.overrode_prior)) {
     prior_.interruptOdometryScale();
   } else {
     prior_.observeOdometryStep(p, T_local_prev.inverse() * *m.T);
@@ -98,10 +99,9 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
                                                  : "odometry distances not scaled (scale_odometry)"));
     }
   }
-  // What the odometry strayed by on a step the scans measured at both ends, an override included
-  // (MotionPrior's learnt noise: a prior too narrow for the odometry widens again).
-  if (m.T && prev_matched && !m.degenerate && odometryTrusted(p))
-    prior_.observeOdometryNoise(p, T_local_prev.inverse() * *m.T);
+  // What the odometry strayed by on such a step, an override included (MotionPrior's learnt noise:
+  // a prior too narrow for the odometry widens again).
+  if (measured) prior_.observeOdometryNoise(p, T_local_prev.inverse() * *m.T);
   prev_matched = m.T && !m.degenerate;
   if (m.T) {
     out.T_local_robot = *m.T;

@@ -155,7 +155,6 @@ class MotionPrior {
   /// The scans placed the frame of prediction `p` at `matched_step` from the previous frame, both
   /// ends pinned or overriding `p` (OdometryNoise::observe).
   void observeOdometryNoise(const MotionPrediction& p, const SE2& matched_step);
-  const OdometryNoise& odometryNoise() const { return noise_; }
   /// A step they did not pin (OdometryScale::interrupt).
   void interruptOdometryScale() { scale_.interrupt(); }
   const OdometryScale& odometryScale() const { return scale_; }
