@@ -129,12 +129,27 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     ++s_.stats.unmatched;
     consecutive_failures = 0;
     out.placed_by_odometry = true;
+    // The odometry's pose, or the best match near it where that match is near enough and explains
+    // enough of what overlaps to correct the odometry's heading (a sparse scan's overlap pins the
+    // rotation before it pins the place).
+    std::string at = "placed by odometry";
+    if (opt.refine_odometry_placement && m.near && refinesPlacement(*m.near)) {
+      out.T_local_robot = m.near->T;
+      out.refined = true;
+      const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * m.near->T);
+      at = fmt::format(
+          "placed by odometry, refined by the best match near it ({:.2f} m / {:.1f} deg, {:.1f} sigmas; "
+          "it explains {:.0f}% of the {:.0f}% of the scan that overlaps the local map)",
+          d.translation().norm(), std::abs(d.theta()) / kDeg, m.near->sigmas,
+          100.0 * m.near->overlap.explained_in_overlap, 100.0 * m.near->overlap.overlap);
+    }
     s_.event(f, m.vouches == OdometryVouches::kNewGround
-                    ? std::string("the scan sees only new ground (it overlaps almost nothing of the local map at the "
-                                  "odometry's pose): placed by odometry")
+                    ? fmt::format("the scan sees only new ground (it overlaps almost nothing of the local map at the "
+                                  "odometry's pose): {}",
+                                  at)
                     : fmt::format("the scan does not match the local map, but no match explains more of it than the "
-                                  "best near the odometry's pose ({:.0f}%): placed by odometry",
-                                  100.0 * m.explained_in_gate));
+                                  "best near the odometry's pose ({:.0f}%): {}",
+                                  100.0 * m.explained_in_gate, at));
   } else {
     ++s_.stats.unmatched;
     ++consecutive_failures;
@@ -148,6 +163,11 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     }
   }
   return out;
+}
+
+bool FrontEnd::refinesPlacement(const Candidate& c) {
+  return c.sigmas <= kRefineSigmas && !c.degenerate && c.overlap.overlap >= kMinOverlap &&
+         c.overlap.explained_in_overlap >= kRefineExplainedInOverlap;
 }
 
 bool FrontEnd::odometryTrusted(const Prediction& p) const {
@@ -305,6 +325,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
     }
   }
   out.explained_in_gate = bestExplained();
+  out.near = in_gate;
   const Candidate* win = nullptr;
   // Within the gate of a prior narrower than ICP's basin, or of one drawn from the robot's own
   // recent steps (a keyframe log without odometry), the prior vouches for the match where the scan

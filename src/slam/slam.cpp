@@ -413,7 +413,7 @@ struct Slam::Impl {
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
                 prediction.source == internal::PriorSource::kOdometry ? prediction.T_odom_scaled : std::nullopt,
-                t.placed_by_odometry);
+                t.placed_by_odometry, t.refined);
       } else {
         rec.node = nodes_added - 1;
         rec.T_node_scan = rel;
@@ -434,14 +434,15 @@ struct Slam::Impl {
   /// nodes behind and the run is the same as without its thread.
   void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                bool degenerate, const Eigen::Vector2d& dir_local, bool restart, std::optional<SE2> odometry,
-               bool predicted = false) {
+               bool predicted = false, bool refined = false) {
     ++nodes_added;
     last_node_time = f.time;
     last_node_T_local = T_local;
     front_end.addNode(T_local, pts, restart);
     auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart, odometry,
-                 predicted]() mutable {
-      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odometry, predicted);
+                 predicted, refined]() mutable {
+      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odometry, predicted,
+                refined);
       publish();
     };
     if (back_end)
@@ -454,7 +455,7 @@ struct Slam::Impl {
   /// then the back end's searches and optimisation (backEnd).
   void graphNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                  bool degenerate, const Eigen::Vector2d& dir_local, bool restart, const std::optional<SE2>& odometry,
-                 bool predicted) {
+                 bool predicted, bool refined) {
     const SlamOptions& opt = state.opt;
     const std::size_t n = state.nodes.size();
     Node node;
@@ -486,7 +487,7 @@ struct Slam::Impl {
       state.restarts.push_back(n);
       state.untied_since = n;
     }
-    if (n > 0) internal::addSequentialConstraints(state, n, restart, predicted, degenerate, dir_local);
+    if (n > 0) internal::addSequentialConstraints(state, n, restart, predicted, refined, degenerate, dir_local);
     // A scan the front end placed by the odometry, unmatched (`predicted`; never with `restart`): how
     // far the chain drifted there is less certain, so the nodes after it search for closures at
     // every node (as a lost track's fragment does), not every loop_search_every_nodes.

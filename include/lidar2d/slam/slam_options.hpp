@@ -45,6 +45,7 @@ struct SlamOptions {
   double max_line_flatness = 0.5;
   double match_inlier_distance_m = 0.1;
   double min_explained_fraction = 0.5;
+  bool refine_odometry_placement = true;
   double alternative_start_m = 0.1;
   double alternative_start_rad = 3.0 * kDeg;
   double fallback_linear_window_m = 1.0;
@@ -233,6 +234,9 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "a point within this distance of the map counts as explained"},
     {LIDAR2D_SLAM_FIELD(min_explained_fraction), "front end", "fraction", OptionRange::fraction(),
      "a match explaining less of the scan is poor: the correlative search runs next"},
+    {LIDAR2D_SLAM_FIELD(refine_odometry_placement), "front end", "flag", OptionRange::any(),
+     "a scan the odometry places (unmatched) goes to the best match near the prediction when it lies within "
+     "1 sigma and explains 30% of the points that overlap the local map"},
     {LIDAR2D_SLAM_FIELD(alternative_start_m), "front end", "m", OptionRange::atLeast(0),
      "when the predicted step exceeds this (or the angle below), ICP also starts from no motion and from "
      "constant velocity, and the result explaining the most points wins"},

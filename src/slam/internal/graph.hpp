@@ -12,10 +12,11 @@ namespace lidar2d::slam::internal {
 
 /// The constraints from node n-1 to node `n` (n > 0): the front end's relative pose (weak along
 /// `dir_local`, the local-frame direction a degenerate match could not pin; only as strong as the
-/// prediction after a `restart`, or for a node the front end placed by odometry alone, `predicted`),
-/// and the odometry between them when both have trusted odometry (after a `restart` it is recorded
-/// as SlamState::restart_odometry).
-void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool predicted, bool degenerate,
+/// prediction after a `restart`, or for a node the front end placed by odometry alone, `predicted`;
+/// held as a loop closure when it placed the node at a weak match near the odometry, `refined`), and
+/// the odometry between them when both have trusted odometry (after a `restart` it is recorded as
+/// SlamState::restart_odometry).
+void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool predicted, bool refined, bool degenerate,
                               const Eigen::Vector2d& dir_local);
 
 /// Optimises every node's T_world_robot (node 0 fixed) with at most `iterations`; the front end's
