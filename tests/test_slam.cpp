@@ -417,6 +417,15 @@ TEST(Slam, KeyframesThatSeeOnlyNewGroundArePlacedByOdometryNotLost) {
   EXPECT_LT(ate, 0.5);
 }
 
+/// Clutter seen from new angles: `moved` beams in every five of `frame`'s scan moved 0.25 m along
+/// the beam, one nearer and the next further.
+void clutter(Frame& frame, std::size_t moved) {
+  LaserScanFields f = frame.scan.fields();
+  for (std::size_t i = 0; i < f.ranges.size(); ++i)
+    if (i % 5 < moved && std::isfinite(f.ranges[i])) f.ranges[i] += i % 2 == 0 ? -0.25 : 0.25;
+  frame.scan = LaserScan::create(f);
+}
+
 // Scans that do not match but point nowhere else: six in a row of the office run, each with four
 // beams in five moved 0.25 m along the beam (objects near the walls, seen from new angles: what
 // orebro's cluttered rooms gave). The best match near the odometry explains under half of the first
@@ -425,12 +434,7 @@ TEST(Slam, KeyframesThatSeeOnlyNewGroundArePlacedByOdometryNotLost) {
 // lost track, a restarted local map and a fragment that must be found again.
 TEST(Slam, ScansThatMatchNothingBetterElsewhereArePlacedByOdometryNotLost) {
   std::vector<Frame> frames = simulateWorld("office", 3, 500);
-  for (std::size_t k = 300; k < 306; ++k) {
-    LaserScanFields f = frames[k].scan.fields();
-    for (std::size_t i = 0; i < f.ranges.size(); ++i)
-      if (i % 5 < 4 && std::isfinite(f.ranges[i])) f.ranges[i] += i % 2 == 0 ? -0.25 : 0.25;
-    frames[k].scan = LaserScan::create(f);
-  }
+  for (std::size_t k = 300; k < 306; ++k) clutter(frames[k], 4);
   Slam* slam = nullptr;
   const auto est = runSlam(frames, SlamOptions{}, &slam);
   const std::string all = eventText(*slam);
@@ -468,12 +472,7 @@ TEST(Slam, AWeakMatchNearTheOdometryCorrectsTheHeadingOfTheScansItPlaces) {
     po.keyframes.min_turn_rad = 30.0 * r.keyframe_m * kDeg;
     po.seed = r.seed;
     std::vector<Frame> frames = sim::perturbLog(simulateWorld("office", r.seed), po);
-    for (std::size_t k = r.every; k < frames.size(); k += r.every) {
-      LaserScanFields f = frames[k].scan.fields();
-      for (std::size_t i = 0; i < f.ranges.size(); ++i)
-        if (i % 5 < 3 && std::isfinite(f.ranges[i])) f.ranges[i] += i % 2 == 0 ? -0.25 : 0.25;
-      frames[k].scan = LaserScan::create(f);
-    }
+    for (std::size_t k = r.every; k < frames.size(); k += r.every) clutter(frames[k], 3);
     Slam* slam = nullptr;
     const auto refined_est = runSlam(frames, SlamOptions{}, &slam);
     std::vector<std::size_t> refined;
