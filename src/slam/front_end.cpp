@@ -363,6 +363,14 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
         out.vouches = OdometryVouches::kBestMatchNearIt;
     }
   }
+  // A match near the prediction that refines a placement (refinesPlacement) vouches for the
+  // odometry too where a weak match farther away explains more of the scan, or where a match beyond
+  // the gate was refused: within a sigma of the odometry it pins what overlaps (the scans lost so
+  // on sparse keyframes, left at the prediction and counted towards a lost track, turned the
+  // estimate by up to 14 degrees).
+  if (!win && out.vouches == OdometryVouches::kNo && !beyond_wins && in_gate && opt.refine_odometry_placement &&
+      odometryTrusted(p) && refinesPlacement(*in_gate))
+    out.vouches = OdometryVouches::kBestMatchNearIt;
   if (beyond_wins && (win || out.vouches == OdometryVouches::kNo)) {
     win = &*beyond_gate;
     out.overrode_prior = true;

@@ -54,7 +54,8 @@ class FrontEnd {
   /// odometry rather than counted towards a lost track: it overlaps almost nothing of the local map
   /// at the prediction (it sees only new ground), or the best match near the prediction, though too
   /// weak to take (or the prediction itself, where ICP found too few pairs), explains more of it
-  /// than any match farther away (the scan points nowhere else).
+  /// than any match farther away (the scan points nowhere else), or refines the placement
+  /// (refinesPlacement) where no match beyond the gate outweighs the prior.
   enum class OdometryVouches { kNo, kNewGround, kBestMatchNearIt };
 
   /// True once a scan was remembered.
