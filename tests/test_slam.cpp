@@ -501,6 +501,28 @@ TEST(Slam, AWeakMatchNearTheOdometryCorrectsTheHeadingOfTheScansItPlaces) {
   EXPECT_LT(refined_deg, unrefined_deg) << "the odometry's own: " << odometry_deg;
 }
 
+// Keyframes 3 m / 90 degrees apart with a 6 m laser: some scans match too little to be taken while
+// a weak match farther away explains more of them without outweighing the prior. Such a scan used
+// to be left at the prediction and counted towards a lost track; where its best match near the
+// odometry pins it (refinesPlacement), it is placed there. In the identical rooms and the office
+// (seed 1), without refined placements and with them: ATE 0.156 -> 0.090 m and 0.436 -> 0.154 m.
+TEST(Slam, AScanAFartherMatchExplainsBetterIsPlacedAtTheNearMatchThatPinsIt) {
+  for (const char* world : {"symmetric", "office"}) {
+    sim::LaserModel laser;
+    laser.range_max_m = 6.0;
+    const auto frames = simulatedWith(world, laser, 10.0, 1, std::pair{3.0, 90.0});
+    Slam* slam = nullptr;
+    const double ate = ateAgainstTruth(runSlam(frames, SlamOptions{}, &slam), frames).trans_m.rmse;
+    EXPECT_GT(countEvents(*slam, "a match farther away explains more of it"), 0)
+        << world << ": the case no longer arises\n"
+        << eventText(*slam);
+    SlamOptions off;
+    off.refine_odometry_placement = false;
+    const double without = ateAgainstTruth(runSlam(frames, off), frames).trans_m.rmse;
+    EXPECT_LT(ate, without) << world;
+  }
+}
+
 /// SLAM with its defaults on `frames`: the rule whose event holds `what` places scans by the
 /// odometry, no lost track restarts the local map, the run ends in one fragment within `max_ate_m`.
 void expectPlacedByOdometryNotLost(const std::vector<Frame>& frames, const char* what, double max_ate_m) {

@@ -143,13 +143,22 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
           d.translation().norm(), std::abs(d.theta()) / kDeg, m.near->sigmas,
           100.0 * m.near->overlap.explained_in_overlap, 100.0 * m.near->overlap.overlap);
     }
-    s_.event(f, m.vouches == OdometryVouches::kNewGround
-                    ? fmt::format("the scan sees only new ground (it overlaps almost nothing of the local map at the "
-                                  "odometry's pose): {}",
-                                  at)
-                    : fmt::format("the scan does not match the local map, but no match explains more of it than the "
-                                  "best near the odometry's pose ({:.0f}%): {}",
-                                  100.0 * m.explained_in_gate, at));
+    switch (m.vouches) {
+      case OdometryVouches::kNewGround:
+        s_.event(f, fmt::format("the scan sees only new ground (it overlaps almost nothing of the local map at the "
+                                "odometry's pose): {}",
+                                at));
+        break;
+      case OdometryVouches::kNearMatchRefines:
+        s_.event(f, fmt::format("the scan does not match the local map, and a match farther away explains more of it "
+                                "without outweighing the prior, but the best near the odometry's pose pins it: {}",
+                                at));
+        break;
+      default:
+        s_.event(f, fmt::format("the scan does not match the local map, but no match explains more of it than the "
+                                "best near the odometry's pose ({:.0f}%): {}",
+                                100.0 * m.explained_in_gate, at));
+    }
   } else {
     ++s_.stats.unmatched;
     ++consecutive_failures;
@@ -370,7 +379,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // estimate by up to 14 degrees).
   if (!win && out.vouches == OdometryVouches::kNo && !beyond_wins && in_gate && opt.refine_odometry_placement &&
       odometryTrusted(p) && refinesPlacement(*in_gate))
-    out.vouches = OdometryVouches::kBestMatchNearIt;
+    out.vouches = OdometryVouches::kNearMatchRefines;
   if (beyond_wins && (win || out.vouches == OdometryVouches::kNo)) {
     win = &*beyond_gate;
     out.overrode_prior = true;

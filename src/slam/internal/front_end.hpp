@@ -54,9 +54,9 @@ class FrontEnd {
   /// odometry rather than counted towards a lost track: it overlaps almost nothing of the local map
   /// at the prediction (it sees only new ground), or the best match near the prediction, though too
   /// weak to take (or the prediction itself, where ICP found too few pairs), explains more of it
-  /// than any match farther away (the scan points nowhere else), or refines the placement
-  /// (refinesPlacement) where no match beyond the gate outweighs the prior.
-  enum class OdometryVouches { kNo, kNewGround, kBestMatchNearIt };
+  /// than any match farther away (the scan points nowhere else), or it refines the placement
+  /// (refinesPlacement) where a match farther away explains more without outweighing the prior.
+  enum class OdometryVouches { kNo, kNewGround, kBestMatchNearIt, kNearMatchRefines };
 
   /// True once a scan was remembered.
   bool started() const { return have_prev; }
