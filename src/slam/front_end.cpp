@@ -133,15 +133,15 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     // enough of what overlaps to correct the odometry's heading (a sparse scan's overlap pins the
     // rotation before it pins the place).
     std::string at = "placed by odometry";
-    if (opt.refine_odometry_placement && m.near && refinesPlacement(*m.near)) {
-      out.T_local_robot = m.near->T;
+    if (m.refining) {
+      out.T_local_robot = m.refining->T;
       out.refined = true;
-      const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * m.near->T);
+      const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * m.refining->T);
       at = fmt::format(
           "placed by odometry, refined by the best match near it ({:.2f} m / {:.1f} deg, {:.1f} sigmas; "
           "it explains {:.0f}% of the {:.0f}% of the scan that overlaps the local map)",
-          d.translation().norm(), std::abs(d.theta()) / kDeg, m.near->sigmas,
-          100.0 * m.near->overlap.explained_in_overlap, 100.0 * m.near->overlap.overlap);
+          d.translation().norm(), std::abs(d.theta()) / kDeg, m.refining->sigmas,
+          100.0 * m.refining->overlap.explained_in_overlap, 100.0 * m.refining->overlap.overlap);
     }
     switch (m.vouches) {
       case OdometryVouches::kNewGround:
@@ -334,7 +334,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
     }
   }
   out.explained_in_gate = bestExplained();
-  out.near = in_gate;
+  if (opt.refine_odometry_placement && in_gate && refinesPlacement(*in_gate)) out.refining = in_gate;
   const Candidate* win = nullptr;
   // Within the gate of a prior narrower than ICP's basin, or of one drawn from the robot's own
   // recent steps (a keyframe log without odometry), the prior vouches for the match where the scan
@@ -377,8 +377,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // the gate was refused: within a sigma of the odometry it pins what overlaps (the scans lost so
   // on sparse keyframes, left at the prediction and counted towards a lost track, turned the
   // estimate by up to 14 degrees).
-  if (!win && out.vouches == OdometryVouches::kNo && !beyond_wins && in_gate && opt.refine_odometry_placement &&
-      odometryTrusted(p) && refinesPlacement(*in_gate))
+  if (!win && out.vouches == OdometryVouches::kNo && !beyond_wins && out.refining && odometryTrusted(p))
     out.vouches = OdometryVouches::kNearMatchRefines;
   if (beyond_wins && (win || out.vouches == OdometryVouches::kNo)) {
     win = &*beyond_gate;

@@ -158,8 +158,9 @@ class FrontEnd {
     /// Nothing within the gate matched, no match beyond it was refused, and the odometry vouches
     /// for the prediction (OdometryVouches): Tracked::placed_by_odometry when unmatched.
     OdometryVouches vouches = OdometryVouches::kNo;
-    /// The best match within the gate, whether taken or not.
-    std::optional<Candidate> near;
+    /// The best match within the gate when it refines a placement by the odometry (refinesPlacement,
+    /// `refine_odometry_placement`), whether taken as a match or not.
+    std::optional<Candidate> refining;
   };
 
   void rebuildLocalMap();
