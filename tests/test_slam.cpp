@@ -407,6 +407,26 @@ TEST(Slam, KeyframesStampedInBurstsAreNotGaps) {
   EXPECT_LT(ate, clean + 0.02) << "without bursts " << clean;
 }
 
+// Keyframes 3 m / 90 degrees apart (the open world, a 10 m laser over 180 degrees): the second scan
+// comes 3.8 s after the first. Called a gap (the log's usual interval unknown), it left the odometry
+// untrusted until a scan matched the first one's local map; none did, and the track was lost at
+// the second node, leaving the first scan a fragment of its own on every seed.
+TEST(Slam, AKeyframeLogsFirstStepIsNotAGap) {
+  sim::LaserModel laser;
+  laser.beams = 181;
+  laser.fov_rad = std::numbers::pi;
+  laser.range_max_m = 10.0;
+  for (const std::uint64_t seed : {1u, 2u}) {
+    const auto frames = simulatedWith("open", laser, 10.0, seed, std::pair{3.0, 90.0});
+    ASSERT_GT(frames[1].time - frames[0].time, SlamOptions{}.time_gap_s);
+    Slam* slam = nullptr;
+    runSlam(frames, SlamOptions{}, &slam);
+    EXPECT_EQ(countEvents(*slam, "gap of"), 0) << "seed " << seed;
+    EXPECT_EQ(countEvents(*slam, "local map restarted"), 0) << "seed " << seed;
+    EXPECT_EQ(slam->stats().fragments, 1u) << "seed " << seed;
+  }
+}
+
 TEST(Slam, KeyframesThatSeeOnlyNewGroundArePlacedByOdometryNotLost) {
   const auto frames = shortRangeKeyframes(1.0, 30.0, 1);
   Slam* slam = nullptr;
@@ -770,6 +790,29 @@ TEST(SlamMotionPrior, KeyframesWhoseOdometryStraysLittleGetANarrowerPrior) {
   EXPECT_LT(learnt.sigma_rad, 0.5 * model.sigma_rad);
   EXPECT_GE(learnt.sigma_m, opt.prior_odometry_sigma_m);
   EXPECT_GE(learnt.sigma_rad, opt.prior_odometry_sigma_rad);
+}
+
+// A log's first interval has no usual interval to be measured against: keyframes 3 m apart took
+// 20 s to the second scan and 10 s each after it. None of that is a gap; 60 s after 10 s steps is.
+TEST(SlamMotionPrior, TheFirstIntervalOfALogIsNotAGap) {
+  internal::MotionPrior prior(SlamOptions{});
+  std::vector<std::string> notes;
+  auto sink = [&](std::string note) { notes.push_back(std::move(note)); };
+  SE2 odom;
+  const std::vector<double> times = {0.0, 20.0, 30.0, 40.0, 50.0, 110.0};
+  std::vector<bool> time_ok;
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    Frame f;
+    f.time = times[k];
+    f.T_odom_robot = odom;
+    const internal::MotionPrediction p = prior.predict(f, sink);
+    if (k > 0) time_ok.push_back(p.time_ok);
+    prior.remember(f, p.delta, k == 0, p.time_ok, true);
+    odom = odom * SE2(3.0, 0.0, 0.0);
+  }
+  EXPECT_EQ(time_ok, (std::vector<bool>{true, true, true, true, false}));
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_EQ(notes[0], "gap of 60.0 s in the log");
 }
 
 TEST(SlamMotionPrior, SmallNoisyOdometryStepsAreMeasuredOverSpans) {
