@@ -11,7 +11,7 @@
 
 namespace lidar2d::slam::internal {
 
-void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool predicted, bool refined, bool degenerate,
+void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, Placement placement, bool degenerate,
                               const Eigen::Vector2d& dir_local) {
   const Node& prev = s.nodes[n - 1];
   Constraint c;
@@ -20,11 +20,11 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool pr
   c.to = n;
   c.T_from_to = prev.T_local_robot.inverse() * s.nodes[n].T_local_robot;
   Eigen::Matrix3d sqrt_info = diagSqrtInfo(s.opt.sequential_sigma_m, s.opt.sequential_sigma_rad);
-  if (refined) {
+  if (placement == Placement::kRefined) {
     // Placed by odometry at a weak match near the prediction (FrontEnd::refinesPlacement): the match
     // is held as a loop closure is, looser than a match that explains the scan.
     sqrt_info = diagSqrtInfo(s.opt.loop_sigma_m, s.opt.loop_sigma_rad);
-  } else if (restart || predicted) {
+  } else if (restart || placement == Placement::kOdometry) {
     // Tracking was lost, or the scan was placed by odometry alone: the link is only the prediction
     // (the odometry constraint below holds the information).
     sqrt_info = diagSqrtInfo(s.opt.odometry_sigma_m * 20.0, s.opt.odometry_sigma_rad * 20.0);

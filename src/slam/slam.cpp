@@ -413,7 +413,9 @@ struct Slam::Impl {
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
                 prediction.source == internal::PriorSource::kOdometry ? prediction.T_odom_scaled : std::nullopt,
-                t.placed_by_odometry, t.refined);
+                t.refined              ? internal::Placement::kRefined
+                : t.placed_by_odometry ? internal::Placement::kOdometry
+                                       : internal::Placement::kMatched);
       } else {
         rec.node = nodes_added - 1;
         rec.T_node_scan = rel;
@@ -434,15 +436,14 @@ struct Slam::Impl {
   /// nodes behind and the run is the same as without its thread.
   void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                bool degenerate, const Eigen::Vector2d& dir_local, bool restart, std::optional<SE2> odometry,
-               bool predicted = false, bool refined = false) {
+               internal::Placement placement = internal::Placement::kMatched) {
     ++nodes_added;
     last_node_time = f.time;
     last_node_T_local = T_local;
     front_end.addNode(T_local, pts, restart);
     auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart, odometry,
-                 predicted, refined]() mutable {
-      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odometry, predicted,
-                refined);
+                 placement]() mutable {
+      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odometry, placement);
       publish();
     };
     if (back_end)
@@ -455,7 +456,7 @@ struct Slam::Impl {
   /// then the back end's searches and optimisation (backEnd).
   void graphNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                  bool degenerate, const Eigen::Vector2d& dir_local, bool restart, const std::optional<SE2>& odometry,
-                 bool predicted, bool refined) {
+                 internal::Placement placement) {
     const SlamOptions& opt = state.opt;
     const std::size_t n = state.nodes.size();
     Node node;
@@ -487,11 +488,12 @@ struct Slam::Impl {
       state.restarts.push_back(n);
       state.untied_since = n;
     }
-    if (n > 0) internal::addSequentialConstraints(state, n, restart, predicted, refined, degenerate, dir_local);
-    // A scan the front end placed by the odometry, unmatched (`predicted`; never with `restart`): how
+    if (n > 0) internal::addSequentialConstraints(state, n, restart, placement, degenerate, dir_local);
+    // A scan the front end placed by the odometry, unmatched (never with `restart`): how
     // far the chain drifted there is less certain, so the nodes after it search for closures at
     // every node (as a lost track's fragment does), not every loop_search_every_nodes.
-    if (predicted) state.search_every_node_until = n + internal::SlamState::kSearchEveryNodeAfterPlaced;
+    if (placement != internal::Placement::kMatched)
+      state.search_every_node_until = n + internal::SlamState::kSearchEveryNodeAfterPlaced;
     backEnd(n, static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes);
   }
 };

@@ -10,13 +10,19 @@
 
 namespace lidar2d::slam::internal {
 
+/// How the front end placed a node against the node before it.
+enum class Placement {
+  kMatched,   ///< a match against the local map
+  kOdometry,  ///< unmatched, placed by odometry alone at its prediction
+  kRefined,   ///< unmatched, placed by odometry at a weak match near its prediction
+};
+
 /// The constraints from node n-1 to node `n` (n > 0): the front end's relative pose (weak along
 /// `dir_local`, the local-frame direction a degenerate match could not pin; only as strong as the
-/// prediction after a `restart`, or for a node the front end placed by odometry alone, `predicted`;
-/// held as a loop closure when it placed the node at a weak match near the odometry, `refined`), and
-/// the odometry between them when both have trusted odometry (after a `restart` it is recorded as
-/// SlamState::restart_odometry).
-void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, bool predicted, bool refined, bool degenerate,
+/// prediction after a `restart` or for Placement::kOdometry; held as a loop closure for
+/// Placement::kRefined), and the odometry between them when both have trusted odometry (after a
+/// `restart` it is recorded as SlamState::restart_odometry).
+void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, Placement placement, bool degenerate,
                               const Eigen::Vector2d& dir_local);
 
 /// Optimises every node's T_world_robot (node 0 fixed) with at most `iterations`; the front end's
