@@ -795,7 +795,8 @@ TEST(SlamMotionPrior, KeyframesWhoseOdometryStraysLittleGetANarrowerPrior) {
 // A log's first interval has no usual interval to be measured against: keyframes 3 m apart took
 // 20 s to the second scan and 10 s each after it. None of that is a gap; 60 s after 10 s steps is.
 TEST(SlamMotionPrior, TheFirstIntervalOfALogIsNotAGap) {
-  internal::MotionPrior prior(SlamOptions{});
+  const SlamOptions opt;
+  internal::MotionPrior prior(opt);
   std::vector<std::string> notes;
   auto sink = [&](std::string note) { notes.push_back(std::move(note)); };
   SE2 odom;

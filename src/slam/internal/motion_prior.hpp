@@ -124,6 +124,8 @@ class OdometryNoise {
 class MotionPrior {
  public:
   explicit MotionPrior(const SlamOptions& opt) : opt_(opt) {}
+  /// The prior keeps a reference to its options: a temporary would dangle.
+  explicit MotionPrior(const SlamOptions&&) = delete;
 
   /// The prediction for frame `f` (identity with source kNone for the first). `event` records what
   /// the prior noticed (time going backwards, gaps, odometry missing, resuming or implausible).
