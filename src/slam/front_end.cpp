@@ -105,7 +105,7 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
   prev_matched = m.T && !m.degenerate;
   if (m.T) {
     out.T_local_robot = *m.T;
-    out.matched = true;
+    out.placement = Placement::kMatched;
     out.overrode_prior = m.overrode_prior;
     consecutive_failures = 0;
     ++s_.stats.matched;
@@ -128,14 +128,14 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     // scan contradicts the prior), nor without odometry (the prediction is only a guess).
     ++s_.stats.unmatched;
     consecutive_failures = 0;
-    out.placed_by_odometry = true;
+    out.placement = Placement::kOdometry;
     // The odometry's pose, or the best match near it where that match is near enough and explains
     // enough of what overlaps to correct the odometry's heading (a sparse scan's overlap pins the
     // rotation before it pins the place).
     std::string at = "placed by odometry";
     if (m.refining) {
       out.T_local_robot = m.refining->T;
-      out.refined = true;
+      out.placement = Placement::kRefined;
       const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * m.refining->T);
       at = fmt::format(
           "placed by odometry, refined by the best match near it ({:.2f} m / {:.1f} deg, {:.1f} sigmas; "

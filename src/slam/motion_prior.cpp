@@ -148,10 +148,9 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     p.time_ok = false;
   } else if (!recent_intervals_.empty() && per_scan > opt_.time_gap_s && (between <= 0.0 || per_scan > 5.0 * between)) {
     // Relative to the log's usual interval: keyframe logs are seconds apart on every scan. The
-    // log's first interval has none to be measured against: a keyframe log's first step takes 3-20
-    // s, and called a gap it left the odometry untrusted until a scan matched a local map of one
-    // scan (keyframes 3 m / 90 degrees apart: five scans unmatched, a lost track at the second node
-    // and a fragment on every run of two of the seven logs).
+    // log's first interval has none to be measured against and is no gap: a keyframe log's first
+    // step takes seconds, and a gap there would leave the odometry untrusted until a scan matched a
+    // local map of one scan (keyframes metres apart match none, and the track is lost at once).
     notes_.push_back(fmt::format("gap of {:.1f} s in the log", dt));
     p.time_ok = false;
   }

@@ -399,7 +399,7 @@ struct Slam::Impl {
       last_T_local = T0;
     } else {
       const internal::FrontEnd::Tracked t = front_end.track(f, pts, prediction);
-      rec.matched = t.matched;
+      rec.matched = t.matched();
       rec.degenerate = t.degenerate;
       // Motion filter: a scan that moved or turned enough since the last node, or after long
       // enough, becomes a node; the others hang off the last node.
@@ -407,21 +407,19 @@ struct Slam::Impl {
       const bool moved = rel.translation().norm() >= opt.node_min_translation_m ||
                          std::abs(rel.theta()) >= opt.node_min_rotation_rad ||
                          f.time - last_node_time >= opt.node_max_interval_s;
-      if (t.restart || ((rec.matched || t.placed_by_odometry) && moved && pts.size() >= opt.min_points)) {
+      if (t.restart || (t.placement && moved && pts.size() >= opt.min_points)) {
         rec.node = nodes_added;
         rec.is_node = true;
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
                 prediction.source == internal::PriorSource::kOdometry ? prediction.T_odom_scaled : std::nullopt,
-                t.refined              ? internal::Placement::kRefined
-                : t.placed_by_odometry ? internal::Placement::kOdometry
-                                       : internal::Placement::kMatched);
+                t.placement.value_or(internal::Placement::kMatched));  // a restart's link: `restart`
       } else {
         rec.node = nodes_added - 1;
         rec.T_node_scan = rel;
         state.scans.push_back(rec);
       }
-      front_end.remember(f, t.T_local_robot, false, prediction.time_ok, t.matched && !t.degenerate);
+      front_end.remember(f, t.T_local_robot, false, prediction.time_ok, t.matched() && !t.degenerate);
       last_T_local = t.T_local_robot;
     }
     ++state.stats.scans;

@@ -37,17 +37,15 @@ class FrontEnd {
   /// The scan's match.
   struct Tracked {
     SE2 T_local_robot;  ///< the match, or the prediction when unmatched
-    bool matched = false;
+    /// How the scan was placed; nothing when it was left at the prediction (neither matched nor
+    /// vouched for by the odometry, FrontEnd::OdometryVouches: not a node, a step towards a lost
+    /// track). Placed by odometry, it becomes a node, not a failure.
+    std::optional<Placement> placement;
     bool degenerate = false;
     Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
     bool restart = false;                           ///< tracking lost: the local map restarts at this scan
-    /// Unmatched, but nothing contradicts the odometry's prediction (FrontEnd::OdometryVouches): it
-    /// is placed there and becomes a node, not a failure.
-    bool placed_by_odometry = false;
     bool overrode_prior = false;                    ///< the match contradicts the prior (strong scan evidence)
-    /// Placed by the odometry at the best match near its prediction rather than at the prediction
-    /// (FrontEnd::refinesPlacement): the sequential link is that weak match's.
-    bool refined = false;
+    bool matched() const { return placement == Placement::kMatched; }
   };
 
   /// Why an unmatched scan under a trusted odometry prior (odometryTrusted) is placed by the
@@ -156,7 +154,7 @@ class FrontEnd {
     /// The share the best match within the prior's gate explains (unmatched: or the prediction).
     double explained_in_gate = 0.0;
     /// Nothing within the gate matched, no match beyond it was refused, and the odometry vouches
-    /// for the prediction (OdometryVouches): Tracked::placed_by_odometry when unmatched.
+    /// for the prediction (OdometryVouches): placed by the odometry when unmatched (Tracked::placement).
     OdometryVouches vouches = OdometryVouches::kNo;
     /// The best match within the gate when it refines a placement by the odometry (refinesPlacement,
     /// `refine_odometry_placement`), whether taken as a match or not.

@@ -10,13 +10,6 @@
 
 namespace lidar2d::slam::internal {
 
-/// How the front end placed a node against the node before it.
-enum class Placement {
-  kMatched,   ///< a match against the local map
-  kOdometry,  ///< unmatched, placed by odometry alone at its prediction
-  kRefined,   ///< unmatched, placed by odometry at a weak match near its prediction
-};
-
 /// The constraints from node n-1 to node `n` (n > 0): the front end's relative pose (weak along
 /// `dir_local`, the local-frame direction a degenerate match could not pin; only as strong as the
 /// prediction after a `restart` or for Placement::kOdometry; held as a loop closure for

@@ -24,6 +24,13 @@
 
 namespace lidar2d::slam::internal {
 
+/// How the front end placed a scan against the node before it.
+enum class Placement {
+  kMatched,   ///< a match against the local map
+  kOdometry,  ///< unmatched, placed by odometry alone at its prediction
+  kRefined,   ///< unmatched, placed by odometry at a weak match near its prediction
+};
+
 using Clock = std::chrono::steady_clock;
 
 inline double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
