@@ -22,8 +22,11 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, Placeme
   Eigen::Matrix3d sqrt_info = diagSqrtInfo(s.opt.sequential_sigma_m, s.opt.sequential_sigma_rad);
   if (placement == Placement::kRefined) {
     // Placed by odometry at a weak match near the prediction (FrontEnd::refinesPlacement): the match
-    // is held as a loop closure is, looser than a match that explains the scan.
-    sqrt_info = diagSqrtInfo(s.opt.loop_sigma_m, s.opt.loop_sigma_rad);
+    // is held as a loop closure is, looser than a match that explains the scan; a degenerate one
+    // only across its weak direction (along it the pose is the prediction's).
+    sqrt_info = degenerate ? directionalSqrtInfo(prev.T_local_robot.rotation().transpose() * dir_local,
+                                                 s.opt.odometry_sigma_m * 2.0, s.opt.loop_sigma_m, s.opt.loop_sigma_rad)
+                           : diagSqrtInfo(s.opt.loop_sigma_m, s.opt.loop_sigma_rad);
   } else if (restart || placement == Placement::kOdometry) {
     // Tracking was lost, or the scan was placed by odometry alone: the link is only the prediction
     // (the odometry constraint below holds the information).

@@ -46,6 +46,7 @@ struct SlamOptions {
   double match_inlier_distance_m = 0.1;
   double min_explained_fraction = 0.5;
   bool refine_odometry_placement = true;
+  double refine_min_turn_sigmas = 2.0;
   double alternative_start_m = 0.1;
   double alternative_start_rad = 3.0 * kDeg;
   double fallback_linear_window_m = 1.0;
@@ -237,6 +238,9 @@ inline constexpr SlamOption kSlamOptionTable[] = {
     {LIDAR2D_SLAM_FIELD(refine_odometry_placement), "front end", "flag", OptionRange::any(),
      "a scan the odometry places (unmatched) goes to the best match near the prediction when it lies within "
      "1 sigma and explains 30% of the points that overlap the local map"},
+    {LIDAR2D_SLAM_FIELD(refine_min_turn_sigmas), "front end", "sigmas", OptionRange::atLeast(0),
+     "... a degenerate match only when it turns the odometry's heading by more than this many of its own "
+     "heading sigmas (less is the match's noise)"},
     {LIDAR2D_SLAM_FIELD(alternative_start_m), "front end", "m", OptionRange::atLeast(0),
      "when the predicted step exceeds this (or the angle below), ICP also starts from no motion and from "
      "constant velocity, and the result explaining the most points wins"},

@@ -41,7 +41,7 @@ class FrontEnd {
     /// vouched for by the odometry, FrontEnd::OdometryVouches: not a node, a step towards a lost
     /// track). Placed by odometry, it becomes a node, not a failure.
     std::optional<Placement> placement;
-    bool degenerate = false;
+    bool degenerate = false;  ///< the match (or the one refining the placement) could not pin `dir`
     Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
     bool restart = false;                           ///< tracking lost: the local map restarts at this scan
     bool overrode_prior = false;                    ///< the match contradicts the prior (strong scan evidence)
@@ -102,9 +102,10 @@ class FrontEnd {
   /// window; ICP from the prediction or another start only descends into the nearest minimum).
   static bool priorVouchesFor(const Candidate& c, double min_explained);
   /// Whether `c`, the best match within the gate of a scan the odometry places (too weak to take as
-  /// a match), refines that placement: within kRefineSigmas of the prediction, not degenerate, at
-  /// least kMinOverlap of the scan overlapping the local map and kRefineExplainedInOverlap of those
-  /// points explained.
+  /// a match), refines that placement: within kRefineSigmas of the prediction, at least
+  /// kMinOverlap of the scan overlapping the local map and kRefineExplainedInOverlap of those points
+  /// explained. A degenerate match qualifies too: remapped along its weak direction, it refines the
+  /// heading and the direction it pins (FrontEnd::track then asks refine_min_turn_sigmas of it).
   static bool refinesPlacement(const Candidate& c);
 
  private:
