@@ -7,9 +7,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <initializer_list>
 #include <numbers>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -437,6 +439,24 @@ TEST(Slam, KeyframesThatSeeOnlyNewGroundArePlacedByOdometryNotLost) {
   EXPECT_LT(ate, 0.5);
 }
 
+/// Positions in `frames` of the scans of `slam`'s events whose text holds every string of `what`.
+std::vector<std::size_t> scansWithEvent(const Slam& slam, const std::vector<Frame>& frames,
+                                        std::initializer_list<std::string_view> what) {
+  std::vector<std::size_t> out;
+  for (const auto& ev : slam.events()) {
+    if (!std::ranges::all_of(what, [&](std::string_view w) { return ev.what.find(w) != std::string::npos; })) continue;
+    out.push_back(static_cast<std::size_t>(
+        std::ranges::find_if(frames, [&](const Frame& f) { return f.index == ev.frame_index; }) - frames.begin()));
+  }
+  return out;
+}
+
+/// Heading error [deg] of the step from `a` (frame k - 1's pose) to `b` (frame k's) against the truth's.
+double stepHeadingErrorDeg(const std::vector<Frame>& frames, std::size_t k, const SE2& a, const SE2& b) {
+  const SE2 truth = frames[k - 1].T_world_robot->inverse() * *frames[k].T_world_robot;
+  return std::abs((truth.inverse() * (a.inverse() * b)).theta()) / kDeg;
+}
+
 /// Clutter seen from new angles: `moved` beams in every five of `frame`'s scan moved 0.25 m along
 /// the beam, one nearer and the next further.
 void clutter(Frame& frame, std::size_t moved) {
@@ -495,24 +515,15 @@ TEST(Slam, AWeakMatchNearTheOdometryCorrectsTheHeadingOfTheScansItPlaces) {
     for (std::size_t k = r.every; k < frames.size(); k += r.every) clutter(frames[k], 3);
     Slam* slam = nullptr;
     const auto refined_est = runSlam(frames, SlamOptions{}, &slam);
-    std::vector<std::size_t> refined;
-    for (const auto& ev : slam->events())
-      if (ev.what.find("refined by the best match near it") != std::string::npos)
-        refined.push_back(static_cast<std::size_t>(
-            std::find_if(frames.begin(), frames.end(), [&](const Frame& f) { return f.index == ev.frame_index; }) -
-            frames.begin()));
+    const auto refined = scansWithEvent(*slam, frames, {"refined by the best match near it"});
     SlamOptions off;
     off.refine_odometry_placement = false;
     const auto unrefined_est = runSlam(frames, off);
-    auto headingError = [&](const SE2& a, const SE2& b, std::size_t k) {
-      const SE2 truth = frames[k - 1].T_world_robot->inverse() * *frames[k].T_world_robot;
-      return std::abs((truth.inverse() * (a.inverse() * b)).theta()) / kDeg;
-    };
     for (const std::size_t k : refined) {
       ASSERT_TRUE(k > 0 && k < frames.size());
-      refined_deg += headingError(refined_est[k - 1], refined_est[k], k);
-      unrefined_deg += headingError(unrefined_est[k - 1], unrefined_est[k], k);
-      odometry_deg += headingError(*frames[k - 1].T_odom_robot, *frames[k].T_odom_robot, k);
+      refined_deg += stepHeadingErrorDeg(frames, k, refined_est[k - 1], refined_est[k]);
+      unrefined_deg += stepHeadingErrorDeg(frames, k, unrefined_est[k - 1], unrefined_est[k]);
+      odometry_deg += stepHeadingErrorDeg(frames, k, *frames[k - 1].T_odom_robot, *frames[k].T_odom_robot);
     }
     refined_scans += refined.size();
   }
@@ -540,19 +551,10 @@ TEST(Slam, ADegenerateWeakMatchNearTheOdometryCorrectsTheHeadingToo) {
       for (std::size_t k = 5; k < frames.size(); k += 5) clutter(frames[k], 3);
       Slam* slam = nullptr;
       const auto est = runSlam(frames, SlamOptions{}, &slam);
-      for (const auto& ev : slam->events()) {
-        if (ev.what.find("refined by the best match near it") == std::string::npos ||
-            ev.what.find("degenerate") == std::string::npos)
-          continue;
-        const auto k = static_cast<std::size_t>(
-            std::find_if(frames.begin(), frames.end(), [&](const Frame& f) { return f.index == ev.frame_index; }) -
-            frames.begin());
+      for (const std::size_t k : scansWithEvent(*slam, frames, {"refined by the best match near it", "degenerate"})) {
         ASSERT_TRUE(k > 0 && k < frames.size());
-        const SE2 truth = frames[k - 1].T_world_robot->inverse() * *frames[k].T_world_robot;
-        refined_deg += std::abs((truth.inverse() * (est[k - 1].inverse() * est[k])).theta()) / kDeg;
-        odometry_deg +=
-            std::abs((truth.inverse() * (frames[k - 1].T_odom_robot->inverse() * *frames[k].T_odom_robot)).theta()) /
-            kDeg;
+        refined_deg += stepHeadingErrorDeg(frames, k, est[k - 1], est[k]);
+        odometry_deg += stepHeadingErrorDeg(frames, k, *frames[k - 1].T_odom_robot, *frames[k].T_odom_robot);
         ++refined_scans;
       }
     }
@@ -635,20 +637,15 @@ TEST(Slam, AWeakMatchTurningTheOdometryByLessThanItsOwnUncertaintyLeavesItsPose)
       const auto frames = depthCamera(world, seed);
       Slam* slam = nullptr;
       const auto kept = runSlam(frames, SlamOptions{}, &slam);
-      std::vector<std::size_t> scans;  // read before the next run replaces `slam`
-      for (const auto& ev : slam->events())
-        if (ev.what.find("less than its own uncertainty") != std::string::npos)
-          scans.push_back(static_cast<std::size_t>(
-              std::find_if(frames.begin(), frames.end(), [&](const Frame& f) { return f.index == ev.frame_index; }) -
-              frames.begin()));
+      // Read before the next run replaces `slam`.
+      const auto scans = scansWithEvent(*slam, frames, {"less than its own uncertainty"});
       SlamOptions always;
       always.refine_min_turn_sigmas = 0.0;
       const auto moved = runSlam(frames, always);
       for (const std::size_t k : scans) {
         ASSERT_TRUE(k > 0 && k < frames.size());
-        const SE2 truth = frames[k - 1].T_world_robot->inverse() * *frames[k].T_world_robot;
-        kept_deg += std::abs((truth.inverse() * (kept[k - 1].inverse() * kept[k])).theta()) / kDeg;
-        moved_deg += std::abs((truth.inverse() * (moved[k - 1].inverse() * moved[k])).theta()) / kDeg;
+        kept_deg += stepHeadingErrorDeg(frames, k, kept[k - 1], kept[k]);
+        moved_deg += stepHeadingErrorDeg(frames, k, moved[k - 1], moved[k]);
         ++kept_scans;
       }
     }
