@@ -133,30 +133,33 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     // enough of what overlaps to correct the odometry's heading (a sparse scan's overlap pins the
     // rotation before it pins the place).
     std::string at = "placed by odometry";
-    const SE2 d = m.refining ? p.delta.inverse() * (T_local_prev.inverse() * m.refining->T) : SE2();
-    // A degenerate match refines the heading and the direction it pins; where it turns the odometry
-    // by less than refine_min_turn_sigmas of its own heading sigma (its covariance, infinite where
-    // its information is singular), that turn is the match's noise, not the odometry's error (a
-    // depth camera's scan of one wall 3 cm after the last: the odometry right within hundredths of
-    // a degree, such matches tenths of a degree off).
-    const double match_sigma_rad = m.refining ? std::sqrt(m.refining->res.covariance(2, 2)) : 0.0;
-    if (m.refining && m.refining->degenerate && opt.refine_min_turn_sigmas > 0.0 &&
-        !(std::abs(d.theta()) > opt.refine_min_turn_sigmas * match_sigma_rad)) {
-      at = fmt::format(
-          "placed by odometry, where the best match near it is degenerate and turns it by less than its own "
-          "uncertainty ({:.2f} deg, the match's sigma {:.2f} deg)",
-          std::abs(d.theta()) / kDeg, match_sigma_rad / kDeg);
-    } else if (m.refining) {
-      out.T_local_robot = m.refining->T;
-      out.placement = Placement::kRefined;
-      out.degenerate = m.refining->degenerate;  // the graph's link then holds only what it pins
-      out.dir = m.refining->dir;
-      at = fmt::format(
-          "placed by odometry, refined by the best match near it ({:.2f} m / {:.1f} deg, {:.1f} sigmas; "
-          "it explains {:.0f}% of the {:.0f}% of the scan that overlaps the local map{})",
-          d.translation().norm(), std::abs(d.theta()) / kDeg, m.refining->sigmas,
-          100.0 * m.refining->overlap.explained_in_overlap, 100.0 * m.refining->overlap.overlap,
-          m.refining->degenerate ? "; degenerate: along its weak direction the place is the odometry's" : "");
+    if (m.refining) {
+      const Candidate& r = *m.refining;
+      const SE2 d = p.delta.inverse() * (T_local_prev.inverse() * r.T);
+      // A degenerate match refines the heading and the direction it pins; where it turns the
+      // odometry by less than refine_min_turn_sigmas of its own heading sigma (its covariance,
+      // infinite where its information is singular), that turn is the match's noise, not the
+      // odometry's error (a depth camera's scan of one wall 3 cm after the last: the odometry right
+      // within hundredths of a degree, such matches tenths of a degree off).
+      const double sigma_rad = std::sqrt(r.res.covariance(2, 2));
+      if (r.degenerate && opt.refine_min_turn_sigmas > 0.0 &&
+          !(std::abs(d.theta()) > opt.refine_min_turn_sigmas * sigma_rad)) {
+        at = fmt::format(
+            "placed by odometry, where the best match near it is degenerate and turns it by less than its own "
+            "uncertainty ({:.2f} deg, the match's sigma {:.2f} deg)",
+            std::abs(d.theta()) / kDeg, sigma_rad / kDeg);
+      } else {
+        out.T_local_robot = r.T;
+        out.placement = Placement::kRefined;
+        out.degenerate = r.degenerate;  // the graph's link then holds only what it pins
+        out.dir = r.dir;
+        at = fmt::format(
+            "placed by odometry, refined by the best match near it ({:.2f} m / {:.1f} deg, {:.1f} sigmas; "
+            "it explains {:.0f}% of the {:.0f}% of the scan that overlaps the local map{})",
+            d.translation().norm(), std::abs(d.theta()) / kDeg, r.sigmas, 100.0 * r.overlap.explained_in_overlap,
+            100.0 * r.overlap.overlap,
+            r.degenerate ? "; degenerate: along its weak direction the place is the odometry's" : "");
+      }
     }
     switch (m.vouches) {
       case OdometryVouches::kNewGround:

@@ -19,22 +19,19 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, Placeme
   c.from = n - 1;
   c.to = n;
   c.T_from_to = prev.T_local_robot.inverse() * s.nodes[n].T_local_robot;
-  Eigen::Matrix3d sqrt_info = diagSqrtInfo(s.opt.sequential_sigma_m, s.opt.sequential_sigma_rad);
-  if (placement == Placement::kRefined) {
-    // Placed by odometry at a weak match near the prediction (FrontEnd::refinesPlacement): the match
-    // is held as a loop closure is, looser than a match that explains the scan; a degenerate one
-    // only across its weak direction (along it the pose is the prediction's).
-    sqrt_info = degenerate ? directionalSqrtInfo(prev.T_local_robot.rotation().transpose() * dir_local,
-                                                 s.opt.odometry_sigma_m * 2.0, s.opt.loop_sigma_m, s.opt.loop_sigma_rad)
-                           : diagSqrtInfo(s.opt.loop_sigma_m, s.opt.loop_sigma_rad);
-  } else if (restart || placement == Placement::kOdometry) {
+  // A match's relative pose; placed by odometry at a weak match near the prediction
+  // (FrontEnd::refinesPlacement), that match is held as a loop closure is, looser than a match that
+  // explains the scan. Along a degenerate direction the relative pose is as good as the prediction.
+  const bool refined = placement == Placement::kRefined;
+  const double sigma_m = refined ? s.opt.loop_sigma_m : s.opt.sequential_sigma_m;
+  const double sigma_rad = refined ? s.opt.loop_sigma_rad : s.opt.sequential_sigma_rad;
+  Eigen::Matrix3d sqrt_info = degenerate ? directionalSqrtInfo(prev.T_local_robot.rotation().transpose() * dir_local,
+                                                               s.opt.odometry_sigma_m * 2.0, sigma_m, sigma_rad)
+                                         : diagSqrtInfo(sigma_m, sigma_rad);
+  if (restart || placement == Placement::kOdometry) {
     // Tracking was lost, or the scan was placed by odometry alone: the link is only the prediction
     // (the odometry constraint below holds the information).
     sqrt_info = diagSqrtInfo(s.opt.odometry_sigma_m * 20.0, s.opt.odometry_sigma_rad * 20.0);
-  } else if (degenerate) {
-    // Along the degenerate direction the relative pose is as good as the prediction.
-    sqrt_info = directionalSqrtInfo(prev.T_local_robot.rotation().transpose() * dir_local, s.opt.odometry_sigma_m * 2.0,
-                                    s.opt.sequential_sigma_m, s.opt.sequential_sigma_rad);
   }
   s.addEdge(std::move(c), sqrt_info, 0.0);
   if (s.node_odometry[n - 1] && s.node_odometry[n]) {
