@@ -117,8 +117,8 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     // - it sees only new ground: keyframes metres apart with a short-range laser overlap nothing of
     //   the local map after a turn (edmonton's keyframes, 10 m range: 0-11% of the scan within 0.5 m
     //   of it at the odometry's pose, for five scans in a row);
-    // - the best match near the prediction, too weak to take, explains more of the scan than any
-    //   match farther away: clutter seen from new angles (orebro: five scans in a row whose best
+    // - the best match near the prediction, too weak to take, explains at least as much of the scan
+    //   as any match farther away: clutter seen from new angles (orebro: five scans in a row whose best
     //   match near the odometry explained 19-28%, matches elsewhere 6-14%; the scans after them
     //   matched the local map from before at the odometry's poses, explaining 75-89%). A robot
     //   carried elsewhere while its odometry did not know gives no such match: near the prediction
@@ -375,8 +375,12 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // (onlyNewGroundAt): nothing there contradicts the odometry, and the match beyond the gate is
   // a look-alike part of the local map (the simulator's identical rooms, a 4 m laser: 56% explained
   // 2.8 m and 10 sigmas from the odometry's pose), not evidence against it. Where the best match
-  // near the prediction explains more than any beyond the gate, the odometry vouches for the
-  // prediction too (OdometryVouches::kBestMatchNearIt; no match beyond the gate can win there).
+  // near the prediction explains at least as much as any beyond the gate, the odometry vouches for
+  // the prediction too (OdometryVouches::kBestMatchNearIt; no match beyond the gate can win there).
+  // A tie counts for the odometry: a match elsewhere that explains no more of the scan than the
+  // prediction is no evidence against it (a depth camera facing one wall: all of the scan explained
+  // at the odometry's pose and at ICP's, a few degrees round, where the local map's wall had turned
+  // with the overrides before; the simulated corridor's heading walked 20 degrees off that way).
   const bool beyond_counts = beyond_gate && beyond_gate->explained >= opt.min_explained_fraction;
   const bool beyond_wins = beyond_counts && logPosterior(*beyond_gate) > (in_gate ? logPosterior(*in_gate) : 0.0);
   if (!win && (beyond_wins || !beyond_counts)) {
@@ -388,7 +392,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
       // the scan explains there is the best near the odometry's pose.
       out.explained_in_gate =
           std::max(out.explained_in_gate, explainedFraction(*local_target, pts, T_pred, opt.match_inlier_distance_m));
-      if (out.explained_in_gate > (beyond_gate ? beyond_gate->explained : 0.0))
+      if (out.explained_in_gate > 0.0 && out.explained_in_gate >= (beyond_gate ? beyond_gate->explained : 0.0))
         out.vouches = OdometryVouches::kBestMatchNearIt;
     }
   }
