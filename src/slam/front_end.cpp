@@ -378,9 +378,9 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
   // near the prediction explains at least as much as any beyond the gate, the odometry vouches for
   // the prediction too (OdometryVouches::kBestMatchNearIt; no match beyond the gate can win there).
   // A tie counts for the odometry: a match elsewhere that explains no more of the scan than the
-  // prediction is no evidence against it (a depth camera facing one wall: all of the scan explained
-  // at the odometry's pose and at ICP's, a few degrees round, where the local map's wall had turned
-  // with the overrides before; the simulated corridor's heading walked 20 degrees off that way).
+  // prediction is no evidence against it (a depth camera facing one wall is explained all over at
+  // the odometry's pose and a few degrees round, where the local map's wall turned with each such
+  // override before; docs/slam.md, step 4).
   const bool beyond_counts = beyond_gate && beyond_gate->explained >= opt.min_explained_fraction;
   const bool beyond_wins = beyond_counts && logPosterior(*beyond_gate) > (in_gate ? logPosterior(*in_gate) : 0.0);
   if (!win && (beyond_wins || !beyond_counts)) {

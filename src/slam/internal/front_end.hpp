@@ -52,8 +52,9 @@ class FrontEnd {
   /// odometry rather than counted towards a lost track: it overlaps almost nothing of the local map
   /// at the prediction (it sees only new ground), or the best match near the prediction, though too
   /// weak to take (or the prediction itself, where ICP found too few pairs or slid away), explains
-  /// at least as much of it as any match farther away (the scan points nowhere else), or it refines the placement
-  /// (refinesPlacement) where a match farther away explains more without outweighing the prior.
+  /// at least as much of it as any match farther away (the scan points nowhere else), or it refines
+  /// the placement (refinesPlacement) where a match farther away explains more without outweighing
+  /// the prior.
   enum class OdometryVouches { kNo, kNewGround, kBestMatchNearIt, kNearMatchRefines };
 
   /// True once a scan was remembered.
