@@ -1,14 +1,18 @@
 // ICP (point-to-point and point-to-line, Gauss-Newton and Ceres) through the matcher dispatcher:
 // exact recovery of known transforms on noise-free simulated scans, convergence basins, solver
 // agreement, the corridor's free direction in H, both nearest-neighbour searches (bearing walk and
-// k-d tree) and the line fits against brute force and each other,
+// k-d tree) and the line fits against brute force and each other (with any number of neighbours),
 // bad input, and a few real intel pairs.
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -660,6 +664,43 @@ TEST(IcpTarget, LineFitsGiveWallNormalsAndRejectScatter) {
   }
   EXPECT_EQ(target.normals()[40], Eigen::Vector2d::Zero());  // no neighbour within 0.5 m
   EXPECT_EQ(target.normals()[45], Eigen::Vector2d::Zero());  // centre of the blob
+}
+
+#if !defined(__SANITIZE_ADDRESS__)
+/// Exits 0 when targets of `pts` built with `a` and with `b` fit the same lines, 1 otherwise; with
+/// at most 1 GiB more address space than the process holds (an allocation beyond it aborts).
+[[noreturn]] void exitWithSameNormalsWithin1GiB(const Points2& pts, const IcpOptions& a, const IcpOptions& b) {
+  std::ifstream statm("/proc/self/statm");
+  std::size_t pages = 0;
+  statm >> pages;
+  const rlim_t limit = pages * static_cast<rlim_t>(sysconf(_SC_PAGESIZE)) + (rlim_t{1} << 30);
+  const rlimit lim{limit, limit};
+  setrlimit(RLIMIT_AS, &lim);
+  const IcpTarget with_a(pts, a);
+  const IcpTarget with_b(pts, b);
+  std::exit(with_a.normals() == with_b.normals() ? 0 : 1);
+}
+#endif
+
+TEST(IcpTarget, NeighboursBeyondThePointCountTakeNoMoreMemory) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "limits the address space, which AddressSanitizer's shadow memory does not fit in";
+#else
+  // normal_neighbors has no upper bound (SLAM's comes from a config or a saved state): INT_MAX of
+  // them must fit the lines all the points fit, without a slot per neighbour asked for (24 GB;
+  // found by tools/fuzz-cli.py --modes state).
+  Points2 pts;
+  for (int i = 0; i < 40; ++i) pts.emplace_back(0.05 * i, 2.0);
+  for (int i = 0; i < 20; ++i) pts.emplace_back(-1.0, 0.05 * i);
+  for (const NeighborSearch search : {NeighborSearch::kBearingWalk, NeighborSearch::kKdTree}) {
+    IcpOptions all;
+    all.neighbor_search = search;
+    all.normal_neighbors = static_cast<int>(pts.size());
+    IcpOptions huge = all;
+    huge.normal_neighbors = std::numeric_limits<int>::max();
+    EXPECT_EXIT(exitWithSameNormalsWithin1GiB(pts, all, huge), ::testing::ExitedWithCode(0), "") << toString(search);
+  }
+#endif
 }
 
 TEST(Matcher, NamesRoundTrip) {

@@ -1,15 +1,22 @@
 // The SLAM state file: a saved run loads back to the same estimates and the same bytes; a resumed
 // session starting elsewhere in the mapped area joins the saved graph, one in an unmapped place
 // stays a reported fragment; truncated, corrupted, foreign and future-version files are refused
-// with one clear error.
+// with one clear error, and so are files whose checksum holds but whose contents do not (a damaged
+// payload compressed again: what tools/fuzz-cli.py --modes state writes).
 
 #include <gtest/gtest.h>
+#include <zlib.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <cstring>
+#include <limits>
 #include <memory>
+#include <ostream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
@@ -210,6 +217,215 @@ TEST(SlamState, BadFilesAreRefusedWithOneClearError) {
     EXPECT_NE(errorOf(trailing).second.find("after its payload"), std::string::npos);
   }
   EXPECT_THROW(readStateFile("/nonexistent/state.l2d"), Error);
+}
+
+// ---- damaged contents with a valid checksum (what tools/fuzz-cli.py --modes state found) ----
+
+/// The bytes of a state file around the compressed payload `packed`, whose header states
+/// `payload_length`: the compressed length and CRC-32 are `packed`'s own, as a tool that damaged
+/// the payload and wrote it again would give.
+std::string fileAround(const std::string& packed, std::uint64_t payload_length) {
+  std::string out(kStateMagic);
+  auto put = [&](const auto& v) { out.append(reinterpret_cast<const char*>(&v), sizeof(v)); };
+  put(kStateFormatVersion);
+  put(std::uint64_t{4});
+  out += "test";
+  put(payload_length);
+  put(static_cast<std::uint32_t>(
+      crc32(0L, reinterpret_cast<const Bytef*>(packed.data()), static_cast<uInt>(packed.size()))));
+  put(static_cast<std::uint64_t>(packed.size()));
+  return out + packed;
+}
+
+std::string deflated(const std::string& payload) {
+  uLongf size = compressBound(static_cast<uLong>(payload.size()));
+  std::string packed(size, '\0');
+  EXPECT_EQ(compress(reinterpret_cast<Bytef*>(packed.data()), &size, reinterpret_cast<const Bytef*>(payload.data()),
+                     static_cast<uLong>(payload.size())),
+            Z_OK);
+  packed.resize(size);
+  return packed;
+}
+
+/// The payload of a state file encodeState wrote, decompressed.
+std::string payloadOf(const std::string& bytes) {
+  std::uint64_t writer = 0, length = 0, packed = 0;
+  std::memcpy(&writer, bytes.data() + 12, 8);
+  const std::size_t at = 20 + writer;
+  std::memcpy(&length, bytes.data() + at, 8);
+  std::memcpy(&packed, bytes.data() + at + 12, 8);
+  std::string payload(length, '\0');
+  uLongf size = static_cast<uLongf>(length);
+  EXPECT_EQ(uncompress(reinterpret_cast<Bytef*>(payload.data()), &size,
+                       reinterpret_cast<const Bytef*>(bytes.data() + at + 20), static_cast<uLong>(packed)),
+            Z_OK);
+  return payload;
+}
+
+/// The field decodeState names when it refuses `bytes` (bad input, in file "state.l2d").
+std::string refusedField(const std::string& bytes) {
+  try {
+    decodeState(bytes, "state.l2d");
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kBadInput) << e.what();
+    EXPECT_EQ(e.where().file, "state.l2d") << e.what();
+    return e.where().field;
+  }
+  ADD_FAILURE() << "no error";
+  return "";
+}
+
+TEST(SlamState, APayloadLengthItsCompressedBytesCannotHoldIsRefusedBeforeItIsAllocated) {
+  // Deflate expands at most 1032-fold: 9 compressed bytes never hold a megabyte (the reader used to
+  // allocate whatever the header stated, up to 8 GiB, before finding out).
+  const std::string packed = deflated("x");
+  ASSERT_LT(packed.size() * 1032, 1'000'000u);
+  for (const std::uint64_t length : {std::uint64_t{1'000'000}, std::uint64_t{100'000'000}})
+    EXPECT_EQ(refusedField(fileAround(packed, length)), "payload_length") << length;
+}
+
+TEST(SlamState, BytesAfterTheCompressedStreamAreRefused) {
+  // The zlib stream ends before the stated compressed length: those bytes were ignored.
+  const std::string payload = payloadOf(savedBytes());
+  EXPECT_NO_THROW(decodeState(fileAround(deflated(payload), payload.size()), "state.l2d"));
+  EXPECT_EQ(refusedField(fileAround(deflated(payload) + "junk", payload.size())), "payload");
+}
+
+/// A state damaged through the library's own types (then written with a valid checksum), and the
+/// field the reader must name.
+struct Damage {
+  const char* name;
+  void (*apply)(State&);
+  const char* field;
+};
+void PrintTo(const Damage& d, std::ostream* os) { *os << d.name; }
+
+std::size_t firstAccepted(const State& s, Constraint::Kind kind) {
+  for (std::size_t k = 0; k < s.constraints.size(); ++k)
+    if (s.constraints[k].accepted && s.constraints[k].kind == kind) return k;
+  ADD_FAILURE() << "no such constraint";
+  return 0;
+}
+/// The index of constraint k's edge (edges are the accepted constraints', in order).
+std::size_t edgeOf(const State& s, std::size_t k) {
+  return static_cast<std::size_t>(std::count_if(s.constraints.begin(),
+                                                s.constraints.begin() + static_cast<std::ptrdiff_t>(k),
+                                                [](const Constraint& c) { return c.accepted; }));
+}
+std::size_t firstUnmatchedScanOfANode(const State& s) {
+  for (std::size_t k = 0; k < s.scans.size(); ++k)
+    if (!s.scans[k].is_node) return k;
+  ADD_FAILURE() << "every scan is a node";
+  return 0;
+}
+
+class DamagedState : public ::testing::TestWithParam<Damage> {};
+
+TEST_P(DamagedState, IsRefusedNamingTheField) {
+  State s = decodeState(savedBytes(), "mem");
+  ASSERT_GE(s.submaps.size(), 3u);
+  GetParam().apply(s);
+  EXPECT_EQ(refusedField(encodeState(s)), GetParam().field);
+}
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Each of these decoded before the reader checked it; resumed, several crashed the pipeline (an
+// edge walk past the first edge, the node before node 0) or failed deep in it without naming the file.
+INSTANTIATE_TEST_SUITE_P(
+    FoundByFuzzing, DamagedState,
+    ::testing::Values(
+        // Edges: as the pose graph takes them, and the accepted constraints' in the same order.
+        Damage{"EdgeFromANodeToItself", [](State& s) { s.edges[3].to = s.edges[3].from; }, "edge.to"},
+        Damage{"NegativeHuberScale", [](State& s) { s.edges[0].huber_scale = -1.0; }, "edge.huber_scale"},
+        Damage{"EdgeMissing", [](State& s) { s.edges.pop_back(); }, "edges"},
+        Damage{"AcceptedConstraintWithoutItsEdge",
+               [](State& s) { s.constraints[firstAccepted(s, Constraint::Kind::kSequential)].accepted = false; },
+               "edges"},
+        Damage{"EdgesSwapped", [](State& s) { std::swap(s.edges[0], s.edges.back()); }, "edges"},
+        // The odometry across a lost track: the constraint and edge it names, from the node before.
+        Damage{"RestartOdometryAtNodeZero",
+               [](State& s) {
+                 s.restart_odometry = State::RestartOdometry{0, 0, 0};
+               },
+               "restart_odometry"},
+        Damage{"RestartOdometryNamingAnotherEdge",
+               [](State& s) {
+                 const std::size_t k = firstAccepted(s, Constraint::Kind::kOdometry);
+                 s.restart_odometry = State::RestartOdometry{edgeOf(s, k) + 1, k, s.constraints[k].to};
+               },
+               "restart_odometry"},
+        Damage{"RestartOdometryNotAnOdometryConstraint",
+               [](State& s) {
+                 const std::size_t k = firstAccepted(s, Constraint::Kind::kSequential);
+                 s.restart_odometry = State::RestartOdometry{edgeOf(s, k), k, s.constraints[k].to};
+               },
+               "restart_odometry"},
+        // Node indices of the back end.
+        Damage{"LastLoopNodeOutOfRange", [](State& s) { s.last_loop_node = s.nodes.size(); }, "last_loop_node"},
+        Damage{"UntiedSinceOutOfRange", [](State& s) { s.untied_since = s.nodes.size() + 7; }, "untied_since"},
+        Damage{"RestartsOutOfOrder",
+               [](State& s) {
+                 s.restarts = {5, 3};
+               },
+               "restart"},
+        // The submaps partition the nodes; a node's scan is the one scan that says it is the node.
+        Damage{"NodeTwiceInASubmap", [](State& s) { s.submaps[1].nodes.push_back(s.submaps[1].nodes.back()); },
+               "submap.node"},
+        Damage{"NodeNamingAnotherSubmap", [](State& s) { s.nodes[s.submaps[1].nodes[1]].node.submap = 0; },
+               "submap.node"},
+        Damage{"NodeInNoSubmap", [](State& s) { s.submaps[1].nodes.pop_back(); }, "submap.nodes"},
+        Damage{"ScanClaimingAnotherScansNode", [](State& s) { s.scans[firstUnmatchedScanOfANode(s)].is_node = true; },
+               "scan.is_node"},
+        // Times, directions and durations: finite, as the writer writes them.
+        Damage{"NodeTimeNaN", [](State& s) { s.nodes[2].node.time = kNaN; }, "node.time"},
+        Damage{"DegenerateDirectionInf", [](State& s) { s.nodes[2].node.degenerate_dir_rad = kInf; },
+               "node.degenerate_dir_rad"},
+        Damage{"ScanTimeInf", [](State& s) { s.scans[5].time = -kInf; }, "scan.time"},
+        Damage{"ScanSecondsNaN", [](State& s) { s.scans[5].seconds = kNaN; }, "scan.seconds"},
+        Damage{"EventTimeNaN",
+               [](State& s) {
+                 s.events.push_back({0, kNaN, "x"});
+               },
+               "event.time"},
+        Damage{"StatsSecondsInf", [](State& s) { s.stats.total_seconds = kInf; }, "stats"},
+        // Positions beyond 10^7 m: the grids built from them overflow.
+        Damage{"NodeFarAway", [](State& s) { s.nodes[4].node.T_world_robot = SE2(2e7, 0.0, 0.0); },
+               "node.T_world_robot"},
+        Damage{"WorldFrameFarAway", [](State& s) { s.T_world_local = SE2(0.0, -1e300, 0.0); }, "T_world_local"},
+        Damage{"LaserMountedFarAway", [](State& s) { s.nodes[0].T_robot_laser = SE2(1e9, 0.0, 0.0); },
+               "node.T_robot_laser"},
+        Damage{"EdgeSpanningTooFar", [](State& s) { s.edges[2].T_from_to = SE2(0.0, 1e8, 0.0); }, "edge.T_from_to"}),
+    [](const auto& info) { return std::string(info.param.name); });
+
+// These the reader refused before the fuzzer ran (kept here as the fuzzer's checks of them).
+INSTANTIATE_TEST_SUITE_P(
+    AlwaysRefused, DamagedState,
+    ::testing::Values(
+        Damage{"NodeNamingNoSubmap", [](State& s) { s.nodes[3].node.submap = s.submaps.size(); }, "node.submap"},
+        Damage{"EdgeNamingNoNode", [](State& s) { s.edges[1].to = s.nodes.size(); }, "edge.to"},
+        Damage{"ConstraintKind7", [](State& s) { s.constraints[0].kind = static_cast<Constraint::Kind>(7); },
+               "constraint.kind"},
+        Damage{"PoseNaN", [](State& s) { s.nodes[1].node.T_local_robot = SE2(kNaN, 0.0, 0.0); }, "node.T_local_robot"},
+        Damage{"SubmapAnchorNotItsFirstNode", [](State& s) { s.submaps[2].anchor = s.submaps[2].nodes[1]; },
+               "submap.nodes"}),
+    [](const auto& info) { return std::string(info.param.name); });
+
+TEST(SlamState, ConsistentOptionalFieldsAndFarButPlausibleFramesAreRead) {
+  // What the checks above must still let through: the odometry across a lost track as SLAM
+  // records it, a fragment, a latest closure, and an odometry frame as far out as UTM's.
+  State s = decodeState(savedBytes(), "mem");
+  const std::size_t k = firstAccepted(s, Constraint::Kind::kOdometry);
+  s.restart_odometry = State::RestartOdometry{edgeOf(s, k), k, s.constraints[k].to};
+  s.untied_since = s.constraints[k].to;
+  s.last_loop_node = s.nodes.size() - 1;
+  s.restarts = {s.constraints[k].to};
+  s.nodes[3].T_odom_robot = SE2(6.5e5, 9.9e6, 1.0);
+  const State loaded = decodeState(encodeState(s), "mem");
+  ASSERT_TRUE(loaded.restart_odometry);
+  EXPECT_EQ(loaded.restart_odometry->edge, edgeOf(s, k));
+  EXPECT_EQ(loaded.untied_since, s.untied_since);
 }
 
 }  // namespace

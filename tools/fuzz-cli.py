@@ -7,7 +7,7 @@ output files behind. A clean error (exit 1 or 2, one message) and a success both
 Use a sanitizer build (make test-asan builds build-asan/lidar2d) to catch memory errors that do not
 crash. Deterministic per --seed. Each finding's input is kept under --work.
 
-  tools/fuzz-cli.py BINARY [--modes carmen bag1 ros2 map db options] [--runs N] [--seed S]
+  tools/fuzz-cli.py BINARY [--modes carmen bag1 ros2 map db options state] [--runs N] [--seed S]
 
 Modes:
   carmen   CARMEN text logs: fields replaced by NaN/inf/garbage, lines cut, dropped, duplicated,
@@ -20,6 +20,15 @@ Modes:
   map      map YAML keys and PGM bytes (localize-index, map --prior, simulate --map).
   db       localization database bytes (localize --db).
   options  every numeric option of every command at 0, -1, tiny, huge, NaN and inf.
+  state    SLAM state files (state.l2d) through `slam --resume` and `track`: three small states made
+           once (a 120-scan simulated log; that state resumed with a second log; the log with a
+           kidnapping, for a lost track's fields), their payload decompressed, damaged and compressed
+           again with the correct lengths and CRC-32 (what a buggy tool or a crafted file gives):
+           any field by name set to an extreme (sizes and counts 0, off by one, 2^32, 2^63, 2^64-1;
+           f64 NaN, inf, 1e308, -0; f32 ranges; flags 2, 255; kinds 3, 7, 255), whole elements of
+           an array removed or repeated (a scan's beams all removed), random bytes, a cut, bytes
+           appended or moved; and a few damaged headers (version, lengths, a wrong CRC, the
+           writer string, a damaged zlib stream). An allocation over 2 GiB counts as a finding.
 The shared data (../shared/data, or LIDAR2D_DATA_DIR) is needed by bag1 and ros2; a missing file
 skips its mode with a message.
 """
@@ -32,6 +41,7 @@ import sqlite3
 import struct
 import subprocess
 import sys
+import zlib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = os.environ.get('LIDAR2D_DATA_DIR') or os.path.join(HERE, '..', '..', 'shared', 'data')
@@ -42,13 +52,15 @@ class Fuzzer:
         self.bin, self.work, self.timeout, self.rng = binary, work, timeout, rng
         self.runs = self.findings = 0
 
-    def run(self, args, keep, label):
-        """Runs the CLI (args may use {o}, a fresh output folder); keep() saves the input on a finding."""
+    def run(self, args, keep, label, max_alloc_mb=None):
+        """Runs the CLI (args may use {o}, a fresh output folder); keep() saves the input on a finding.
+        With max_alloc_mb, a larger allocation is a sanitizer error (ASan's allocation-size-too-big)."""
         out = os.path.join(self.work, 'out')
         shutil.rmtree(out, ignore_errors=True)
         os.makedirs(out)
         args = [a.format(o=out) for a in args]
-        env = dict(os.environ, ASAN_OPTIONS='detect_leaks=0:abort_on_error=1', UBSAN_OPTIONS='halt_on_error=1')
+        asan = 'detect_leaks=0:abort_on_error=1' + (f':max_allocation_size_mb={max_alloc_mb}' if max_alloc_mb else '')
+        env = dict(os.environ, ASAN_OPTIONS=asan, UBSAN_OPTIONS='halt_on_error=1')
         self.runs += 1
         try:
             p = subprocess.run([self.bin] + args, capture_output=True, timeout=self.timeout, env=env)
@@ -373,7 +385,299 @@ def fuzzOptions(f, base, runs):
                 f.run(base_args + [f'{opt}={v}'], lambda k: '(command line only)', f'options {name} {opt}={v}')
 
 
-MODES = {'carmen': fuzzCarmen, 'bag1': fuzzBag1, 'ros2': fuzzRos2, 'map': fuzzMap, 'db': fuzzDb, 'options': fuzzOptions}
+# ---- SLAM state files (state.l2d; docs/file-formats.md, SLAM state) ----
+
+class PayloadWalk:
+    """Walks a state.l2d payload as decodeState reads it, recording each field (offset, struct
+    format, name, role) and each array (name, offset of its count, each element's byte span), so that
+    damage can hit a chosen field or remove and repeat whole elements."""
+
+    def __init__(self, p):
+        self.p, self.at, self.fields, self.arrays = p, 0, [], []
+
+    def take(self, fmt, name, role):
+        v = struct.unpack_from('<' + fmt, self.p, self.at)[0]
+        self.fields.append((self.at, fmt, name, role))
+        self.at += struct.calcsize(fmt)
+        return v
+
+    def size(self, name, role='size'):
+        return self.take('Q', name, role)
+
+    def real(self, name):
+        return self.take('d', name, 'real')
+
+    def flag(self, name):
+        return self.take('B', name, 'flag')
+
+    def string(self, name):
+        n = self.size(name, 'count')
+        self.at += n
+
+    def pose(self, name):
+        for _ in range(3):
+            self.real(name)
+
+    def opt(self, name, value):
+        if self.flag(name):
+            value()
+
+    def array(self, name, item):
+        at, spans = self.at, []
+        for _ in range(self.size(name, 'count')):
+            start = self.at
+            item()
+            spans.append((start, self.at))
+        self.arrays.append((name, at, spans))
+
+
+def walkState(p):
+    w = PayloadWalk(p)
+
+    def option():
+        w.string('options.name')
+        kind = w.take('B', 'options.type', 'kind')
+        {0: lambda: w.flag('options.value'), 1: lambda: w.take('q', 'options.value', 'int'),
+         2: lambda: w.size('options.value'), 3: lambda: w.real('options.value')}[kind]()
+
+    def node():
+        w.size('node.scan_index', 'index')
+        w.real('node.time')
+        w.pose('node.T_local_robot')
+        w.pose('node.T_world_robot')
+        w.size('node.submap', 'index')
+        w.flag('node.degenerate')
+        w.real('node.degenerate_dir_rad')
+        for name in ('time', 'angle_min', 'angle_increment', 'range_min', 'range_max'):
+            w.real('node.scan.' + name)
+        w.array('node.scan.beams', lambda: w.take('f', 'node.scan.ranges', 'range'))
+        w.pose('node.T_robot_laser')
+        w.opt('node.T_odom_robot', lambda: w.pose('node.T_odom_robot'))
+        w.size('node.frame_index')
+        w.real('node.path_m')
+
+    def scan():
+        w.size('scan.frame_index')
+        w.real('scan.time')
+        w.size('scan.node', 'index')
+        w.pose('scan.T_node_scan')
+        for name in ('is_node', 'matched', 'degenerate'):
+            w.flag('scan.' + name)
+        w.real('scan.seconds')
+
+    def submap():
+        w.size('submap.anchor', 'index')
+        w.array('submap.nodes', lambda: w.size('submap.node', 'index'))
+        w.flag('submap.finished')
+        w.opt('submap.last_link_node', lambda: w.size('submap.last_link_node', 'index'))
+        w.pose('submap.last_link_T_anchor_node')
+
+    def constraint():
+        w.take('B', 'constraint.kind', 'kind')
+        w.size('constraint.from', 'index')
+        w.size('constraint.to', 'index')
+        w.pose('constraint.T_from_to')
+        for name in ('accepted', 'searched', 'descriptor'):
+            w.flag('constraint.' + name)
+        w.real('constraint.score')
+        w.real('constraint.explained')
+        w.string('constraint.reason')
+
+    def edge():
+        w.size('edge.from', 'index')
+        w.size('edge.to', 'index')
+        w.pose('edge.T_from_to')
+        for _ in range(9):
+            w.real('edge.sqrt_information')
+        w.real('edge.huber_scale')
+        w.flag('edge.scalable')
+
+    def event():
+        w.size('event.frame_index')
+        w.real('event.time')
+        w.string('event.what')
+
+    w.array('options', option)
+    w.array('sessions', lambda: (w.string('session.name'), w.size('session.first_scan', 'index')))
+    w.array('nodes', node)
+    w.array('scans', scan)
+    w.array('submaps', submap)
+    w.array('constraints', constraint)
+    w.array('edges', edge)
+    w.array('restarts', lambda: w.size('restart', 'index'))
+    w.array('events', event)
+    for _ in range(20):
+        w.size('stats')
+    for _ in range(3):
+        w.real('stats')
+    w.pose('T_world_local')
+    w.opt('last_loop_node', lambda: w.size('last_loop_node', 'index'))
+    w.opt('untied_since', lambda: w.size('untied_since', 'index'))
+    w.opt('restart_odometry', lambda: [w.size('restart_odometry.' + x, 'index') for x in ('edge', 'constraint', 'node')])
+    w.size('nodes_since_optimization')
+    w.size('loops_since_optimization')
+    assert w.at == len(p), 'the payload walk disagrees with the format'
+    return w
+
+
+def splitState(data):
+    """(payload length, CRC-32, the decompressed payload) of a valid state.l2d."""
+    at = 20 + struct.unpack_from('<Q', data, 12)[0]  # magic, version, writer string
+    plen, crc, clen = struct.unpack_from('<QIQ', data, at)
+    return zlib.decompress(data[at + 20:at + 20 + clen])
+
+
+def packState(payload, version=1, writer=b'fuzz', plen=None, crc=None, clen=None, packed=None):
+    """A state.l2d around `payload`: the lengths and CRC-32 correct unless given."""
+    packed = zlib.compress(payload, 1) if packed is None else packed
+    return (b'L2DSLAMS' + struct.pack('<IQ', version, len(writer)) + writer
+            + struct.pack('<QIQ', len(payload) if plen is None else plen, zlib.crc32(packed) if crc is None else crc,
+                          len(packed) if clen is None else clen) + packed)
+
+
+HUGE_SIZES = [1 << 32, 1 << 63, (1 << 64) - 1, (1 << 33) + 1, 1 << 40]
+STATE_REALS = [float('nan'), float('inf'), -float('inf'), 1e308, -1e308, -0.0, 0.0, 5e-324, 1e9, -1e9]
+STATE_FLOATS = [float('nan'), float('inf'), -float('inf'), -1.0, 0.0, 3.4e38, 1e-45]
+
+
+def damagePayload(rng, p, w):
+    """One damage to the payload (walked by w): a field set to an extreme, an element removed or
+    repeated, random bytes, a cut, bytes appended or moved. Returns (bytes, what was done)."""
+    p = bytearray(p)
+    op = rng.choice(['field'] * 6 + ['element'] * 2 + ['bytes', 'cut', 'append', 'shift'])
+    if op == 'field':
+        # A field by its name (each name as likely as any other, whether it occurs once or once per
+        # beam), then one of its occurrences.
+        name = rng.choice(sorted({x[2] for x in w.fields}))
+        at, fmt, name, role = rng.choice([x for x in w.fields if x[2] == name])
+        v = struct.unpack_from('<' + fmt, p, at)[0]
+        if fmt == 'Q':
+            new = rng.choice([0, 1, v - 1, v + 1, v + 2, 2 * v] + HUGE_SIZES + [rng.randrange(1 << 64)]) % (1 << 64)
+        elif fmt == 'q':
+            new = rng.choice([0, -1, 1 << 31, -(1 << 31) - 1, (1 << 63) - 1, -(1 << 63)])
+        elif fmt == 'd':
+            new = rng.choice(STATE_REALS + [-v, v * 1e6])
+        elif fmt == 'f':
+            new = rng.choice(STATE_FLOATS)
+        elif role == 'kind':
+            new = rng.choice([0, 1, 2, 3, 4, 7, 255])
+        else:
+            new = rng.choice([2, 255, v ^ 1])
+        struct.pack_into('<' + fmt, p, at, new)
+        return bytes(p), f'{name}={new}'
+    if op == 'element':
+        name = rng.choice(sorted({a[0] for a in w.arrays if a[2]}))
+        name, at, spans = rng.choice([a for a in w.arrays if a[0] == name and a[2]])
+        if name == 'node.scan.beams' and rng.random() < 0.3:  # a scan with no beams
+            start, end = spans[0][0], spans[-1][1]
+            struct.pack_into('<Q', p, at, 0)
+            return bytes(p[:start] + p[end:]), f'{name}=0 (ranges removed)'
+        start, end = rng.choice(spans)
+        n = struct.unpack_from('<Q', p, at)[0]
+        if rng.random() < 0.5:
+            struct.pack_into('<Q', p, at, n - 1)
+            return bytes(p[:start] + p[end:]), f'{name}: element at {start} removed'
+        struct.pack_into('<Q', p, at, n + 1)
+        return bytes(p[:end] + p[start:end] + p[end:]), f'{name}: element at {start} repeated'
+    if op == 'bytes':
+        for _ in range(rng.randrange(1, 6)):
+            i = rng.randrange(len(p))
+            p[i] = rng.randrange(256) if rng.random() < 0.5 else p[i] ^ (1 << rng.randrange(8))
+        return bytes(p), 'bytes changed'
+    if op == 'cut':
+        i = rng.randrange(len(p))
+        return bytes(p[:i]), f'cut at {i}'
+    if op == 'append':
+        extra = rng.choice([b'\x00', b'\x01', struct.pack('<Q', rng.choice(HUGE_SIZES)),
+                            bytes(rng.randrange(256) for _ in range(rng.randrange(1, 64)))])
+        return bytes(p) + extra, f'{len(extra)} bytes appended'
+    i, k = rng.randrange(len(p)), rng.randrange(1, 9)
+    if rng.random() < 0.5:
+        return bytes(p[:i] + p[i + k:]), f'{k} bytes removed at {i}'
+    return bytes(p[:i] + bytes(k) + p[i:]), f'{k} bytes inserted at {i}'
+
+
+def damageStateHeader(rng, payload):
+    """A state.l2d whose header (not its payload) is wrong: version, lengths, CRC, writer string,
+    a cut file, bytes after it, or a compressed stream that is not zlib (with its CRC)."""
+    packed = zlib.compress(payload, 1)
+    what = rng.choice(['version', 'plen', 'clen', 'crc', 'writer', 'cut', 'after', 'stream'])
+    if what == 'version':
+        v = rng.choice([0, 2, 0xFFFFFFFF])
+        return packState(payload, version=v), f'version={v}'
+    if what == 'plen':
+        v = rng.choice([0, 1, len(payload) - 1, len(payload) + 1, 2 * len(payload), 1 << 32, (8 << 30),
+                        (8 << 30) + 1, 1 << 63, (1 << 64) - 1])
+        return packState(payload, plen=v), f'payload_length={v}'
+    if what == 'clen':
+        v = rng.choice([0, 1, len(packed) - 1, len(packed) + 1, 1 << 63, (1 << 64) - 1])
+        return packState(payload, clen=v, packed=packed), f'compressed_length={v}'
+    if what == 'crc':  # the payload damaged, its old CRC kept
+        d = bytearray(packed)
+        d[rng.randrange(len(d))] ^= 1 << rng.randrange(8)
+        return packState(payload, crc=zlib.crc32(packed), packed=bytes(d)), 'checksum left wrong'
+    if what == 'writer':
+        d = bytearray(packState(payload))
+        v = rng.choice([0, 1 << 20, 1 << 63, (1 << 64) - 1, len(d)])
+        struct.pack_into('<Q', d, 12, v)
+        return bytes(d), f'writer length={v}'
+    if what == 'cut':
+        d = packState(payload)
+        i = rng.randrange(len(d))
+        return d[:i], f'file cut at {i}'
+    if what == 'after':
+        return packState(payload) + b'\x00' * rng.randrange(1, 9), 'bytes after the payload'
+    d = bytearray(packed)  # damaged inside the zlib stream, CRC recomputed
+    for _ in range(rng.randrange(1, 4)):
+        d[rng.randrange(len(d))] = rng.randrange(256)
+    return packState(payload, packed=bytes(d)), 'zlib stream damaged (CRC recomputed)'
+
+
+def fuzzState(f, base, runs):
+    """Damaged SLAM states through `slam --resume` and `track`. The payload is damaged inside and
+    compressed again with correct lengths and CRC-32 (what a buggy tool or a crafted file gives),
+    so only the reader's checks of the contents stand between the damage and the pipeline."""
+    d = os.path.join(base, 'state')
+    os.makedirs(d, exist_ok=True)
+
+    def j(*x):
+        return os.path.join(d, *x)
+
+    steps = [['simulate', '--world', 'office', '--scans', '120', '-o', j('sim.log')],
+             ['simulate', '--world', 'office', '--scans', '30', '--seed', '7', '-o', j('sim2.log')],
+             ['perturb', j('sim.log'), '--kidnap', '4@4', '--seed', '2', '-o', j('kidnap.log')],
+             ['slam', j('sim.log'), '-o', j('one'), '-q'],
+             ['slam', j('sim2.log'), '--resume', j('one', 'state.l2d'), '-o', j('two'), '-q'],
+             ['slam', j('kidnap.log'), '-o', j('kidnap'), '-q']]
+    for s in steps:
+        subprocess.run([f.bin] + s, check=True, capture_output=True)
+    # One session; two (the second resumed: sessions, restarts); a lost track across the kidnapping
+    # (an untied fragment, the odometry across it).
+    payloads = [splitState(open(j(x, 'state.l2d'), 'rb').read()) for x in ('one', 'two', 'kidnap')]
+    walks = [walkState(p) for p in payloads]
+    sim2, path = os.path.join(d, 'sim2.log'), os.path.join(f.work, 'state.l2d')
+    rng = f.rng
+    for n in range(runs):
+        k = rng.randrange(len(payloads))
+        if rng.random() < 0.15:
+            data, what = damageStateHeader(rng, payloads[k])
+        else:
+            p, walk, done = payloads[k], walks[k], []
+            for _ in range(rng.randrange(1, 4)):
+                p, what = damagePayload(rng, p, walk)
+                done.append(what)
+                try:
+                    walk = walkState(p)  # still well-formed: the next damage aims at its fields
+                except (AssertionError, struct.error, KeyError, OverflowError, ValueError):
+                    break
+            data, what = packState(p), ', '.join(done)
+        open(path, 'wb').write(data)
+        for c in (['slam', sim2, '--resume', path, '-o', '{o}/s', '-q'], ['track', path, sim2, '-o', '{o}/t.txt', '-q']):
+            f.run(c, f.keepFile(path), f'state #{n} ({what}) {c[0]}', max_alloc_mb=2048)
+
+
+MODES = {'carmen': fuzzCarmen, 'bag1': fuzzBag1, 'ros2': fuzzRos2, 'map': fuzzMap, 'db': fuzzDb, 'options': fuzzOptions,
+         'state': fuzzState}
 
 
 def main():

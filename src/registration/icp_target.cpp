@@ -55,7 +55,10 @@ void IcpTarget::Impl::computeNormals(const IcpOptions& o) {
     corner_count.assign(points.size(), 0);
     corner_lines.resize(corner_slots * points.size());
   }
-  const auto k = static_cast<std::size_t>(std::max(2, o.normal_neighbors));
+  // No more neighbour slots than points (with more, every point is found either way): idx and d2
+  // are k long, and normal_neighbors has no upper bound (SLAM's may come from a config or a state).
+  const auto k =
+      std::min(static_cast<std::size_t>(std::max(2, o.normal_neighbors)), std::max<std::size_t>(2, points.size()));
   std::vector<std::uint32_t> idx(k);
   std::vector<double> d2(k);
   const double r2 = o.normal_max_radius_m * o.normal_max_radius_m;

@@ -3,9 +3,10 @@
 #include <fmt/format.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <bit>
-#include <cstdint>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -28,6 +29,13 @@ namespace {
 
 // A state file of a very long run holds a few hundred MB: beyond this a length field is corrupt.
 constexpr std::uint64_t kMaxBytes = std::uint64_t{8} << 30;
+// Deflate expands at most 1032-fold (a 258-byte match in 2 bits): a payload length beyond this many
+// times the compressed length is corrupt, and is refused before it is allocated.
+constexpr std::uint64_t kMaxInflation = 1032;
+// Positions in the state (x and y of every pose, absolute or relative) lie within this of the
+// origin [m]: 10,000 km, beyond a continent's map and an odometry frame's offset (UTM, ECEF); a
+// coordinate beyond it is corrupt (and would overflow the grids SLAM and the map build from it).
+constexpr double kMaxCoordinateM = 1e7;
 
 enum class OptionType : std::uint8_t { kBool = 0, kInt = 1, kSize = 2, kDouble = 3 };
 
@@ -101,17 +109,23 @@ class Reader {
     pos_ += n;
     return s;
   }
+  /// A pose: finite, its position within kMaxCoordinateM of the origin.
   SE2 pose(const char* field) {
     const double x = real(field), y = real(field), t = real(field);
+    if (std::abs(x) > kMaxCoordinateM || std::abs(y) > kMaxCoordinateM)
+      throw bad(
+          fmt::format("'{}' is at ({:g}, {:g}) m, farther than {:g} m from the origin", field, x, y, kMaxCoordinateM),
+          field);
     return SE2(x, y, t);
   }
   std::optional<SE2> optPose(const char* field) {
     if (!flag(field)) return std::nullopt;
     return pose(field);
   }
-  std::optional<std::size_t> optSize(const char* field) {
+  /// An optional index below `limit`.
+  std::optional<std::size_t> optIndex(const char* field, std::size_t limit) {
     if (!flag(field)) return std::nullopt;
-    return size(field);
+    return index(field, limit);
   }
   /// An index below `limit`.
   std::size_t index(const char* field, std::size_t limit) {
@@ -279,7 +293,7 @@ SlamStats getStats(Reader& r) {
                          &s.odometry_wins, &s.loop_searches, &s.loop_accepted, &s.loop_rejected,
                          &s.loop_downweighted, &s.descriptor_queries, &s.descriptor_hypotheses, &s.descriptor_accepted, &s.optimizations})
     *v = r.size("stats");
-  for (double* v : {&s.descriptor_seconds, &s.optimization_seconds, &s.total_seconds}) *v = r.get<double>("stats");
+  for (double* v : {&s.descriptor_seconds, &s.optimization_seconds, &s.total_seconds}) *v = r.real("stats");
   return s;
 }
 
@@ -375,12 +389,12 @@ State decodePayload(Reader& r) {
   for (auto& d : s.nodes) {
     Node& n = d.node;
     n.scan = r.size("node.scan_index");
-    n.time = r.get<double>("node.time");
+    n.time = r.real("node.time");
     n.T_local_robot = r.pose("node.T_local_robot");
     n.T_world_robot = r.pose("node.T_world_robot");
     n.submap = r.size("node.submap");
     n.degenerate = r.flag("node.degenerate");
-    n.degenerate_dir_rad = r.get<double>("node.degenerate_dir_rad");
+    n.degenerate_dir_rad = r.real("node.degenerate_dir_rad");
     d.scan = getScan(r);
     d.T_robot_laser = r.pose("node.T_robot_laser");
     d.T_odom_robot = r.optPose("node.T_odom_robot");
@@ -390,13 +404,13 @@ State decodePayload(Reader& r) {
   s.scans.resize(r.count("scans", 40));
   for (auto& x : s.scans) {
     x.frame_index = r.size("scan.frame_index");
-    x.time = r.get<double>("scan.time");
+    x.time = r.real("scan.time");
     x.node = r.index("scan.node", N);
     x.T_node_scan = r.pose("scan.T_node_scan");
     x.is_node = r.flag("scan.is_node");
     x.matched = r.flag("scan.matched");
     x.degenerate = r.flag("scan.degenerate");
-    x.seconds = r.get<double>("scan.seconds");
+    x.seconds = r.real("scan.seconds");
   }
   s.submaps.resize(r.count("submaps", 20));
   for (auto& sm : s.submaps) {
@@ -406,8 +420,7 @@ State decodePayload(Reader& r) {
     if (sm.nodes.empty() || sm.nodes.front() != sm.anchor)
       throw r.bad("a submap's first node is not its anchor", "submap.nodes");
     sm.finished = r.flag("submap.finished");
-    sm.last_link_node = r.optSize("submap.last_link_node");
-    if (sm.last_link_node && *sm.last_link_node >= N) throw r.bad("a submap's link is out of range", "submap.last_link_node");
+    sm.last_link_node = r.optIndex("submap.last_link_node", N);
     sm.last_link_T_anchor_node = r.pose("submap.last_link_T_anchor_node");
   }
   s.constraints.resize(r.count("constraints", 40));
@@ -416,10 +429,12 @@ State decodePayload(Reader& r) {
   for (auto& e : s.edges) {
     e.from = r.index("edge.from", N);
     e.to = r.index("edge.to", N);
+    if (e.from == e.to) throw r.bad(fmt::format("an edge joins node {} to itself", e.from), "edge.to");
     e.T_from_to = r.pose("edge.T_from_to");
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) e.sqrt_information(i, j) = r.real("edge.sqrt_information");
     e.huber_scale = r.real("edge.huber_scale");
+    if (e.huber_scale < 0.0) throw r.bad(fmt::format("an edge's Huber scale is {}", e.huber_scale), "edge.huber_scale");
     e.scalable = r.flag("edge.scalable");
   }
   s.restarts.resize(r.count("restarts", 8));
@@ -427,13 +442,13 @@ State decodePayload(Reader& r) {
   s.events.resize(r.count("events", 24));
   for (auto& e : s.events) {
     e.frame_index = r.size("event.frame_index");
-    e.time = r.get<double>("event.time");
+    e.time = r.real("event.time");
     e.what = r.str("event.what");
   }
   s.stats = getStats(r);
   s.T_world_local = r.pose("T_world_local");
-  s.last_loop_node = r.optSize("last_loop_node");
-  s.untied_since = r.optSize("untied_since");
+  s.last_loop_node = r.optIndex("last_loop_node", N);
+  s.untied_since = r.optIndex("untied_since", N);
   if (r.flag("restart_odometry")) {
     State::RestartOdometry ro;
     ro.edge = r.index("restart_odometry.edge", s.edges.size());
@@ -451,6 +466,51 @@ State decodePayload(Reader& r) {
     if (n.scan >= s.scans.size() || s.scans[n.scan].node != i || !s.scans[n.scan].is_node)
       throw r.bad(fmt::format("node {} and its scan do not match", i), "node.scan_index");
     if (n.submap >= s.submaps.size()) throw r.bad(fmt::format("node {} names no submap", i), "node.submap");
+  }
+  for (std::size_t k = 0; k < s.scans.size(); ++k)
+    if (s.scans[k].is_node && s.nodes[s.scans[k].node].node.scan != k)
+      throw r.bad(fmt::format("scan {} is a node that names another scan", k), "scan.is_node");
+  // The submaps partition the nodes: each lists its nodes in increasing order, each node is in the
+  // one it names, and the lists hold N nodes in all (so none twice, none missing).
+  std::size_t members = 0;
+  for (std::size_t j = 0; j < s.submaps.size(); ++j) {
+    const auto& nodes = s.submaps[j].nodes;
+    for (std::size_t k = 0; k < nodes.size(); ++k) {
+      if (k > 0 && nodes[k] <= nodes[k - 1])
+        throw r.bad(fmt::format("submap {}'s nodes are not in increasing order", j), "submap.node");
+      if (s.nodes[nodes[k]].node.submap != j)
+        throw r.bad(
+            fmt::format("submap {} lists node {}, which names submap {}", j, nodes[k], s.nodes[nodes[k]].node.submap),
+            "submap.node");
+    }
+    members += nodes.size();
+  }
+  if (members != N) throw r.bad(fmt::format("the submaps list {} nodes of {}", members, N), "submap.nodes");
+  // Edges are the accepted constraints', in the same order (the loop closure walks both together).
+  std::size_t accepted = 0;
+  for (const Constraint& c : s.constraints) {
+    if (!c.accepted) continue;
+    if (accepted >= s.edges.size() || s.edges[accepted].from != c.from || s.edges[accepted].to != c.to)
+      throw r.bad(fmt::format("edge {} is not the accepted constraint's (from node {} to {})", accepted, c.from, c.to),
+                  "edges");
+    ++accepted;
+  }
+  if (accepted != s.edges.size())
+    throw r.bad(fmt::format("{} edges for {} accepted constraints", s.edges.size(), accepted), "edges");
+  for (std::size_t k = 1; k < s.restarts.size(); ++k)
+    if (s.restarts[k] <= s.restarts[k - 1]) throw r.bad("the restarts are not in increasing order", "restart");
+  // The odometry constraint across the latest lost track: from the node before it to `node`,
+  // accepted, and `edge` its edge.
+  if (const auto& ro = s.restart_odometry) {
+    const Constraint& c = s.constraints[ro->constraint];
+    const auto edge_of = static_cast<std::size_t>(
+        std::count_if(s.constraints.begin(), s.constraints.begin() + static_cast<std::ptrdiff_t>(ro->constraint),
+                      [](const Constraint& x) { return x.accepted; }));
+    if (ro->node == 0 || c.kind != Constraint::Kind::kOdometry || !c.accepted || c.from != ro->node - 1 ||
+        c.to != ro->node || ro->edge != edge_of)
+      throw r.bad(fmt::format("the odometry across the lost track at node {} is not constraint {} and edge {}",
+                              ro->node, ro->constraint, ro->edge),
+                  "restart_odometry");
   }
   for (std::size_t i = 0; i < s.sessions.size(); ++i)
     if (s.sessions[i].first_scan > s.scans.size() || (i > 0 && s.sessions[i].first_scan < s.sessions[i - 1].first_scan))
@@ -504,8 +564,9 @@ State decodeState(std::string_view bytes, const std::string& source) {
   if (packed.size() > packed_size)
     throw badInput(fmt::format("SLAM state file has {} bytes after its payload", packed.size() - packed_size),
                    ErrorLocation(source, 0, "payload"));
-  if (payload_size > kMaxBytes)
-    throw badInput(fmt::format("SLAM state file: payload length {} is absurd (corrupt header)", payload_size),
+  if (payload_size > kMaxBytes || payload_size / kMaxInflation > packed_size)
+    throw badInput(fmt::format("SLAM state file: payload length {} is absurd for {} compressed bytes (corrupt header)",
+                               payload_size, packed_size),
                    ErrorLocation(source, 0, "payload_length"));
   const auto actual =
       static_cast<std::uint32_t>(crc32(0L, reinterpret_cast<const Bytef*>(packed.data()), static_cast<uInt>(packed.size())));
@@ -514,11 +575,12 @@ State decodeState(std::string_view bytes, const std::string& source) {
                    ErrorLocation(source, 0, "checksum"));
   std::string payload(payload_size, '\0');
   uLongf out = static_cast<uLongf>(payload_size);
-  if (uncompress(reinterpret_cast<Bytef*>(payload.data()), &out, reinterpret_cast<const Bytef*>(packed.data()),
-                 static_cast<uLong>(packed.size())) != Z_OK ||
-      out != payload_size)
+  uLong in = static_cast<uLong>(packed.size());
+  if (uncompress2(reinterpret_cast<Bytef*>(payload.data()), &out, reinterpret_cast<const Bytef*>(packed.data()), &in) !=
+          Z_OK ||
+      out != payload_size || in != packed.size())
     throw badInput(fmt::format("SLAM state file (written by lidar2d {}): the payload does not decompress to its "
-                               "length",
+                               "length, or not all of it",
                                written_by),
                    ErrorLocation(source, 0, "payload"));
   Reader r(payload, source, kWhat);

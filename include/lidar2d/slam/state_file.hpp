@@ -94,9 +94,12 @@ struct State {
 std::string encodeState(const State& state);
 
 /// The state in `bytes`, read from `source` (named in errors). Throws `lidar2d::Error` naming
-/// `source` and what is wrong: kBadInput for a wrong magic ("not a lidar2d SLAM state file"), a
-/// truncated file, a checksum mismatch, or contents that do not hold together (an index out of
-/// range, an invalid scan or option); kUnsupported for another format version.
+/// `source` and the field: kBadInput for a wrong magic ("not a lidar2d SLAM state file"), a
+/// truncated file, a payload length the compressed bytes cannot hold, a checksum mismatch, or
+/// contents that do not hold together, whatever the checksum says (an index out of range, a
+/// non-finite value, a position beyond 10^7 m, an invalid scan or option, records that contradict
+/// each other: docs/file-formats.md); kUnsupported for another format version. Never allocates
+/// more than the payload length its compressed bytes can hold.
 State decodeState(std::string_view bytes, const std::string& source);
 
 /// Reads and decodes the state file at `path` (decodeState); kIo when it cannot be read.
