@@ -123,6 +123,19 @@ TEST_F(CliMap, PriorOverridesTheSensor) {
   EXPECT_FALSE(fs::exists(path("yaml-prior.yaml")));
 }
 
+TEST_F(CliMap, AFailedOutputLeavesNoneOfTheFiles) {
+  // The files appear together or not at all: PREFIX.png cannot be written (a folder has its name),
+  // so neither PREFIX.pgm nor PREFIX.yaml is left, nor a staging folder.
+  test::TempDir t;
+  fs::create_directories(t.path() / "m.png");
+  const auto r = runCli({"map", log(), "-o", (t.path() / "m").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("m.png"), std::string::npos) << r.err;
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(t.path())) left.push_back(e.path().filename().string());
+  EXPECT_EQ(left, std::vector<std::string>{"m.png"});
+}
+
 struct BadMapCase {
   std::string name;
   std::vector<std::string> extra;  // arguments after "map LOG"

@@ -236,6 +236,22 @@ TEST_F(CliSlam, BadInputIsOneClearError) {
   EXPECT_EQ(r.exit_code, 2);  // usage: -o missing
 }
 
+TEST_F(CliSlam, AFailedOutputLeavesTheFolderAsItWas) {
+  // The outputs appear together or not at all: report.html cannot be written (a folder has its
+  // name), so the earlier run's trajectory stays, and no new file nor staging folder is left.
+  TempDir t;
+  const fs::path out = t.path() / "out";
+  fs::create_directories(out / "report.html");
+  writeFile(out / "trajectory.txt", "old\n");
+  const auto r = runCli({"slam", log().string(), "-o", out.string(), "--quiet"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("report.html"), std::string::npos) << r.err;
+  EXPECT_TRUE(test::readFile(out / "trajectory.txt") == "old\n") << "the earlier trajectory was replaced";
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(out)) left.push_back(e.path().filename().string());
+  EXPECT_EQ(left.size(), 2u) << ::testing::PrintToString(left);
+}
+
 TEST(CliSlamRealData, MitCsailRawBagBeatsItsOdometry) {
   LIDAR2D_REQUIRE_DATA("raw/mit-csail.orig.bag");
   TempDir t;

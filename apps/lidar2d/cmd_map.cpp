@@ -126,15 +126,22 @@ void run(const MapArgs& a) {
         "\nprior layer {} overrides the sensor in {} cells of the image: black mask cells are occupied, white ones\n"
         "free, grey ones keep the sensor's verdict (lidar2d map --prior; docs/mapping.md)",
         std::filesystem::path(a.prior).filename().string(), overridden);
-  std::vector<std::string> written = writeMapFiles(a.prefix, image, comment);
+  // The files are staged and appear together: a failed write leaves the folder as it was.
+  const std::filesystem::path prefix(a.prefix);
+  io::OutputSet outputs(prefix.parent_path().string());
+  const std::string name = prefix.filename().string();
+  const std::string staged_pgm = outputs.stage(name + ".pgm");
+  outputs.stage(name + ".yaml");
+  outputs.stage(name + ".png");
+  writeMapFiles(staged_pgm.substr(0, staged_pgm.size() - 4), image, comment);  // PREFIX.{pgm,yaml,png}
   if (a.model == mapping::MapModel::kTsdf) {
     const auto surface = mapping::tsdfSurface(*map);
-    io::AtomicFile f(a.prefix + ".surface.txt");
+    io::AtomicFile f(outputs.stage(name + ".surface.txt"));
     f.stream() << "# lidar2d TSDF surface: sub-cell zero crossings, one per line: x y weight [m, m, observations]\n";
     for (const auto& s : surface) f.stream() << fmt::format("{:.4f} {:.4f} {:.0f}\n", s.p_world.x(), s.p_world.y(), s.weight);
     f.commit();
-    written.push_back(a.prefix + ".surface.txt");
   }
+  const std::vector<std::string> written = outputs.commit();
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!a.quiet) {
     std::cerr << fmt::format("mapped {} scans ({} model, {} m cells) in {:.3f} s: {} x {} cells, {:.1f} M cell updates",

@@ -223,15 +223,15 @@ void run(const SlamArgs& a) {
 
   fs::create_directories(a.dir, ec);
   if (ec) throw ioError(fmt::format("cannot create the output folder: {}", ec.message()), ErrorLocation(a.dir));
-  const std::string dir = a.dir;
+  // Every output is staged and they appear together: a failed write leaves the folder as it was.
+  io::OutputSet outputs(a.dir);
   Trajectory traj;
   traj.reserve(trajectory.size());
   for (std::size_t i = 0; i < trajectory.size(); ++i) {
     const auto& e = trajectory[i];
     traj.push_back({e.time, a.laser_frame ? e.T_world_robot * T_robot_laser[i] : e.T_world_robot});
   }
-  io::writeTrajectory(dir + "/trajectory.txt", traj);
-  std::vector<std::string> written{dir + "/trajectory.txt"};
+  io::writeTrajectory(outputs.stage("trajectory.txt"), traj);
   for (std::size_t k = 0; k < earlier_sessions; ++k) {
     const std::size_t end = state.sessions[k + 1].first_scan;
     Trajectory earlier;
@@ -239,18 +239,17 @@ void run(const SlamArgs& a) {
       const auto& e = all_scans[i];
       earlier.push_back({e.time, a.laser_frame ? e.T_world_robot * state.nodes[e.node].T_robot_laser : e.T_world_robot});
     }
-    const std::string path = fmt::format("{}/trajectory_session{}.txt", dir, k + 1);
-    io::writeTrajectory(path, earlier);
-    written.push_back(path);
+    io::writeTrajectory(outputs.stage(fmt::format("trajectory_session{}.txt", k + 1)), earlier);
   }
-  for (const auto& w : writeMapFiles(dir + "/map", image)) written.push_back(w);
-  writeGraph(dir + "/graph.txt", slam);
-  written.push_back(dir + "/graph.txt");
+  const std::string map_pgm = outputs.stage("map.pgm");
+  outputs.stage("map.yaml");
+  outputs.stage("map.png");
+  writeMapFiles(map_pgm.substr(0, map_pgm.size() - 4), image);  // writes map.{pgm,yaml,png}
+  writeGraph(outputs.stage("graph.txt"), slam);
   const auto t_save = Clock::now();
   const std::string state_bytes = slam::encodeState(state);
-  io::writeFileAtomically(dir + "/state.l2d", state_bytes);
+  io::writeFileAtomically(outputs.stage("state.l2d"), state_bytes);
   const double state_save_s = secondsSince(t_save);
-  written.push_back(dir + "/state.l2d");
 
   const slam::SlamStats& s = slam.stats();
   std::vector<double> per_scan;
@@ -312,18 +311,17 @@ void run(const SlamArgs& a) {
 
   ReportInput report{a.log, slam, all_scans, image, j};
   {
-    io::AtomicFile f(dir + "/report.html");
+    io::AtomicFile f(outputs.stage("report.html"));
     f.stream() << slamReportHtml(report);
     f.commit();
   }
-  written.push_back(dir + "/report.html");
   j["total_s"] = secondsSince(t_start);
   {
-    io::AtomicFile f(dir + "/summary.json");
+    io::AtomicFile f(outputs.stage("summary.json"));
     f.stream() << j.dump(2) << "\n";
     f.commit();
   }
-  written.push_back(dir + "/summary.json");
+  const std::vector<std::string> written = outputs.commit();
   if (!a.quiet) {
     std::cerr << fmt::format(
         "slam: {} scans, {} nodes, {} loop closures ({} rejected), {} events; {:.2f} s ({:.2f} ms per scan), total "

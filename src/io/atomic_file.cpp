@@ -56,4 +56,44 @@ void writeFileAtomically(const std::string& path, const std::string& content) {
   f.commit();
 }
 
+OutputSet::OutputSet(std::string dir) : dir_(std::move(dir)) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::is_directory(dir_.empty() ? "." : dir_, ec)) throw ioError("folder does not exist", {dir_});
+  staging_ = (fs::path(dir_.empty() ? "." : dir_) / (".lidar2d-staging." + std::to_string(::getpid()))).string();
+  fs::remove_all(staging_, ec);  // a crashed earlier process of the same id
+  if (!fs::create_directory(staging_, ec) || ec)
+    throw ioError("cannot create a staging folder: " + (ec ? ec.message() : std::string("it exists")), {staging_});
+}
+
+OutputSet::~OutputSet() {
+  std::error_code ec;
+  std::filesystem::remove_all(staging_, ec);
+}
+
+std::string OutputSet::stage(const std::string& name) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path target = fs::path(dir_) / name;  // a bare name when dir_ is empty
+  if (fs::is_directory(target, ec)) throw ioError("is a directory, expected a file path", {target.string()});
+  names_.push_back(name);
+  return (fs::path(staging_) / name).string();
+}
+
+std::vector<std::string> OutputSet::commit() {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  for (const auto& name : names_)
+    if (!fs::is_regular_file(fs::path(staging_) / name, ec))
+      throw ioError("was staged but not written", {(fs::path(dir_) / name).string()});
+  std::vector<std::string> paths;
+  for (const auto& name : names_) {
+    const std::string target = (fs::path(dir_) / name).string();
+    if (std::rename((fs::path(staging_) / name).c_str(), target.c_str()) != 0)
+      throw ioError(std::string("cannot move the output into place: ") + std::strerror(errno), {target});
+    paths.push_back(target);
+  }
+  return paths;
+}
+
 }  // namespace lidar2d::io
