@@ -21,8 +21,10 @@
 #              --odom-noise 0,0,0): what SLAM's scan matching and loop closures make of perfect
 #              odometry, i.e. how far its scan-consistent answer lies from the log's truth (itself the
 #              output of another SLAM system); and the same log with slam --no-odometry (keyframe logs
-#              without odometry: the constant-velocity prior alone). Not in the default set. Error: ATE
-#              against the truth.
+#              without odometry: the constant-velocity prior alone), and with perfect odometry but the
+#              short part's 5.6 m laser (what scan matching of a few metres around the robot does to
+#              odometry that needs no correction). Not in the default set. Error: ATE against the
+#              truth.
 #   short      every log in ../shared/data/corrected read with a short-range laser (perturb
 #              --laser-range-max 5.6: a low-cost laser's 5.6 m, beams beyond it no return), realistic
 #              odometry, dense and as keyframes, seeds as for corrected: a large building seen a few
@@ -200,6 +202,9 @@ if want_part corrected || want_part sparse || want_part floor || want_part short
       perturb "$log" --odom-noise 0,0,0 "${clock[@]}" -o "$p" || continue
       run "$base dense$tag, truth as odometry" "$p" "$p" "$p"
       run "$base dense$tag, no odometry" "$p" "$p" - --no-odometry
+      p=$OUT/logs/$base-truth-odometry-5.6m.log
+      perturb "$log" --odom-noise 0,0,0 "${clock[@]}" --laser-range-max 5.6 -o "$p" || continue
+      run "$base dense$tag, truth as odometry, 5.6 m laser" "$p" "$p" "$p"
     fi
   done
 fi
