@@ -22,6 +22,7 @@
 #include "lidar2d/sim/simulator.hpp"
 #include "lidar2d/sim/worlds.hpp"
 #include "lidar2d/slam/slam.hpp"
+#include "lidar2d/slam/state_file.hpp"
 #include "src/slam/internal/front_end.hpp"
 #include "src/slam/internal/loop_closure.hpp"
 #include "src/slam/internal/motion_prior.hpp"
@@ -1121,6 +1122,35 @@ TEST(SlamFrontEnd, ThePriorVouchesForAWeakMatchOnlyNearThePrediction) {
   weak.overlap.overlap = 0.39;
   weak.overlap.explained_in_overlap = 0.45;
   EXPECT_FALSE(internal::FrontEnd::priorVouchesFor(weak, 0.5));
+}
+
+// The odometry links' sigmas come from the options, the shares of the motion included (a robot
+// whose odometry is better than its scan matching narrows them: BENCHMARK.md, SLAM, the floor).
+TEST(SlamGraph, OdometryLinksTakeTheirSigmasFromTheOptions) {
+  const auto frames = simulateWorld("office", 1, 300);
+  for (const double share : {0.1, 0.0, 0.03}) {
+    SlamOptions o;
+    o.odometry_sigma_per_m = share;
+    o.odometry_sigma_per_turn = share;
+    Slam* slam = nullptr;
+    runSlam(frames, o, &slam);
+    const State st = slam->state();
+    ASSERT_EQ(slam->stats().odometry_wins, 0u);  // those links take the motion prior's sigmas
+    std::size_t edge = 0, links = 0, turning = 0;
+    for (const Constraint& c : st.constraints) {
+      if (!c.accepted) continue;
+      const auto& e = st.edges[edge++];
+      if (c.kind != Constraint::Kind::kOdometry) continue;
+      const double sm = o.odometry_sigma_m + share * c.T_from_to.translation().norm();
+      const double sr = o.odometry_sigma_rad + share * std::abs(c.T_from_to.theta());
+      EXPECT_NEAR(e.sqrt_information(0, 0), 1.0 / sm, 1e-9 / sm) << "link " << c.from << "-" << c.to;
+      EXPECT_NEAR(e.sqrt_information(2, 2), 1.0 / sr, 1e-9 / sr) << "link " << c.from << "-" << c.to;
+      ++links;
+      turning += std::abs(c.T_from_to.theta()) > 10.0 * kDeg;
+    }
+    EXPECT_GT(links, 20u) << share;
+    EXPECT_GT(turning, 0u) << share;  // where the share of the turn weighs
+  }
 }
 
 TEST(Slam, CorridorDoesNotSlide) {

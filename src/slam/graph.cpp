@@ -40,8 +40,8 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, Placeme
     o.from = n - 1;
     o.to = n;
     o.T_from_to = s.node_odometry[n - 1]->inverse() * *s.node_odometry[n];
-    const double sm = s.opt.odometry_sigma_m + 0.1 * o.T_from_to.translation().norm();
-    const double sr = s.opt.odometry_sigma_rad + 0.1 * std::abs(o.T_from_to.theta());
+    const double sm = s.opt.odometry_sigma_m + s.opt.odometry_sigma_per_m * o.T_from_to.translation().norm();
+    const double sr = s.opt.odometry_sigma_rad + s.opt.odometry_sigma_per_turn * std::abs(o.T_from_to.theta());
     // Across a lost track it is the only link to the map before it, until a relocalization either
     // agrees with it or shows the robot was carried (LoopClosure::acceptLoop drops it then).
     if (restart) s.restart_odometry = {s.edges.size(), s.constraints.size(), n};

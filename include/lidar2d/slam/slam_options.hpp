@@ -123,6 +123,8 @@ struct SlamOptions {
   double loop_huber = 1.0;
   double odometry_sigma_m = 0.05;
   double odometry_sigma_rad = 2.0 * kDeg;
+  double odometry_sigma_per_m = 0.1;
+  double odometry_sigma_per_turn = 0.1;
   int optimize_every_nodes = 30;
   int intermediate_iterations = 10;
   bool intermediate_rigid_submaps = true;
@@ -376,9 +378,13 @@ inline constexpr SlamOption kSlamOptionTable[] = {
     {LIDAR2D_SLAM_FIELD(loop_huber), "pose graph", "sigmas", OptionRange::above(0),
      "Huber scale on the whitened residual of loop closures found by proximity"},
     {LIDAR2D_SLAM_FIELD(odometry_sigma_m), "pose graph", "m", OptionRange::above(0),
-     "sigma of an odometry constraint, plus 10% of its distance"},
-    {LIDAR2D_SLAM_FIELD(odometry_sigma_rad), "pose graph", "deg", OptionRange::above(0),
-     "... in angle, plus 10% of its rotation"},
+     "sigma of an odometry constraint between nodes: this ..."},
+    {LIDAR2D_SLAM_FIELD(odometry_sigma_per_m), "pose graph", "m/m", OptionRange::atLeast(0),
+     "... plus this share of its distance"},
+    {LIDAR2D_SLAM_FIELD(odometry_sigma_rad), "pose graph", "deg", OptionRange::above(0), "... in angle: this ..."},
+    {LIDAR2D_SLAM_FIELD(odometry_sigma_per_turn), "pose graph", "rad/rad", OptionRange::atLeast(0),
+     "... plus this share of its rotation (a robot whose odometry is better than its scan matching, a short-range "
+     "laser with good wheel odometry: smaller values; BENCHMARK.md, SLAM, the floor)"},
     {LIDAR2D_SLAM_FIELD(optimize_every_nodes), "pose graph", "nodes", OptionRange::atLeast(1),
      "optimise this many nodes after a closure found by search (10 times as many after other closures)"},
     {LIDAR2D_SLAM_FIELD(intermediate_iterations), "pose graph", "iterations", OptionRange::atLeast(1),
