@@ -130,10 +130,7 @@ void run(const MapArgs& a) {
   const std::filesystem::path prefix(a.prefix);
   io::OutputSet outputs(prefix.parent_path().string());
   const std::string name = prefix.filename().string();
-  const std::string staged_pgm = outputs.stage(name + ".pgm");
-  outputs.stage(name + ".yaml");
-  outputs.stage(name + ".png");
-  writeMapFiles(staged_pgm.substr(0, staged_pgm.size() - 4), image, comment);  // PREFIX.{pgm,yaml,png}
+  writeMapFiles(outputs, name, image, comment);
   if (a.model == mapping::MapModel::kTsdf) {
     const auto surface = mapping::tsdfSurface(*map);
     io::AtomicFile f(outputs.stage(name + ".surface.txt"));

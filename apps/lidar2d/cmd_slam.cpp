@@ -241,10 +241,7 @@ void run(const SlamArgs& a) {
     }
     io::writeTrajectory(outputs.stage(fmt::format("trajectory_session{}.txt", k + 1)), earlier);
   }
-  const std::string map_pgm = outputs.stage("map.pgm");
-  outputs.stage("map.yaml");
-  outputs.stage("map.png");
-  writeMapFiles(map_pgm.substr(0, map_pgm.size() - 4), image);  // writes map.{pgm,yaml,png}
+  writeMapFiles(outputs, "map", image);
   writeGraph(outputs.stage("graph.txt"), slam);
   const auto t_save = Clock::now();
   const std::string state_bytes = slam::encodeState(state);

@@ -18,16 +18,16 @@ std::vector<std::uint8_t> encodeMapPng(const OccupancyImage& map, const std::str
   return io::encodePng(img.data(), map.width(), map.height(), 1, w, path);
 }
 
-std::vector<std::string> writeMapFiles(const std::string& prefix, const OccupancyImage& map,
-                                       const std::string& yaml_comment) {
-  const std::string yaml = prefix + ".yaml";
-  const std::string pgm = prefix + ".pgm";
-  const std::string png = prefix + ".png";
+void writeMapFiles(io::OutputSet& outputs, const std::string& name, const OccupancyImage& map,
+                   const std::string& yaml_comment) {
+  const std::string pgm = outputs.stage(name + ".pgm");
+  const std::string yaml = outputs.stage(name + ".yaml");
+  const std::string png = outputs.stage(name + ".png");
   // Our images are already trinary (-1/0/100), so the writer's thresholds only pass them through.
+  // The YAML names the image relative to itself: the staged files share a folder, as the outputs do.
   io::writeMap(yaml, map, pgm, 25, 65, yaml_comment);
   const auto bytes = encodeMapPng(map, png);
   io::writeFileAtomically(png, std::string(bytes.begin(), bytes.end()));
-  return {pgm, yaml, png};
 }
 
 }  // namespace lidar2d::cli

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "lidar2d/io/atomic_file.hpp"
 #include "lidar2d/io/map_file.hpp"
 
 namespace lidar2d::cli {
@@ -13,8 +14,9 @@ namespace lidar2d::cli {
 /// `path` only names the output in an error.
 std::vector<std::uint8_t> encodeMapPng(const OccupancyImage& map, const std::string& path);
 
-/// Writes PREFIX.pgm, PREFIX.yaml (map_server) and PREFIX.png, each atomically; returns the paths.
-std::vector<std::string> writeMapFiles(const std::string& prefix, const OccupancyImage& map,
-                                       const std::string& yaml_comment = {});
+/// Stages NAME.pgm, NAME.yaml (map_server) and NAME.png in `outputs` and writes them there; they
+/// appear with the command's other outputs at `outputs.commit()`.
+void writeMapFiles(io::OutputSet& outputs, const std::string& name, const OccupancyImage& map,
+                   const std::string& yaml_comment = {});
 
 }  // namespace lidar2d::cli

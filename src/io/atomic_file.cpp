@@ -59,8 +59,9 @@ void writeFileAtomically(const std::string& path, const std::string& content) {
 OutputSet::OutputSet(std::string dir) : dir_(std::move(dir)) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  if (!fs::is_directory(dir_.empty() ? "." : dir_, ec)) throw ioError("folder does not exist", {dir_});
-  staging_ = (fs::path(dir_.empty() ? "." : dir_) / (".lidar2d-staging." + std::to_string(::getpid()))).string();
+  const fs::path folder = dir_.empty() ? fs::path(".") : fs::path(dir_);
+  if (!fs::is_directory(folder, ec)) throw ioError("folder does not exist", {dir_});
+  staging_ = (folder / (".lidar2d-staging." + std::to_string(::getpid()))).string();
   fs::remove_all(staging_, ec);  // a crashed earlier process of the same id
   if (!fs::create_directory(staging_, ec) || ec)
     throw ioError("cannot create a staging folder: " + (ec ? ec.message() : std::string("it exists")), {staging_});
