@@ -61,6 +61,13 @@ TEST_F(CliSlam, WritesEveryOutput) {
   EXPECT_NEAR(summary["odometry_scale"].get<double>(), 1.0 / 1.005, 0.003);
   EXPECT_GE(summary["odometry_scale_evidence_m"].get<double>(), slam::kOdometryScaleMinEvidenceM);
   EXPECT_NE(test::readFile(run() / "report.html").find("m per metre of odometry"), std::string::npos);
+  // The loop closures' cycles: the simulator's odometry errs more per step than its matches, so the
+  // odometry keeps its links' weights.
+  EXPECT_GT(summary["loop_cycles"].get<int>(), 0);
+  EXPECT_GT(summary["cycle_odometry_deg"].get<double>(), summary["cycle_front_end_deg"].get<double>());
+  EXPECT_GT(summary["cycle_odometry_m"].get<double>(), 0.0);
+  EXPECT_GT(summary["cycle_front_end_m"].get<double>(), 0.0);
+  EXPECT_FALSE(summary["odometry_weighted_by_cycles"].get<bool>());
   // The graph file lists nodes and constraints.
   const std::string graph = test::readFile(run() / "graph.txt");
   EXPECT_NE(graph.find("\nNODE 0 "), std::string::npos);

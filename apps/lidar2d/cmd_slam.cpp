@@ -282,6 +282,12 @@ void run(const SlamArgs& a) {
   j["loop_closures_accepted"] = s.loop_accepted;
   j["loop_closures_rejected"] = s.loop_rejected;
   j["loop_closures_downweighted"] = s.loop_downweighted;
+  j["loop_cycles"] = s.loop_cycles;
+  j["cycle_odometry_deg"] = s.cycle_odometry_deg;
+  j["cycle_front_end_deg"] = s.cycle_front_end_deg;
+  j["cycle_odometry_m"] = s.cycle_odometry_m;
+  j["cycle_front_end_m"] = s.cycle_front_end_m;
+  j["odometry_weighted_by_cycles"] = s.odometry_weighted_by_cycles;
   j["descriptor_queries"] = s.descriptor_queries;
   j["descriptor_hypotheses"] = s.descriptor_hypotheses;
   j["descriptor_closures_accepted"] = s.descriptor_accepted;

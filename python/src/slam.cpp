@@ -69,6 +69,12 @@ py::dict statsDict(const slam::SlamStats& s) {
   d["loop_accepted"] = s.loop_accepted;
   d["loop_rejected"] = s.loop_rejected;
   d["loop_downweighted"] = s.loop_downweighted;
+  d["loop_cycles"] = s.loop_cycles;
+  d["cycle_odometry_deg"] = s.cycle_odometry_deg;
+  d["cycle_front_end_deg"] = s.cycle_front_end_deg;
+  d["cycle_odometry_m"] = s.cycle_odometry_m;
+  d["cycle_front_end_m"] = s.cycle_front_end_m;
+  d["odometry_weighted_by_cycles"] = s.odometry_weighted_by_cycles;
   d["descriptor_accepted"] = s.descriptor_accepted;
   d["optimizations"] = s.optimizations;
   d["total_seconds"] = s.total_seconds;

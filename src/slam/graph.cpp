@@ -1,13 +1,14 @@
 #include "src/slam/internal/graph.hpp"
 
-#include "src/slam/internal/motion_prior.hpp"
-
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <utility>
 #include <vector>
+
+#include "src/slam/internal/motion_prior.hpp"
 
 namespace lidar2d::slam::internal {
 
@@ -56,6 +57,25 @@ void optimizeWith(SlamState& s, int iterations, bool rigid_submaps) {
   std::vector<SE2> poses;
   poses.reserve(s.nodes.size());
   for (const Node& n : s.nodes) poses.push_back(n.T_world_robot);
+  // The cycles' sigmas (calibrateFromCycles) on a copy: the state keeps the links as built.
+  std::vector<PoseGraphEdge> calibrated;
+  if (s.cycles_odometry_sigma_rad > 0.0) {
+    calibrated = s.edges;
+    std::size_t k = 0;
+    for (const Constraint& c : s.constraints) {
+      if (!c.accepted) continue;
+      PoseGraphEdge& e = calibrated[k++];
+      const double sr = 1.0 / e.sqrt_information(2, 2);
+      if (c.kind == Constraint::Kind::kOdometry && sr > s.cycles_odometry_sigma_rad)
+        e.sqrt_information.row(2) *= sr / s.cycles_odometry_sigma_rad;
+      if (c.kind == Constraint::Kind::kOdometry && s.cycles_odometry_sigma_m > 0.0) {
+        const double sm = 1.0 / e.sqrt_information(0, 0);
+        if (sm > s.cycles_odometry_sigma_m) e.sqrt_information.topRows<2>() *= sm / s.cycles_odometry_sigma_m;
+      } else if (c.kind == Constraint::Kind::kSequential && sr < s.cycles_sequential_sigma_rad)
+        e.sqrt_information.row(2) *= sr / s.cycles_sequential_sigma_rad;
+    }
+  }
+  const std::vector<PoseGraphEdge>& edges = calibrated.empty() ? s.edges : calibrated;
   PoseGraphOptions go = s.opt.graph;
   go.max_iterations = iterations;
   PoseGraphSummary summary;
@@ -80,9 +100,9 @@ void optimizeWith(SlamState& s, int iterations, bool rigid_submaps) {
     // larger, and dynamic covariance scaling would fade right closures (BENCHMARK.md, SLAM). The
     // final optimisation scales them.
     go.dcs_phi = 0.0;
-    summary = optimizePoseGraphRigid(poses, s.edges, group_of, 0, go);
+    summary = optimizePoseGraphRigid(poses, edges, group_of, 0, go);
   } else {
-    summary = optimizePoseGraph(poses, s.edges, 0, go);
+    summary = optimizePoseGraph(poses, edges, 0, go);
   }
   ++s.stats.optimizations;
   s.stats.optimization_seconds += summary.seconds;
@@ -99,6 +119,95 @@ void optimizeWith(SlamState& s, int iterations, bool rigid_submaps) {
 }  // namespace
 
 void optimize(SlamState& s, int iterations) { optimizeWith(s, iterations, false); }
+
+CycleMeasure measureCycles(const SlamState& s) {
+  const std::size_t N = s.nodes.size();
+  // The accepted sequential and odometry edge into each node (the first of each kind).
+  constexpr std::size_t kNone = static_cast<std::size_t>(-1);
+  std::vector<std::size_t> seq(N, kNone), odo(N, kNone), loops;
+  std::vector<char> restart(N, 0);
+  for (std::size_t r : s.restarts)
+    if (r < N) restart[r] = 1;
+  std::size_t k = 0;
+  for (const Constraint& c : s.constraints) {
+    if (!c.accepted) continue;
+    const bool link = c.to == c.from + 1 && c.to < N;
+    if (link && c.kind == Constraint::Kind::kSequential && seq[c.to] == kNone) seq[c.to] = k;
+    if (link && c.kind == Constraint::Kind::kOdometry && odo[c.to] == kNone) odo[c.to] = k;
+    if (c.kind == Constraint::Kind::kLoop) loops.push_back(k);
+    ++k;
+  }
+  // Per cycle, each chain's heading error against the closure, squared, per node step.
+  std::vector<double> q_odo, q_seq, t_odo, t_seq;
+  for (const std::size_t l : loops) {
+    const PoseGraphEdge& e = s.edges[l];
+    const std::size_t a = std::min(e.from, e.to), b = std::max(e.from, e.to);
+    if (b >= N || b - a < kCycleMinSteps) continue;
+    double th_odo = 0.0, th_seq = 0.0;
+    SE2 T_odo, T_seq;
+    bool whole = true;
+    for (std::size_t n = a + 1; n <= b && whole; ++n) {
+      whole = !restart[n] && seq[n] != kNone && odo[n] != kNone;
+      if (!whole) break;
+      th_odo += s.edges[odo[n]].T_from_to.theta();
+      th_seq += s.edges[seq[n]].T_from_to.theta();
+      T_odo = T_odo * s.edges[odo[n]].T_from_to;
+      T_seq = T_seq * s.edges[seq[n]].T_from_to;
+    }
+    if (!whole) continue;
+    const double th_loop = e.from == a ? e.T_from_to.theta() : -e.T_from_to.theta();
+    const double steps = static_cast<double>(b - a);
+    const double eo = angleDiff(th_loop, th_odo), es = angleDiff(th_loop, th_seq);
+    q_odo.push_back(eo * eo / steps);
+    q_seq.push_back(es * es / steps);
+    const SE2 T_loop = e.from == a ? e.T_from_to : e.T_from_to.inverse();
+    t_odo.push_back((T_odo.translation() - T_loop.translation()).squaredNorm() / steps);
+    t_seq.push_back((T_seq.translation() - T_loop.translation()).squaredNorm() / steps);
+  }
+  CycleMeasure m;
+  m.cycles = q_odo.size();
+  if (q_odo.empty()) return m;
+  const auto median = [](std::vector<double>& v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  // A chain's heading error over n steps of independent errors of sigma s is N(0, n s^2) (plus the
+  // closure's own), so each cycle's e^2 / n is s^2 times a chi-square(1), whose median is 0.455.
+  // The median keeps the wrong closures a run may hold from counting.
+  m.odometry_rad = std::sqrt(median(q_odo) / 0.455);
+  m.front_end_rad = std::sqrt(median(q_seq) / 0.455);
+  m.odometry_m = std::sqrt(median(t_odo) / 1.386);
+  m.front_end_m = std::sqrt(median(t_seq) / 1.386);
+  return m;
+}
+
+void calibrateFromCycles(SlamState& s) {
+  const CycleMeasure m = measureCycles(s);
+  s.stats.loop_cycles = m.cycles;
+  s.stats.cycle_odometry_deg = m.odometry_rad / kDeg;
+  s.stats.cycle_front_end_deg = m.front_end_rad / kDeg;
+  s.stats.cycle_odometry_m = m.odometry_m;
+  s.stats.cycle_front_end_m = m.front_end_m;
+  s.cycles_odometry_sigma_rad = s.cycles_sequential_sigma_rad = s.cycles_odometry_sigma_m = 0.0;
+  s.stats.odometry_weighted_by_cycles = false;
+  const double rotation = m.odometry_rad / m.front_end_rad, position = m.odometry_m / m.front_end_m;
+  if (m.cycles < kCycleMinCount || !(rotation < 1.0) || !(position < 1.0) ||
+      !(std::sqrt(rotation * position) < kCycleOdometryRatio))
+    return;
+  s.cycles_odometry_sigma_rad = std::max(m.odometry_rad, kCycleMinSigmaRad);
+  s.cycles_sequential_sigma_rad = m.front_end_rad;
+  s.cycles_odometry_sigma_m = std::max(m.odometry_m, kCycleMinSigmaM);
+  s.stats.odometry_weighted_by_cycles = true;
+  const Node& last = s.nodes.back();
+  s.events.push_back(
+      {s.scans[last.scan].frame_index, last.time,
+       fmt::format(
+           "odometry weighted by the loop closures' cycles: over {} cycles it erred {:.3f} degrees and {:.4f} m "
+           "per node step, the scan matches {:.3f} degrees and {:.4f} m; the final graph holds the odometry "
+           "links to {:.3f} degrees and {:.4f} m and the matches' rotation to at least {:.3f} degrees",
+           m.cycles, m.odometry_rad / kDeg, m.odometry_m, m.front_end_rad / kDeg, m.front_end_m,
+           s.cycles_odometry_sigma_rad / kDeg, s.cycles_odometry_sigma_m, m.front_end_rad / kDeg)});
+}
 
 void reportDownweighted(SlamState& s) {
   s.stats.loop_downweighted = 0;

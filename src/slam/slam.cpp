@@ -512,6 +512,7 @@ void Slam::finish() {
   std::stable_sort(s.events.begin(), s.events.end(),
                    [](const Event& a, const Event& b) { return a.frame_index < b.frame_index; });
   impl_->loops.expirePending();
+  internal::calibrateFromCycles(s);
   internal::optimize(s, s.opt.graph.max_iterations);
   // A resumed map carries the fragment verdicts of the run that saved it; the new session may have
   // tied those fragments: checkAtEnd states them again for the whole graph.

@@ -93,6 +93,16 @@ struct SlamStats {
   /// does not keep it.
   double odometry_scale = 1.0;
   double odometry_scale_evidence_m = 0.0;
+  /// The loop closures' cycles at the end (internal::calibrateFromCycles; docs/slam.md, Pose graph):
+  /// how many were measured, the odometry's and the scan matches' heading error per node step they
+  /// show [deg], and whether the final optimisation weighed the odometry links by them. This
+  /// session's own: a saved state does not keep it.
+  std::size_t loop_cycles = 0;
+  double cycle_odometry_deg = 0.0;
+  double cycle_front_end_deg = 0.0;
+  double cycle_odometry_m = 0.0;
+  double cycle_front_end_m = 0.0;
+  bool odometry_weighted_by_cycles = false;
   std::size_t loop_searches = 0, loop_accepted = 0, loop_rejected = 0;
   std::size_t loop_downweighted = 0;  ///< accepted closures the final graph scaled below half weight (DCS)
   std::size_t descriptor_queries = 0;      ///< descriptor look-ups

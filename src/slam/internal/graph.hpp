@@ -32,6 +32,40 @@ void optimize(SlamState& s, int iterations);
 ///   fragment beyond the first is reported as an event. Sets stats.fragments and
 ///   stats.odometry_wins.
 void checkAtEnd(SlamState& s);
+
+/// What the loop closures' cycles say of the two chains of links between consecutive nodes: for
+/// each accepted closure over at least kCycleMinSteps node steps with both an odometry and a front
+/// end (sequential) link at every step and no lost track, the closure's heading against each
+/// chain's sum of headings. The chains' rotation errors per node step (radians) are the medians of
+/// error^2 / steps, as sigmas.
+struct CycleMeasure {
+  std::size_t cycles = 0;
+  double odometry_rad = 0.0;
+  double front_end_rad = 0.0;
+  double odometry_m = 0.0;
+  double front_end_m = 0.0;
+};
+inline constexpr std::size_t kCycleMinSteps = 5;
+/// The cycles needed before their measure reweighs the graph.
+inline constexpr std::size_t kCycleMinCount = 20;
+/// The odometry must err less than the front end in heading and in position, and the geometric mean
+/// of the two shares must be under this. With realistic simulated odometry (a degree per metre), the
+/// raw bags' own and the simulated lasers', it was at least 0.37 on every run of the robustness
+/// benchmark with 20 cycles or more; with the truth as odometry 0.02-0.6 (BENCHMARK.md, SLAM).
+inline constexpr double kCycleOdometryRatio = 0.25;
+/// The narrowest the odometry links' rotation sigma gets (the closures' own error bounds the measure).
+inline constexpr double kCycleMinSigmaRad = 0.02 * kDeg;
+inline constexpr double kCycleMinSigmaM = 0.002;
+CycleMeasure measureCycles(const SlamState& s);
+
+/// Before the final optimisation: measures the cycles (stats loop_cycles, cycle_*) and, when there
+/// are kCycleMinCount of them and the odometry erred clearly less than the front end per step
+/// (kCycleOdometryRatio), has the final optimisation hold the odometry links' sigmas to the
+/// odometry's measured errors (never wider than their own; at least kCycleMinSigmaRad and
+/// kCycleMinSigmaM) and the front end's links' rotation sigma to at least theirs (SlamState::cycles_*_sigma_rad; the
+/// state's edges keep their weights), with an event. Odometry better than the scan matching, which the defaults'
+/// odometry weights (made for odometry drifting a degree per metre) cannot know, then holds the map.
+void calibrateFromCycles(SlamState& s);
 /// How checkAtEnd's event of a fragment no closure tied begins.
 inline constexpr std::string_view kFragmentEvent = "fragment from node ";
 

@@ -130,6 +130,12 @@ struct SlamState {
   bool untiedHasOdometryLink() const {
     return untied_since && restart_odometry && restart_odometry->node == *untied_since;
   }
+  /// Rotation sigmas the final optimisation gives the odometry links (at most) and the front end's
+  /// links (at least), measured from the loop closures' cycles (calibrateFromCycles); 0: the
+  /// links' own. This session's own: not saved.
+  double cycles_odometry_sigma_rad = 0.0;
+  double cycles_sequential_sigma_rad = 0.0;
+  double cycles_odometry_sigma_m = 0.0;
   std::vector<double> edge_scale;  // of `edges` at the latest optimisation (PoseGraphSummary::edge_scale)
   /// Whether the latest optimisation faded edge k (a closure the rest of the graph contradicts:
   /// dynamic covariance scaling left it under half its weight); false for edges added since.
