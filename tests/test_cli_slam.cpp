@@ -68,6 +68,7 @@ TEST_F(CliSlam, WritesEveryOutput) {
   EXPECT_GT(summary["cycle_odometry_m"].get<double>(), 0.0);
   EXPECT_GT(summary["cycle_front_end_m"].get<double>(), 0.0);
   EXPECT_FALSE(summary["odometry_weighted_by_cycles"].get<bool>());
+  EXPECT_NE(test::readFile(run() / "report.html").find("the odometry links kept their own weights"), std::string::npos);
   // The graph file lists nodes and constraints.
   const std::string graph = test::readFile(run() / "graph.txt");
   EXPECT_NE(graph.find("\nNODE 0 "), std::string::npos);

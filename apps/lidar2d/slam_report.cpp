@@ -197,6 +197,20 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
             : fmt::format("not measured: {:.0f} m of steps the scans pinned, {:.0f} m needed",
                           j.value("odometry_scale_evidence_m", 0.0), slam::kOdometryScaleMinEvidenceM));
   }
+  if (j.value("used_odometry", false)) {
+    // How good the odometry is against the scan matching, as the loop closures' cycles measure it
+    // (docs/slam.md, Pose graph): what a user tuning odometry_sigma_* would want to know.
+    const std::size_t cycles = j.value("loop_cycles", std::size_t{0});
+    row("odometry against the matches",
+        cycles == 0 ? std::string("not measured: no loop closure over 5 node steps or more with odometry all along")
+                    : fmt::format("over {} loop closures' cycles, per node step: odometry {:.3f} degrees and {:.4f} m, "
+                                  "scan matches {:.3f} degrees and {:.4f} m; {}",
+                                  cycles, j.value("cycle_odometry_deg", 0.0), j.value("cycle_odometry_m", 0.0),
+                                  j.value("cycle_front_end_deg", 0.0), j.value("cycle_front_end_m", 0.0),
+                                  j.value("odometry_weighted_by_cycles", false)
+                                      ? "the final graph weighed the odometry links by it"
+                                      : "the odometry links kept their own weights"));
+  }
   row("map", fmt::format("{} x {} cells of {} m", W, H, res));
   html << "</table>\n";
   html << "<h2>Map and trajectory</h2>\n<p class=\"legend\"><span style=\"background:#1f77b4\"></span>trajectory"
