@@ -57,22 +57,24 @@ void optimizeWith(SlamState& s, int iterations, bool rigid_submaps) {
   std::vector<SE2> poses;
   poses.reserve(s.nodes.size());
   for (const Node& n : s.nodes) poses.push_back(n.T_world_robot);
-  // The cycles' sigmas (calibrateFromCycles) on a copy: the state keeps the links as built.
+  // The cycles' sigmas (calibrateFromCycles) on a copy: the state keeps the links as built. Each
+  // sigma is only narrowed (odometry) or widened (front end), never moved the other way.
   std::vector<PoseGraphEdge> calibrated;
   if (s.cycles_odometry_sigma_rad > 0.0) {
     calibrated = s.edges;
+    const auto hold = [](auto rows, double sigma, double target, bool narrow) {
+      if (narrow ? sigma > target : sigma < target) rows *= sigma / target;
+    };
     std::size_t k = 0;
     for (const Constraint& c : s.constraints) {
       if (!c.accepted) continue;
-      PoseGraphEdge& e = calibrated[k++];
-      const double sr = 1.0 / e.sqrt_information(2, 2);
-      if (c.kind == Constraint::Kind::kOdometry && sr > s.cycles_odometry_sigma_rad)
-        e.sqrt_information.row(2) *= sr / s.cycles_odometry_sigma_rad;
-      if (c.kind == Constraint::Kind::kOdometry && s.cycles_odometry_sigma_m > 0.0) {
-        const double sm = 1.0 / e.sqrt_information(0, 0);
-        if (sm > s.cycles_odometry_sigma_m) e.sqrt_information.topRows<2>() *= sm / s.cycles_odometry_sigma_m;
-      } else if (c.kind == Constraint::Kind::kSequential && sr < s.cycles_sequential_sigma_rad)
-        e.sqrt_information.row(2) *= sr / s.cycles_sequential_sigma_rad;
+      Eigen::Matrix3d& info = calibrated[k++].sqrt_information;
+      if (c.kind == Constraint::Kind::kOdometry) {
+        hold(info.row(2), 1.0 / info(2, 2), s.cycles_odometry_sigma_rad, true);
+        hold(info.topRows<2>(), 1.0 / info(0, 0), s.cycles_odometry_sigma_m, true);
+      } else if (c.kind == Constraint::Kind::kSequential) {
+        hold(info.row(2), 1.0 / info(2, 2), s.cycles_sequential_sigma_rad, false);
+      }
     }
   }
   const std::vector<PoseGraphEdge>& edges = calibrated.empty() ? s.edges : calibrated;
@@ -137,47 +139,41 @@ CycleMeasure measureCycles(const SlamState& s) {
     if (c.kind == Constraint::Kind::kLoop) loops.push_back(k);
     ++k;
   }
-  // Per cycle, each chain's heading error against the closure, squared, per node step.
+  // Per cycle, each chain's error against the closure (heading; x and y), squared, per node step.
   std::vector<double> q_odo, q_seq, t_odo, t_seq;
   for (const std::size_t l : loops) {
     const PoseGraphEdge& e = s.edges[l];
     const std::size_t a = std::min(e.from, e.to), b = std::max(e.from, e.to);
     if (b >= N || b - a < kCycleMinSteps) continue;
-    double th_odo = 0.0, th_seq = 0.0;
     SE2 T_odo, T_seq;
     bool whole = true;
     for (std::size_t n = a + 1; n <= b && whole; ++n) {
       whole = !restart[n] && seq[n] != kNone && odo[n] != kNone;
-      if (!whole) break;
-      th_odo += s.edges[odo[n]].T_from_to.theta();
-      th_seq += s.edges[seq[n]].T_from_to.theta();
-      T_odo = T_odo * s.edges[odo[n]].T_from_to;
-      T_seq = T_seq * s.edges[seq[n]].T_from_to;
+      if (whole) {
+        T_odo = T_odo * s.edges[odo[n]].T_from_to;
+        T_seq = T_seq * s.edges[seq[n]].T_from_to;
+      }
     }
     if (!whole) continue;
-    const double th_loop = e.from == a ? e.T_from_to.theta() : -e.T_from_to.theta();
+    const SE2 T_loop = e.from == a ? e.T_from_to : e.T_from_to.inverse();
     const double steps = static_cast<double>(b - a);
-    const double eo = angleDiff(th_loop, th_odo), es = angleDiff(th_loop, th_seq);
+    const double eo = angleDiff(T_loop.theta(), T_odo.theta()), es = angleDiff(T_loop.theta(), T_seq.theta());
     q_odo.push_back(eo * eo / steps);
     q_seq.push_back(es * es / steps);
-    const SE2 T_loop = e.from == a ? e.T_from_to : e.T_from_to.inverse();
     t_odo.push_back((T_odo.translation() - T_loop.translation()).squaredNorm() / steps);
     t_seq.push_back((T_seq.translation() - T_loop.translation()).squaredNorm() / steps);
   }
   CycleMeasure m;
   m.cycles = q_odo.size();
   if (q_odo.empty()) return m;
-  const auto median = [](std::vector<double>& v) {
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-    return v[v.size() / 2];
-  };
   // A chain's heading error over n steps of independent errors of sigma s is N(0, n s^2) (plus the
-  // closure's own), so each cycle's e^2 / n is s^2 times a chi-square(1), whose median is 0.455.
-  // The median keeps the wrong closures a run may hold from counting.
-  m.odometry_rad = std::sqrt(median(q_odo) / 0.455);
-  m.front_end_rad = std::sqrt(median(q_seq) / 0.455);
-  m.odometry_m = std::sqrt(median(t_odo) / 1.386);
-  m.front_end_m = std::sqrt(median(t_seq) / 1.386);
+  // closure's own), so each cycle's e^2 / n is s^2 times a chi-square(1), whose median is 0.455; its
+  // x and y error a chi-square(2), median 1.386. The median keeps the wrong closures a run may hold
+  // from counting.
+  m.odometry_rad = std::sqrt(upperMedian(std::move(q_odo)) / 0.455);
+  m.front_end_rad = std::sqrt(upperMedian(std::move(q_seq)) / 0.455);
+  m.odometry_m = std::sqrt(upperMedian(std::move(t_odo)) / 1.386);
+  m.front_end_m = std::sqrt(upperMedian(std::move(t_seq)) / 1.386);
   return m;
 }
 

@@ -7,16 +7,11 @@
 #include <vector>
 
 namespace lidar2d::slam::internal {
-namespace {
-
-/// The upper median of `v` (its element n/2 in sorted order; n > 0), in O(n).
 double upperMedian(std::vector<double> v) {
   const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
   std::nth_element(v.begin(), mid, v.end());
   return *mid;
 }
-
-}  // namespace
 
 const char* toString(PriorSource s) {
   switch (s) {

@@ -35,9 +35,9 @@ void checkAtEnd(SlamState& s);
 
 /// What the loop closures' cycles say of the two chains of links between consecutive nodes: for
 /// each accepted closure over at least kCycleMinSteps node steps with both an odometry and a front
-/// end (sequential) link at every step and no lost track, the closure's heading against each
-/// chain's sum of headings. The chains' rotation errors per node step (radians) are the medians of
-/// error^2 / steps, as sigmas.
+/// end (sequential) link at every step and no lost track, the closure against each chain's
+/// composed links. The chains' errors per node step, heading [rad] and x and y [m], are the
+/// medians of error^2 / steps, as sigmas.
 struct CycleMeasure {
   std::size_t cycles = 0;
   double odometry_rad = 0.0;
@@ -53,7 +53,7 @@ inline constexpr std::size_t kCycleMinCount = 20;
 /// raw bags' own and the simulated lasers', it was at least 0.37 on every run of the robustness
 /// benchmark with 20 cycles or more; with the truth as odometry 0.02-0.6 (BENCHMARK.md, SLAM).
 inline constexpr double kCycleOdometryRatio = 0.25;
-/// The narrowest the odometry links' rotation sigma gets (the closures' own error bounds the measure).
+/// The narrowest the odometry links' sigmas get (the closures' own error bounds the measure).
 inline constexpr double kCycleMinSigmaRad = 0.02 * kDeg;
 inline constexpr double kCycleMinSigmaM = 0.002;
 CycleMeasure measureCycles(const SlamState& s);
@@ -62,9 +62,10 @@ CycleMeasure measureCycles(const SlamState& s);
 /// are kCycleMinCount of them and the odometry erred clearly less than the front end per step
 /// (kCycleOdometryRatio), has the final optimisation hold the odometry links' sigmas to the
 /// odometry's measured errors (never wider than their own; at least kCycleMinSigmaRad and
-/// kCycleMinSigmaM) and the front end's links' rotation sigma to at least theirs (SlamState::cycles_*_sigma_rad; the
-/// state's edges keep their weights), with an event. Odometry better than the scan matching, which the defaults'
-/// odometry weights (made for odometry drifting a degree per metre) cannot know, then holds the map.
+/// kCycleMinSigmaM) and the front end's links' rotation sigma to at least theirs
+/// (SlamState::cycles_*; the state's edges keep their weights), with an event. Odometry better than
+/// the scan matching, which the defaults' odometry weights (made for odometry drifting a degree per
+/// metre) cannot know, then holds the map.
 void calibrateFromCycles(SlamState& s);
 /// How checkAtEnd's event of a fragment no closure tied begins.
 inline constexpr std::string_view kFragmentEvent = "fragment from node ";

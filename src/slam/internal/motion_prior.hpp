@@ -19,6 +19,9 @@
 
 namespace lidar2d::slam::internal {
 
+/// The upper median of `v` (its element n/2 in sorted order; n > 0), in O(n).
+double upperMedian(std::vector<double> v);
+
 /// Where a prediction came from.
 enum class PriorSource {
   kNone,              ///< the first scan

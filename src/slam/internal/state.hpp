@@ -130,9 +130,9 @@ struct SlamState {
   bool untiedHasOdometryLink() const {
     return untied_since && restart_odometry && restart_odometry->node == *untied_since;
   }
-  /// Rotation sigmas the final optimisation gives the odometry links (at most) and the front end's
-  /// links (at least), measured from the loop closures' cycles (calibrateFromCycles); 0: the
-  /// links' own. This session's own: not saved.
+  /// Sigmas the final optimisation gives the odometry links (rotation and x, y: at most) and the
+  /// front end's links (rotation: at least), measured from the loop closures' cycles
+  /// (calibrateFromCycles); 0: the links' own. This session's own: not saved.
   double cycles_odometry_sigma_rad = 0.0;
   double cycles_sequential_sigma_rad = 0.0;
   double cycles_odometry_sigma_m = 0.0;
