@@ -267,10 +267,9 @@ TEST(PerturbCli, OdometryLagReadsTheOdometryAtAnotherTime) {
   EXPECT_NE(test::readFile(random).find("lag_s=0,0.03"), std::string::npos);
 }
 
-TEST(PerturbCli, KeepOdometryDropsAndRetimesALogWithoutTruth) {
-  TempDir tmp;
-  // An odometry-only CARMEN log: FLASER lines whose poses are odometry, turning 10 degrees per scan
-  // for a while, then driving straight.
+/// An odometry-only CARMEN log of 200 scans at 10 Hz: FLASER lines whose poses are odometry,
+/// 5 cm apart, turning 10 degrees per scan over scans 50-79.
+std::string turningOdometryLog() {
   std::string text;
   double x = 0, y = 0, th = 0;
   for (int i = 0; i < 200; ++i) {
@@ -279,8 +278,13 @@ TEST(PerturbCli, KeepOdometryDropsAndRetimesALogWithoutTruth) {
     y += 0.05 * std::sin(th);
     text += fmt::format("FLASER 3 1.0 1.5 2.0 {} {} {} {} {} {} {} host {}\n", x, y, th, x, y, th, 0.1 * i, 0.1 * i);
   }
+  return text;
+}
+
+TEST(PerturbCli, KeepOdometryDropsAndRetimesALogWithoutTruth) {
+  TempDir tmp;
   const std::string in = (tmp / "odo.log").string(), out = (tmp / "kept.log").string();
-  test::writeFile(in, text);
+  test::writeFile(in, turningOdometryLog());
   const CliResult r = runCli({"perturb", in, "--keep-odometry", "--gap", "2@turn", "--keyframes", "0.2,0", "-o", out});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("odometry kept from the log"), std::string::npos) << r.out;
@@ -295,6 +299,27 @@ TEST(PerturbCli, KeepOdometryDropsAndRetimesALogWithoutTruth) {
     // go to the earliest, [4.9, 6.9) s, scans 49-68.
     EXPECT_FALSE(i >= 49 && i <= 68) << i;
   }
+}
+
+TEST(PerturbCli, FreezeOdometryKeepsTheScansAndHoldsTheirOdometryThroughATurn) {
+  TempDir tmp;
+  const std::string in = (tmp / "odo.log").string(), out = (tmp / "frozen.log").string();
+  test::writeFile(in, turningOdometryLog());
+  const CliResult r = runCli({"perturb", in, "--keep-odometry", "--freeze-odometry", "2@turn", "-o", out});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("kept 200, dropped 0 by keyframes, 0 by gaps (odometry frozen 4.9-6.9 s, turn 190 deg: 20 "
+                       "scans)"),
+            std::string::npos)
+      << r.out;
+  const auto src = readAll(in), got = readAll(out);
+  ASSERT_EQ(got.size(), src.size());
+  // Scans 49-68 read scan 48's odometry; the others their own.
+  for (std::size_t i = 0; i < got.size(); ++i)
+    EXPECT_TRUE(test::IsNearPose(*src[i >= 49 && i <= 68 ? 48 : i].T_odom_robot, *got[i].T_odom_robot, 1e-9, 1e-7))
+        << i;
+  EXPECT_NE(test::readFile(out).find("gaps=frozen-odometry[4.900,6.900)"), std::string::npos);
+  // A malformed window is a usage error.
+  EXPECT_EQ(runCli({"perturb", in, "--keep-odometry", "--freeze-odometry", "abc", "-o", out}).exit_code, 2);
 }
 
 TEST(PerturbCli, KeepOdometryOnARealBagWithAGapDuringATurn) {

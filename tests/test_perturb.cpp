@@ -331,6 +331,42 @@ TEST(LogPerturber, AcrossACarriedGapTheOdometryReadsNoMotion) {
   }
 }
 
+TEST(LogPerturber, AFrozenOdometryWindowKeepsItsScansAndHoldsTheirOdometry) {
+  // Every scan is kept; inside the window each reads the odometry of the last scan before it, and
+  // after it the odometry reads what it would have read without the window (the wheels counted).
+  const auto in = simulatedLog("office");
+  GapRequest freeze{10.0, GapPlacement::kMiddle, 0.0};
+  freeze.frozen_odometry = true;
+  for (const OdometrySource source : {OdometrySource::kNoisyFromTruth, OdometrySource::kKeepLog}) {
+    LogPerturbationOptions o;
+    o.odometry_source = source;
+    PerturbationStats st, plain_st;
+    const auto plain = perturbLog(in, o, {}, &plain_st);
+    const auto out = perturbLog(in, o, {freeze}, &st);
+    ASSERT_EQ(out.size(), in.size());
+    EXPECT_EQ(st.dropped_by_gaps, 0u);
+    ASSERT_EQ(st.dropped_per_gap.size(), 1u);
+    EXPECT_GT(st.frozen_odometry, 50u);
+    EXPECT_EQ(st.frozen_odometry, st.dropped_per_gap[0]);
+    std::size_t frozen = 0, first = out.size(), last = 0;
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      const bool differs = !IsNearPose(*plain[k].T_odom_robot, *out[k].T_odom_robot, 0.0, 0.0);
+      if (!differs) continue;
+      first = std::min(first, k);
+      last = k;
+      ++frozen;
+      ASSERT_GT(first, 0u);
+      EXPECT_TRUE(IsNearPose(*plain[first - 1].T_odom_robot, *out[k].T_odom_robot, 0.0, 0.0)) << k;
+      EXPECT_EQ(out[k].time, plain[k].time);
+    }
+    EXPECT_EQ(frozen, st.frozen_odometry);
+    EXPECT_EQ(last - first + 1, frozen);  // one stretch: after it the odometry reads what the wheels counted
+  }
+  GapRequest both = freeze;
+  both.carried = true;
+  EXPECT_THROW(both.validate(), Error);
+}
+
 TEST(LogPerturber, AGapAtTheStartKeepsOdometryAnchoredAtTheFirstTruth) {
   const auto in = simulatedLog("office");
   LogPerturbationOptions o;

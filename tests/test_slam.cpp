@@ -867,7 +867,7 @@ TEST(SlamMotionPrior, KeyframesWhoseOdometryStraysLittleGetANarrowerPrior) {
       p = prior.predict(f, sink);
       const SE2 step = k == 0 ? SE2() : p.delta * SE2(0.03, 0.0, 0.5 * kDeg);
       if (k > 0) prior.observeOdometryNoise(p, step);
-      prior.remember(f, step, k == 0, p.time_ok, true);
+      prior.remember(f, p, step, k == 0, true);
       odom = odom * SE2(3.0, 0.0, 45.0 * kDeg);
     }
     return p;
@@ -886,6 +886,51 @@ TEST(SlamMotionPrior, KeyframesWhoseOdometryStraysLittleGetANarrowerPrior) {
   EXPECT_GE(learnt.sigma_rad, opt.prior_odometry_sigma_rad);
 }
 
+// A robot standing still reads one odometry pose while its scans jitter by millimetres: that is
+// no frozen odometry. A robot creeping 2 cm per scan with its odometry stuck is: the scans move it
+// beyond the gate of standing still (0.05 m + 0.01 m/s, 1 degree; 4 sigmas) after 13 steps, and from
+// the next scan the prior is constant velocity until the odometry reads another pose, whose first
+// step, spanning the frozen stretch, predicts nothing either.
+TEST(SlamMotionPrior, OdometryReadingOnePoseWhileTheScansMoveIsFrozen) {
+  const SlamOptions opt;
+  auto run = [&](const SE2& scan_step, std::size_t still, std::vector<std::string>& notes) {
+    internal::MotionPrior prior(opt);
+    auto sink = [&](std::string note) { notes.push_back(std::move(note)); };
+    std::vector<internal::MotionPrediction> out;
+    for (std::size_t k = 0; k <= still + 2; ++k) {
+      Frame f;
+      f.time = 0.1 * static_cast<double>(k);
+      // One pose for scans 0..still, then the wheels' count: where the robot is.
+      const double moved = static_cast<double>(k > still ? k : 0) * scan_step.x();
+      f.T_odom_robot = SE2(moved, 0.0, 0.0);
+      out.push_back(prior.predict(f, sink));
+      const SE2 step = k == 0 ? SE2() : (k % 2 ? scan_step : SE2(scan_step.x(), -scan_step.y(), -scan_step.theta()));
+      prior.remember(f, out.back(), step, k == 0, true);
+    }
+    return out;
+  };
+  std::vector<std::string> notes;
+  const auto standing = run(SE2(0.0, 0.005, 0.2 * kDeg), 100, notes);
+  for (std::size_t k = 1; k <= 100; ++k) EXPECT_EQ(standing[k].source, internal::PriorSource::kOdometry) << k;
+  EXPECT_TRUE(standing[50].odometry_still);
+  EXPECT_TRUE(notes.empty()) << notes.front();
+
+  notes.clear();
+  const auto creeping = run(SE2(0.02, 0.0, 0.0), 30, notes);
+  for (std::size_t k = 1; k <= 13; ++k) EXPECT_EQ(creeping[k].source, internal::PriorSource::kOdometry) << k;
+  for (std::size_t k = 14; k <= 31; ++k) EXPECT_EQ(creeping[k].source, internal::PriorSource::kConstantVelocity) << k;
+  EXPECT_EQ(creeping[32].source, internal::PriorSource::kOdometry);
+  EXPECT_TRUE(test::IsNearPose(SE2(0.02, 0, 0), creeping[32].delta, 1e-12, 1e-12));
+  ASSERT_EQ(notes.size(), 2u);
+  EXPECT_TRUE(
+      notes[0].starts_with("odometry frozen: it read the same pose for 1.3 s while the scans moved the robot "
+                           "0.26 m / 0.0 deg"))
+      << notes[0];
+  EXPECT_EQ(notes[1],
+            "odometry reads another pose after 30 scans (3.0 s) on one: its first step spans them, constant-velocity "
+            "prior for this scan");
+}
+
 // A log's first interval has no usual interval to be measured against: keyframes 3 m apart took
 // 20 s to the second scan and 10 s each after it. None of that is a gap; 60 s after 10 s steps is.
 TEST(SlamMotionPrior, TheFirstIntervalOfALogIsNotAGap) {
@@ -902,7 +947,7 @@ TEST(SlamMotionPrior, TheFirstIntervalOfALogIsNotAGap) {
     f.T_odom_robot = odom;
     const internal::MotionPrediction p = prior.predict(f, sink);
     if (k > 0) time_ok.push_back(p.time_ok);
-    prior.remember(f, p.delta, k == 0, p.time_ok, true);
+    prior.remember(f, p, p.delta, k == 0, true);
     odom = odom * SE2(3.0, 0.0, 0.0);
   }
   EXPECT_EQ(time_ok, (std::vector<bool>{true, true, true, true, false}));
@@ -958,7 +1003,7 @@ TEST(SlamMotionPrior, AnImplausibleOdometryStepIsCarriedIntoTheNext) {
     const SE2 step = k == 0 ? SE2() : p.delta;  // unmatched: placed at the prediction
     pose = pose * step;
     poses.push_back(pose);
-    prior.remember(frames[k], step, k == 0, p.time_ok, false);
+    prior.remember(frames[k], p, step, k == 0, false);
   }
   EXPECT_EQ(predictions[1].source, internal::PriorSource::kOdometry);
   EXPECT_EQ(predictions[2].source, internal::PriorSource::kConstantVelocity);
@@ -974,7 +1019,7 @@ TEST(SlamMotionPrior, AnImplausibleOdometryStepIsCarriedIntoTheNext) {
   std::vector<internal::MotionPrediction> pj;
   for (std::size_t k = 0; k < jump.size(); ++k) {
     pj.push_back(jumped.predict(jump[k], sink));
-    jumped.remember(jump[k], k == 0 ? SE2() : pj.back().delta, k == 0, pj.back().time_ok, false);
+    jumped.remember(jump[k], pj.back(), k == 0 ? SE2() : pj.back().delta, k == 0, false);
   }
   EXPECT_EQ(pj[3].source, internal::PriorSource::kOdometry);
   EXPECT_TRUE(test::IsNearPose(SE2(0.03, 0, 0), pj[3].delta, 1e-12, 1e-9));
@@ -993,7 +1038,7 @@ TEST(SlamMotionPrior, WithoutOdometryKeyframesAreBoundByTheirOwnStepsDenseLogsBy
       // Steps of 0.9 and 1.1 m in turn, turning 0, +10 or -10 degrees in turn: over the last 20, a
       // spread of 0.1 m and sqrt(65) degrees (13 of them 10 degrees from the median, 0).
       const double turn = (static_cast<double>(i % 3) - 1.0) * 10.0 * kDeg;
-      prior.remember(f, SE2(1.0 + 0.1 * (static_cast<double>(i % 2) * 2.0 - 1.0), 0.0, turn), i == 0, p.time_ok);
+      prior.remember(f, p, SE2(1.0 + 0.1 * (static_cast<double>(i % 2) * 2.0 - 1.0), 0.0, turn), i == 0);
     }
     return internal::MotionPrediction{};
   };
@@ -1424,6 +1469,26 @@ TEST(Slam, SurvivesGapsBackwardsTimeMissingOdometryAndAKidnapping) {
   // The run stays accurate through all of it.
   const Errors e = poseErrors(est, frames);
   EXPECT_LT(e.rms, 0.1);
+}
+
+// Odometry that freezes (a stalled driver, wheels that do not turn while the robot is pushed)
+// reads one pose for 10 s while the robot drives on through the office, then jumps to where the
+// wheels say. Predicted from the frozen reading, each scan fought a prior of no motion, and every
+// node carried an odometry link holding it still (0.45 m rms before the odometry was taken as
+// frozen, and an "implausible" step at its return).
+TEST(Slam, FrozenOdometryIsNoticedAndLeftOutUntilItMovesAgain) {
+  auto frames = simulateWorld("office", 2);
+  ASSERT_GT(frames.size(), 400u);
+  for (std::size_t i = 150; i < 250; ++i) frames[i].T_odom_robot = frames[149].T_odom_robot;
+  Slam* slam = nullptr;
+  const auto est = runSlam(frames, {}, &slam);
+  ASSERT_EQ(est.size(), frames.size());
+  const std::string all = eventText(*slam);
+  EXPECT_NE(all.find("odometry frozen"), std::string::npos) << all;
+  EXPECT_NE(all.find("odometry reads another pose after"), std::string::npos) << all;
+  EXPECT_EQ(all.find("not plausible"), std::string::npos) << all;
+  const Errors e = poseErrors(est, frames);
+  EXPECT_LT(e.rms, 0.02);
 }
 
 TEST(Slam, KidnappedRobotIsReportedAndTheRunContinues) {

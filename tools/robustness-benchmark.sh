@@ -30,12 +30,14 @@
 #              odometry, dense and as keyframes, seeds as for corrected: a large building seen a few
 #              metres around the robot. Not in the default set. Error: ATE against the truth.
 #   raw        the three raw bags as they are, with a 10 s gap at their largest turn (perturb
-#              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), and with
-#              slam --no-odometry. Error: Kuemmerle relations (mean +- std).
+#              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), with their
+#              odometry frozen for the 10 s of that turn (--freeze-odometry 10@turn: a stalled driver),
+#              and with slam --no-odometry. Error: Kuemmerle relations (mean +- std).
 #   sim        the simulator's worlds (office, corridor, symmetric, open) as simulated (seed 1), with
-#              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, and kidnapped (perturb
+#              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, kidnapped (perturb
 #              --keep-odometry --kidnap 15: the robot carried for the 15 s in the middle of the log,
-#              its odometry unaware). Error: ATE.
+#              its odometry unaware), and with their odometry frozen for the 10 s of the largest turn
+#              (--freeze-odometry 10@turn). Error: ATE.
 #   lasers     the same worlds seen by other lasers than the simulator's default (270 degrees, 30 m,
 #              541 beams, 10 Hz): a low-cost 360-degree laser (360 beams, 12 m, 2 cm noise, 5% of
 #              returns lost), a depth camera's fake laser (58 degrees, 640 beams, 0.5-6 m, 30 Hz) and
@@ -220,6 +222,10 @@ if want_part raw; then
     if perturb "$bag" --keep-odometry --gap 10@turn -o "$p"; then
       run "$d bag gap10@turn" "$p" "$rel" "$p"
     fi
+    p=$OUT/logs/$d-frozen10-turn.log
+    if perturb "$bag" --keep-odometry --freeze-odometry 10@turn -o "$p"; then
+      run "$d bag odometry frozen10@turn" "$p" "$rel" "$p"
+    fi
     run "$d bag no-odometry" "$bag" "$rel" - --no-odometry
   done
 fi
@@ -238,6 +244,8 @@ if want_part sim; then
     done
     k=$OUT/logs/sim-$w-kidnapped.log
     perturb "$s" --keep-odometry --kidnap 15 -o "$k" && run "sim $w kidnapped" "$k" "$k" "$k"
+    k=$OUT/logs/sim-$w-frozen.log
+    perturb "$s" --keep-odometry --freeze-odometry 10@turn -o "$k" && run "sim $w odometry frozen" "$k" "$k" "$k"
   done
 fi
 

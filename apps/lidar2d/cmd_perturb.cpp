@@ -14,6 +14,9 @@
 // end at or before the last scan's time. --kidnap DURATION_S[@START_S|@turn] is a gap across which
 // the robot is carried: the odometry of the first scan after it reads no motion while the truth
 // jumps (with --keep-odometry the log's odometry continues from where it stopped).
+// --freeze-odometry DURATION_S[@START_S|@turn] places a window the same way but keeps its scans: their
+// odometry reads what it read at the last scan before the window (a stalled driver), and after it
+// what the wheels counted (the motion across the window in one step).
 //
 // Keyframes. --keyframes D,K keeps a scan outside the gaps when it is the first kept, or when its
 // truth pose moved at least D metres or turned at least K degrees (net heading change) from the last
@@ -164,6 +167,7 @@ struct PerturbArgs {
   std::string keyframes;
   std::vector<std::string> gaps;
   std::vector<std::string> kidnaps;
+  std::vector<std::string> freezes;
   double time_jitter_s = 0.0;
   std::string odom_lag;  // MEAN_S[,SIGMA_S]
   std::size_t time_bursts = 1;
@@ -173,8 +177,8 @@ struct PerturbArgs {
        drift_given = false, bursts_given = false, jitter_given = false, synth_given = false;
   bool legacy() const {
     return odom_model == "constant" && !trans_given && !rot_rad_given && !rot_m_given && !scale_given && !drift_given &&
-           !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && !jitter_given && !bursts_given &&
-           !synth_given && odom_lag.empty();
+           !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && freezes.empty() && !jitter_given &&
+           !bursts_given && !synth_given && odom_lag.empty();
   }
 };
 
@@ -297,6 +301,10 @@ void run(const PerturbArgs& a) {
     requests.push_back(*parseGap(g));
     requests.back().carried = true;
   }
+  for (const std::string& g : a.freezes) {
+    requests.push_back(*parseGap(g));
+    requests.back().frozen_odometry = true;
+  }
 
   // First pass: place the gaps on the log's times and poses; keep the truth for the odometry lag.
   double t_first = 0.0;
@@ -322,7 +330,9 @@ void run(const PerturbArgs& a) {
   io::CarmenWriter writer(a.output);
   std::string gaps_desc;
   for (const sim::GapWindow& g : o.gaps)
-    gaps_desc += fmt::format(" {}[{:.3f},{:.3f})", g.request.carried ? "kidnap" : "", g.begin_s, g.end_s);
+    gaps_desc += fmt::format(" {}[{:.3f},{:.3f})",
+                             g.request.carried ? "kidnap" : (g.request.frozen_odometry ? "frozen-odometry" : ""),
+                             g.begin_s, g.end_s);
   writer.comment(fmt::format(
       "lidar2d perturb: source={} seed={} odometry={} keyframes={} gaps={} synthesize_hz={} time_jitter_s={} "
       "time_bursts={} (model: docs/perturb.md)",
@@ -351,10 +361,11 @@ void run(const PerturbArgs& a) {
   std::string gaps_summary;
   for (std::size_t k = 0; k < o.gaps.size(); ++k) {
     const sim::GapWindow& g = o.gaps[k];
-    gaps_summary += fmt::format("{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ",
-                                g.request.carried ? "kidnapping " : "", g.begin_s - t_first, g.end_s - t_first,
-                                std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg),
-                                st.dropped_per_gap[k]);
+    gaps_summary += fmt::format(
+        "{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ",
+        g.request.carried ? "kidnapping " : (g.request.frozen_odometry ? "odometry frozen " : ""), g.begin_s - t_first,
+        g.end_s - t_first, std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg),
+        st.dropped_per_gap[k]);
   }
   if (!gaps_summary.empty()) gaps_summary += ")";
   std::string odometry = "odometry kept from the log";
@@ -376,7 +387,9 @@ void addPerturbCommand(CLI::App& app) {
   auto* sub = app.add_subcommand(
       "perturb",
       "Derive a log for robustness tests from a log with truth; writes a CARMEN log with TRUEPOS lines (scans, "
-      "truth and laser mounting kept). Steps: --synthesize-times (clock), --gap (drop time windows), --keyframes "
+      "truth and laser mounting kept). Steps: --synthesize-times (clock), --gap (drop time windows; --freeze-odometry "
+      "keeps them, "
+      "odometry frozen), --keyframes "
       "(drop scans too close to the last kept one), odometry (replaced, read --odom-lag off each scan's time, or "
       "kept with --keep-odometry), "
       "--time-jitter and --time-bursts (stamps). Odometry: odom_0 = truth_0; each kept scan k after the previously "
@@ -456,6 +469,12 @@ void addPerturbCommand(CLI::App& app) {
   sub->add_option("--kidnap", a->kidnaps,
                   "DURATION_S[@START_S|@turn]: a gap (as --gap) across which the robot is carried: the odometry "
                   "reads no motion across it while the truth jumps. Repeatable")
+      ->allow_extra_args(false)
+      ->check(check("DURATION_S[@START_S|@turn]", gapError));
+  sub->add_option("--freeze-odometry", a->freezes,
+                  "DURATION_S[@START_S|@turn]: a window (placed as --gap) whose scans are kept but whose odometry "
+                  "reads what it read at the last scan before it (a stalled driver); after it, what the wheels "
+                  "counted. Repeatable")
       ->allow_extra_args(false)
       ->check(check("DURATION_S[@START_S|@turn]", gapError));
   sub->add_option("--time-jitter", a->time_jitter_s,

@@ -155,6 +155,9 @@ void GapRequest::validate() const {
   if (placement == GapPlacement::kAtOffset && (!std::isfinite(offset_s) || offset_s < 0))
     throw invalidArgument(fmt::format("gap start must be finite and >= 0, got {}", offset_s),
                           ErrorLocation({}, 0, "offset_s"));
+  if (carried && frozen_odometry)
+    throw invalidArgument("a window is either carried (its scans dropped) or freezes the odometry (its scans kept)",
+                          ErrorLocation({}, 0, "frozen_odometry"));
 }
 
 void TimeFaults::validate() const {
@@ -347,10 +350,14 @@ std::vector<Frame> LogPerturber::push(Frame f) {
     }
   }
 
-  bool in_gap = false;
+  bool in_gap = false, frozen = false;
   for (std::size_t k = 0; k < options_.gaps.size(); ++k)
     if (options_.gaps[k].contains(t)) {
       ++stats_.dropped_per_gap[k];
+      if (options_.gaps[k].request.frozen_odometry) {
+        frozen = true;
+        continue;
+      }
       in_gap = true;
       if (options_.gaps[k].request.carried && stats_.scans_kept > 0) carried_ = true;
     }
@@ -388,6 +395,13 @@ std::vector<Frame> LogPerturber::push(Frame f) {
     if (log_odom_shift_) f.T_odom_robot = *log_odom_shift_ * *f.T_odom_robot;
   }
   carried_ = false;
+  if (frozen && f.T_odom_robot) {
+    if (!frozen_reading_) frozen_reading_ = stats_.last_T_odom_robot.value_or(*f.T_odom_robot);
+    f.T_odom_robot = frozen_reading_;
+    ++stats_.frozen_odometry;
+  } else if (!frozen) {
+    frozen_reading_.reset();
+  }
   f.time = t;
   if (options_.time.jitter_sigma_s > 0) f.time += jitter_rng_.gaussian(options_.time.jitter_sigma_s);
   ++stats_.scans_kept;

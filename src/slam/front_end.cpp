@@ -218,11 +218,11 @@ void FrontEnd::addNode(const SE2& T_local, const Points2& pts, bool restart) {
   rebuildLocalMap();
 }
 
-void FrontEnd::remember(const Frame& f, const SE2& T_local, bool first, bool time_ok, bool pinned) {
+void FrontEnd::remember(const Frame& f, const Prediction& p, const SE2& T_local, bool first, bool pinned) {
   const SE2 step = first ? SE2() : T_local_prev.inverse() * T_local;
-  prior_.remember(f, step, first, time_ok, pinned);
+  prior_.remember(f, p, step, first, pinned);
   if (!first) {
-    last_step = time_ok ? std::optional<SE2>(step) : std::nullopt;
+    last_step = p.time_ok ? std::optional<SE2>(step) : std::nullopt;
     recent_poses.push_back(T_local);
     if (recent_poses.size() > kEarlierBack.back()) recent_poses.pop_front();
   }

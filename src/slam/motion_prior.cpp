@@ -162,11 +162,30 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     const SE2 scaled_step = step ? SE2(appliedScale() * step->translation(), step->theta()) : SE2();
     p.T_odom_scaled = step && opt_.scale_odometry ? *odom_scaled_prev_ * scaled_step : *f.T_odom_robot;
     odom_scaled_ = p.T_odom_scaled;
+    // After scans without odometry, or with a frozen reading, the step from the last reading spans
+    // all of them: it says where the robot is, not the step from the previous scan (the simulated
+    // office's odometry back after 10 s: a 6.66 m step, called implausible over one 0.1 s interval).
+    bool spans_more = false;
     if (odometry_missing_) {
-      notes_.push_back(fmt::format("odometry back after {} scans without it", odometry_missing_count_));
+      notes_.push_back(fmt::format(
+          "odometry back after {} scans without it: its first step spans them, constant-velocity prior for this scan",
+          odometry_missing_count_));
       odometry_missing_ = false;
+      spans_more = true;
     }
     odometry_seen_ = true;
+    p.odometry_still = step && !spans_more && f.T_odom_robot->x() == odom_prev_->x() &&
+                       f.T_odom_robot->y() == odom_prev_->y() && f.T_odom_robot->theta() == odom_prev_->theta();
+    if (odometry_frozen_ && !p.odometry_still) {
+      notes_.push_back(
+          fmt::format("odometry reads another pose after {} scans ({:.1f} s) on one: its first step spans "
+                      "them, constant-velocity prior for this scan",
+                      still_count_, std::max(0.0, time_prev_ - still_since_)));
+      odometry_frozen_ = false;
+      spans_more = true;
+    }
+    still_count_ = p.odometry_still ? still_count_ + 1 : 0;
+    const std::optional<SE2> usable = spans_more || odometry_frozen_ ? std::nullopt : step;
     // Plausible against the time the step took, not against fixed per-step limits: a gap of
     // seconds during a turn is a long step, and keyframe logs hold metres between scans. At least
     // the usual interval: a scan stamped a millisecond after the previous one (the Intel bag has
@@ -181,15 +200,15 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       return d.isFinite() && !tooFar(d, took) && !tooTurned(d, took);
     };
     const double took = std::max(p.dt, usual);
-    std::optional<SE2> step_used = step;
-    bool plausible = step && plausibleOver(*step, took);
+    std::optional<SE2> step_used = usable;
+    bool plausible = usable && plausibleOver(*usable, took);
     // After an implausible step that this reading takes back (since the reading before it the
     // odometry turned less than in that step alone, if the turn made it implausible, and moved less,
     // if the distance did; and plausibly over both steps' time): the odometry since then, less the
     // step the previous scan took. Odometry read off its scan's time in a turn (a lag) errs one way
     // on one step and back on the next, and the motion of the step it was dropped for is not lost.
     // A jump the odometry keeps is not taken back.
-    if (anchor_ && step) {
+    if (anchor_ && usable) {
       const SE2 span = anchor_->odom.inverse() * *f.T_odom_robot;
       const SE2& bad = anchor_->implausible;
       const bool taken_back = (!anchor_->too_far || span.translation().norm() < bad.translation().norm()) &&
@@ -204,21 +223,23 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     }
     anchor_.reset();
     pending_anchor_.reset();
-    if (step && !plausible && step->isFinite() && odom_prev_)
+    if (usable && !plausible && usable->isFinite() && odom_prev_)
       pending_anchor_ =
-          OdometryAnchor{*odom_prev_, time_prev_, *step, tooFar(*step, took), tooTurned(*step, took), SE2()};
-    if (step) {
+          OdometryAnchor{*odom_prev_, time_prev_, *usable, tooFar(*usable, took), tooTurned(*usable, took), SE2()};
+    if (usable) {
       const SE2& d = *step_used;
       const double dist = d.translation().norm(), turn = std::abs(d.theta());
       if (plausible) {
         const bool time_ok = p.time_ok;
         const double step_dt = p.dt;
         const std::optional<SE2> scaled = p.T_odom_scaled;
+        const bool still = p.odometry_still;
         p = odometryPrediction(opt_, SE2(appliedScale() * d.translation(), d.theta()), step_dt);
         narrowToOdometryNoise(p);
         p.odometry_step = d;
         p.T_odom_scaled = scaled;
         p.time_ok = time_ok;
+        p.odometry_still = still;
       } else {
         notes_.push_back(
             d.isFinite()
@@ -246,7 +267,25 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
   return p;
 }
 
-void MotionPrior::remember(const Frame& f, const SE2& step, bool first, bool time_ok, bool pinned) {
+void MotionPrior::remember(const Frame& f, const MotionPrediction& p, const SE2& step, bool first, bool pinned) {
+  const bool time_ok = p.time_ok;
+  if (!p.odometry_still) {
+    still_span_ = SE2();
+    still_since_ = f.time;
+  } else if (!odometry_frozen_) {
+    still_span_ = still_span_ * step;
+    const double held = f.time - still_since_;
+    const MotionPrediction standing = odometryPrediction(opt_, SE2(), std::isfinite(held) ? held : 0.0);
+    const double sigmas = standing.distance(still_span_);
+    if (sigmas > opt_.prior_gate_sigmas) {
+      odometry_frozen_ = true;
+      notes_.push_back(fmt::format(
+          "odometry frozen: it read the same pose for {:.1f} s while the scans moved the robot "
+          "{:.2f} m / {:.1f} deg ({:.1f} sigmas): constant-velocity prior, and no odometry "
+          "links, until it reads another pose",
+          std::max(0.0, held), still_span_.translation().norm(), std::abs(still_span_.theta()) / kDeg, sigmas));
+    }
+  }
   if (!first && pending_anchor_) {
     anchor_ = std::move(pending_anchor_);
     anchor_->taken = step;

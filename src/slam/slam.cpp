@@ -384,7 +384,7 @@ struct Slam::Impl {
                                  "a verified loop closure ties it",
                                  state.sessions.size(), state.sessions.back().name, rec.node));
       addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), true, std::nullopt);
-      front_end.remember(f, T0, true, prediction.time_ok);
+      front_end.remember(f, prediction, T0, true);
       last_T_local = T0;
     } else if (!front_end.started()) {
       // The first scan anchors everything.
@@ -395,7 +395,7 @@ struct Slam::Impl {
       rec.matched = true;
       state.scans.push_back(rec);
       addNode(f, scan_index, T0, std::move(pts), raw, false, Eigen::Vector2d::Zero(), false, prediction.T_odom_scaled);
-      front_end.remember(f, T0, true, prediction.time_ok);
+      front_end.remember(f, prediction, T0, true);
       last_T_local = T0;
     } else {
       const internal::FrontEnd::Tracked t = front_end.track(f, pts, prediction);
@@ -419,7 +419,7 @@ struct Slam::Impl {
         rec.T_node_scan = rel;
         state.scans.push_back(rec);
       }
-      front_end.remember(f, t.T_local_robot, false, prediction.time_ok, t.matched() && !t.degenerate);
+      front_end.remember(f, prediction, t.T_local_robot, false, t.matched() && !t.degenerate);
       last_T_local = t.T_local_robot;
     }
     ++state.stats.scans;

@@ -12,7 +12,8 @@
 /// The steps, per input frame i (file order, 0-based) with stamp s_i:
 ///  1. Clock: t_i = s_i, or t_i = s_0 + i / rate with `TimeFaults::synthesize_rate_hz` > 0. Gaps and
 ///     the output stamps use this clock.
-///  2. Gaps: a frame with t_i inside a `GapWindow` [begin, end) is dropped.
+///  2. Gaps: a frame with t_i inside a `GapWindow` [begin, end) is dropped, unless the window only
+///     freezes the odometry (`GapRequest::frozen_odometry`): such frames are kept.
 ///  3. Keyframes: a frame outside the gaps is kept when no frame was kept yet, or when its reference
 ///     pose (below) moved at least `min_distance_m` or turned at least `min_turn_rad` away from the
 ///     last kept frame's (a threshold of 0 is no criterion; without keyframes every frame is kept).
@@ -26,6 +27,9 @@
 ///     point) is the truth at t_k + lag_k instead (`truthAt`): the odometry read at another time
 ///     than the scan. `kKeepLog` leaves the log's odometry as it is, but for the carried gaps'
 ///     jumps, which it removes (the odometry continues from where it was before the gap).
+///     Inside a frozen-odometry window every kept frame's odometry is the last kept frame's before
+///     the window (its own, when none was kept); after it the odometry reads on as made above (the
+///     wheels kept counting: the motion across the window comes in one step).
 ///  5. Stamps of the kept frames: t_i + N(0, jitter_sigma^2); then, with bursts of N, each group of N
 ///     consecutive kept frames (the last group may be shorter) carries the stamp of its last frame.
 /// Scans, truth and laser mounting are never changed; odometry and truth stay with their scan.
@@ -87,13 +91,18 @@ struct GapRequest {
   /// with `kKeepLog`, the log's odometry from there on is shifted to continue where it stopped)
   /// while the truth jumps. Otherwise the odometry carries the whole motion across the gap.
   bool carried = false;
+  /// The window's scans are kept, but the odometry freezes across it: it reads the pose it read at
+  /// the last scan before the window (a stalled driver, or wheels that do not turn while the robot
+  /// is pushed), then what the wheels counted. Not with `carried`.
+  bool frozen_odometry = false;
 
-  /// Throws `lidar2d::Error` (kInvalidArgument) for a duration <= 0 or a negative or non-finite value.
+  /// Throws `lidar2d::Error` (kInvalidArgument) for a duration <= 0, a negative or non-finite value,
+  /// or a window both carried and frozen.
   void validate() const;
 };
 
 /// A gap placed on a log: frames whose time (on the clock of step 1) lies in [begin_s, end_s) are
-/// dropped.
+/// dropped (or, for a frozen-odometry window, kept with their odometry frozen).
 struct GapWindow {
   double begin_s = 0.0;  ///< first dropped time [s]
   double end_s = 0.0;    ///< frames at this time or later are kept again [s]
@@ -223,8 +232,10 @@ struct PerturbationStats {
   std::size_t scans_read = 0;            ///< frames pushed
   std::size_t scans_kept = 0;            ///< frames returned
   std::size_t dropped_by_keyframes = 0;  ///< outside the gaps, but too close to the last kept frame
-  std::size_t dropped_by_gaps = 0;       ///< inside at least one gap
-  /// Frames dropped per `LogPerturbationOptions::gaps` (a frame in two gaps counts in both).
+  std::size_t dropped_by_gaps = 0;       ///< inside at least one gap that drops its frames
+  std::size_t frozen_odometry = 0;       ///< kept frames whose odometry a frozen-odometry window froze
+  /// Frames whose time lies in each of `LogPerturbationOptions::gaps` (a frame in two gaps counts in
+  /// both; in a frozen-odometry window, frames are kept unless keyframing drops them).
   std::vector<std::size_t> dropped_per_gap;
   std::optional<SE2> last_T_odom_robot;   ///< odometry of the last kept frame
   std::optional<SE2> last_T_world_robot;  ///< truth of the last kept frame
@@ -266,6 +277,7 @@ class LogPerturber {
   SE2 prev_truth_;  // truth where the odometry was last integrated
   SE2 odom_;
   bool carried_ = false;               // a carried gap dropped frames since the last kept one
+  std::optional<SE2> frozen_reading_;  // inside a frozen-odometry window: what the odometry reads there
   std::optional<SE2> log_odom_shift_;  // kKeepLog after a carried gap: output odometry = shift * the log's
   std::vector<Frame> burst_;
 };

@@ -71,9 +71,9 @@ class FrontEnd {
   /// starts again from it): rebuilds the local map from the last local_map_nodes nodes. The front
   /// end keeps its own copy, so it never reads the graph the back end may be extending.
   void addNode(const SE2& T_local, const Points2& pts, bool restart);
-  /// Remembers scan `f` at `T_local` for the next prediction; `first`: the first scan (no step),
-  /// `time_ok` as predicted, `pinned`: the scan measured its step (MotionPrior::remember).
-  void remember(const Frame& f, const SE2& T_local, bool first, bool time_ok, bool pinned = true);
+  /// Remembers scan `f`, predicted by `p`, at `T_local` for the next prediction; `first`: the first
+  /// scan (no step), `pinned`: the scan measured its step (MotionPrior::remember).
+  void remember(const Frame& f, const Prediction& p, const SE2& T_local, bool first, bool pinned = true);
 
   /// One match of the scan: its result, the share of the scan it explains and its distance from
   /// the prediction in sigmas.

@@ -44,7 +44,8 @@ class LoopClosure {
   /// are searched by branch and bound in whole finished submaps from before the
   /// fragment, over every heading and the box the robot mapped each from, a few submaps per node in
   /// turn; the best match is refined and tested as a searched closure (submitSearched: confirmed by
-  /// a later one before it is accepted).
+  /// a later one before it is accepted); when the best fails those tests, the next best does them,
+  /// and so on.
   void searchUntied(std::size_t n);
   /// Whether searchUntied searches at the fragment's node number `age` (0 = its first node): every
   /// kUntiedEveryNodes nodes while it is young, then four times per doubling of its length, so that

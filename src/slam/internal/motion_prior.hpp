@@ -48,6 +48,9 @@ struct MotionPrediction {
   /// The frame's odometry pose on a chain of its steps, each with the distance scale estimated when
   /// it was taken (what the graph's odometry constraints link); nothing without odometry.
   std::optional<SE2> T_odom_scaled;
+  /// The odometry read exactly the pose it read at the previous scan (a robot standing still, or
+  /// odometry that froze: MotionPrior::remember tells them apart by the scans).
+  bool odometry_still = false;
   bool time_ok = true;  ///< time moved forward, without a gap, since the previous scan
   double dt = 0.0;      ///< the time the step took as used for the sigma [s] (the usual interval when unknown)
 
@@ -149,11 +152,21 @@ class MotionPrior {
   /// match, 28 degrees off, refused at 18 sigmas). Not after an override in translation alone (the
   /// Intel bag's odometry jumps of 0.2-0.9 m): a prior widened after those let look-alikes win.
   void overridden(const MotionPrediction& p, const SE2& taken);
-  /// Frame `f` ended at `step` from the previous scan (front-end estimate; ignored for the first).
-  /// `pinned`: the scan measured the step (matched, not degenerate); only such steps make the
-  /// constant-velocity history, since an unmatched or degenerate step is (along its weak direction)
-  /// the prediction itself.
-  void remember(const Frame& f, const SE2& step, bool first, bool time_ok, bool pinned = true);
+  /// Frame `f`, predicted by `p`, ended at `step` from the previous scan (front-end estimate;
+  /// ignored for the first). `pinned`: the scan measured the step (matched, not degenerate); only
+  /// such steps make the constant-velocity history, since an unmatched or degenerate step is (along
+  /// its weak direction) the prediction itself.
+  ///
+  /// Frozen odometry: a driver that stalls, or wheels that do not turn while the robot is pushed,
+  /// keep reading one pose while the robot moves (and a bag whose odometry ends early is read as
+  /// its last pose). Each scan then fights a confident prediction of no motion, and every node
+  /// carries an odometry link that holds it still (the simulated office with its odometry frozen
+  /// for 10 s: 0.003 -> 0.071 m ATE). The odometry is taken as frozen once the scans have moved the
+  /// robot, since it last read another pose, beyond the prior's gate for standing still over that
+  /// time (odometryPrediction of no motion; a robot that stands still stays within it, the scans'
+  /// jitter being centimetres). From then on the prior is constant velocity, without odometry links,
+  /// until the odometry reads another pose.
+  void remember(const Frame& f, const MotionPrediction& p, const SE2& step, bool first, bool pinned = true);
   /// The scans matched step `matched_step` of a prediction `p` from odometry, pinning both its ends
   /// (OdometryScale::observe).
   void observeOdometryStep(const MotionPrediction& p, const SE2& matched_step);
@@ -217,6 +230,13 @@ class MotionPrior {
   std::optional<OdometryAnchor> anchor_;          // the previous frame had one
   bool odometry_seen_ = false, odometry_missing_ = false;
   std::size_t odometry_missing_count_ = 0;
+  // Frozen odometry (remember): the scans' steps since the odometry last read another pose, the
+  // time of that reading's first scan and the scans since that read it again; whether it is taken
+  // as frozen.
+  SE2 still_span_;
+  double still_since_ = 0.0;
+  std::size_t still_count_ = 0;
+  bool odometry_frozen_ = false;
   // The front end's last few steps the scans pinned (robot frame), oldest first; a gap leaves only
   // a standstill. The constant-velocity prediction is their component-wise median (`velocityStep`).
   std::deque<SE2> recent_steps_;
