@@ -189,6 +189,26 @@ TEST(Perturb, OdometryNoiseHasThePerStepStatistics) {
 
 // ---- bad input ----
 
+TEST(Simulate, PeopleAreRecordedInTheLogAndLeaveOdometryAndTruthAlone) {
+  TempDir tmp;
+  const std::string plain = (tmp / "plain.log").string(), crowd = (tmp / "crowd.log").string();
+  ASSERT_EQ(runCli({"simulate", "--world", "corridor", "--scans", "200", "-o", plain}).exit_code, 0);
+  ASSERT_EQ(runCli({"simulate", "--world", "corridor", "--scans", "200", "--people", "6", "-o", crowd}).exit_code, 0);
+  EXPECT_NE(test::readFile(crowd).find(" people=6"), std::string::npos);
+  const auto a = readAll(plain), b = readAll(crowd);
+  ASSERT_EQ(a.size(), b.size());
+  std::size_t shorter = 0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    EXPECT_TRUE(test::IsNearPose(*a[k].T_odom_robot, *b[k].T_odom_robot, 0.0, 0.0));
+    EXPECT_TRUE(test::IsNearPose(*a[k].T_world_robot, *b[k].T_world_robot, 0.0, 0.0));
+    for (std::size_t i = 0; i < a[k].scan.size(); ++i) {
+      EXPECT_LE(b[k].scan.ranges()[i], a[k].scan.ranges()[i]);
+      shorter += b[k].scan.ranges()[i] < a[k].scan.ranges()[i] ? 1 : 0;
+    }
+  }
+  EXPECT_GT(shorter, 500u);
+}
+
 TEST(SimulateCli, UsageErrorsExit2) {
   TempDir tmp;
   const std::string out = (tmp / "x.log").string();
@@ -206,6 +226,8 @@ TEST(SimulateCli, UsageErrorsExit2) {
   EXPECT_EQ(runCli({"simulate", "--world", "office", "--map", "m.yaml", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"simulate", "-o", out}).exit_code, 2);
   EXPECT_EQ(runCli({"simulate", "--world", "office"}).exit_code, 2);  // no output
+  EXPECT_EQ(runCli({"simulate", "--world", "office", "--people", "1001", "-o", out}).exit_code, 2);
+  EXPECT_EQ(runCli({"simulate", "--world", "office", "--people", "-1", "-o", out}).exit_code, 2);
   // Non-finite numbers: CLI11 reads "nan" and "inf" as numbers, and NaN passed its range checks
   // (--rate nan reached the path sampler; --clearance nan was taken).
   for (const char* opt : {"--rate", "--speed", "--clearance", "--range-noise"}) {

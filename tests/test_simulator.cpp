@@ -299,6 +299,52 @@ TEST(Simulator, FramesCarryMountingTruthAndTimes) {
   }
 }
 
+TEST(Simulator, PeopleWalkTheRouteAndOnlyShortenBeams) {
+  const Scenario s = builtinScenario("office");
+  const auto path = samplePath(s.waypoints, PathOptions{}, 400);
+  SimulatorOptions o;
+  o.crowd.people = 8;
+  Simulator with(s.world, path, o);
+  const auto alone = simulate(s.world, path, SimulatorOptions{});
+  std::size_t shorter = 0;
+  for (std::size_t k = 0; auto f = with.next(); ++k) {
+    // The odometry and the truth do not know the people; no beam reads longer than without them,
+    // and the noise is the same where a beam hit the same wall.
+    EXPECT_TRUE(IsNearPose(*alone[k].T_odom_robot, *f->T_odom_robot, 0.0, 0.0)) << k;
+    const auto people = with.peopleAt(f->time);
+    ASSERT_EQ(people.size(), 8u);
+    for (std::size_t i = 0; i < f->scan.size(); ++i) {
+      const double a = alone[k].scan.ranges()[i], b = f->scan.ranges()[i];
+      if (a == b) continue;
+      ++shorter;
+      // A shortened beam ends on the rim of a person's disc (0.25 m; 5 cm for the range noise;
+      // two people may overlap).
+      const double ang = f->scan.angle(i);
+      const Eigen::Vector2d end =
+          *f->T_world_robot * (f->T_robot_laser * Eigen::Vector2d(b * std::cos(ang), b * std::sin(ang)));
+      double off_rim = 1e9;
+      for (const auto& c : people) off_rim = std::min(off_rim, std::abs((end - c).norm() - 0.25));
+      if (b > 0.0) EXPECT_LE(off_rim, 0.05) << k << " " << i;
+    }
+    // Each person is on the route, within 0.5 m of where the robot is at some time.
+    for (const auto& c : people) {
+      double d = 1e9;
+      for (const TimedPose& p : path) d = std::min(d, (p.T_world_robot.translation() - c).norm());
+      EXPECT_LE(d, 0.5 + 0.05) << k;
+    }
+  }
+  EXPECT_GT(shorter, 1000u);
+  // Deterministic per seed; no people, no change to the frames.
+  const auto again = simulate(s.world, path, o);
+  Simulator twice(s.world, path, o);
+  for (std::size_t k = 0; auto f = twice.next(); ++k) EXPECT_EQ(f->scan.ranges(), again[k].scan.ranges());
+  o.crowd.people = 0;
+  const auto none = simulate(s.world, path, o);
+  for (std::size_t k = 0; k < none.size(); ++k) EXPECT_EQ(none[k].scan.ranges(), alone[k].scan.ranges());
+  o.crowd.radius_m = -1;
+  EXPECT_THROW(Simulator(s.world, path, o), Error);
+}
+
 // ---- what each built-in world promises ----
 
 TEST(Worlds, OfficeRouteVisitsEveryRoom) {

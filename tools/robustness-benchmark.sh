@@ -36,8 +36,9 @@
 #   sim        the simulator's worlds (office, corridor, symmetric, open) as simulated (seed 1), with
 #              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, kidnapped (perturb
 #              --keep-odometry --kidnap 15: the robot carried for the 15 s in the middle of the log,
-#              its odometry unaware), and with their odometry frozen for the 10 s of the largest turn
-#              (--freeze-odometry 10@turn). Error: ATE.
+#              its odometry unaware), with their odometry frozen for the 10 s of the largest turn
+#              (--freeze-odometry 10@turn), and with 5 and 20 people walking the robot's route
+#              (simulate --people N: moving obstacles). Error: ATE.
 #   lasers     the same worlds seen by other lasers than the simulator's default (270 degrees, 30 m,
 #              541 beams, 10 Hz): a low-cost 360-degree laser (360 beams, 12 m, 2 cm noise, 5% of
 #              returns lost), a depth camera's fake laser (58 degrees, 640 beams, 0.5-6 m, 30 Hz) and
@@ -246,6 +247,11 @@ if want_part sim; then
     perturb "$s" --keep-odometry --kidnap 15 -o "$k" && run "sim $w kidnapped" "$k" "$k" "$k"
     k=$OUT/logs/sim-$w-frozen.log
     perturb "$s" --keep-odometry --freeze-odometry 10@turn -o "$k" && run "sim $w odometry frozen" "$k" "$k" "$k"
+    for n in 5 20; do
+      k=$OUT/logs/sim-$w-people$n.log
+      "$BIN" simulate --world "$w" --seed 1 --people "$n" -o "$k" >/dev/null
+      run "sim $w people $n" "$k" "$k" "$k"
+    done
   done
 fi
 

@@ -76,6 +76,7 @@ struct SimulateArgs {
   std::string odom_drift = "0.02,0.02,0.005";
   std::string odom_bias = "0.005,0.002";
   double clearance_m = 0.4;
+  std::size_t people = 0;
   bool noise_free = false;
 };
 
@@ -104,6 +105,7 @@ void run(const SimulateArgs& a) {
   o.laser.T_robot_laser = SE2(m[0], m[1], m[2] * kDeg);
   o.odometry = {n[0], n[1], n[2], d[0], d[1], d[2], b[0], b[1]};
   if (a.noise_free) o = o.noiseFree();
+  o.crowd.people = a.people;
   sim::PathOptions po;
   po.rate_hz = a.rate_hz;
   po.speed_mps = a.speed_mps;
@@ -143,12 +145,12 @@ void run(const SimulateArgs& a) {
   writer.comment(fmt::format(
       "lidar2d simulate: {} seed={} scans={} rate_hz={} speed_mps={} path={} beams={} fov_deg={} range_min_m={} "
       "range_max_m={} range_noise_m={} dropout={} mount=[{},{},{}] odom_noise=[{},{},{}] odom_drift=[{},{},{}] "
-      "odom_bias=[{},{}]{}",
+      "odom_bias=[{},{}]{}{}",
       world_desc, a.seed, truth.size(), a.rate_hz, a.speed_mps, a.path.empty() ? "route" : a.path, l.beams, a.fov_deg,
       l.range_min_m, l.range_max_m, l.range_noise_m, l.dropout, l.T_robot_laser.x(), l.T_robot_laser.y(),
       l.T_robot_laser.theta(), on.sigma_x_m, on.sigma_y_m, on.sigma_theta_rad, on.trans_sigma_per_m,
-      on.rot_sigma_per_rad, on.rot_sigma_per_m, on.scale_bias, on.heading_bias_per_m,
-      a.noise_free ? " noise_free" : ""));
+      on.rot_sigma_per_rad, on.rot_sigma_per_m, on.scale_bias, on.heading_bias_per_m, a.noise_free ? " noise_free" : "",
+      a.people > 0 ? fmt::format(" people={}", a.people) : std::string()));
   std::size_t count = 0;
   while (auto f = simulator.next()) {
     writer.write(*f);
@@ -223,6 +225,11 @@ void addSimulateCommand(CLI::App& app) {
       ->capture_default_str()
       ->check(nonNegativeNumber());
   sub->add_flag("--noise-free", a->noise_free, "no range noise, no dropout, odometry equal to the true motion");
+  sub->add_option("--people", a->people,
+                  "N people walking the robot's route 2-20 s ahead of or behind it, within 0.5 m of it: discs of "
+                  "0.25 m the laser sees and the world does not hold (moving obstacles; seeded)")
+      ->capture_default_str()
+      ->check(CLI::Range(std::size_t{0}, std::size_t{1000}));
   sub->callback([a] { run(*a); });
 }
 

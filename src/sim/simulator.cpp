@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -48,6 +49,19 @@ void LaserModel::validate() const {
   if (!T_robot_laser.isFinite()) throw fail("mount", "must be finite");
 }
 
+void Crowd::validate() const {
+  auto fail = [](const char* field, const std::string& what) {
+    return invalidArgument(what, ErrorLocation({}, 0, fmt::format("crowd {}", field)));
+  };
+  if (people > 1000) throw fail("people", fmt::format("must be at most 1000, got {}", people));
+  if (!std::isfinite(radius_m) || radius_m <= 0 || radius_m > 2)
+    throw fail("radius", fmt::format("must be in (0, 2] m, got {}", radius_m));
+  if (!std::isfinite(min_lead_s) || !std::isfinite(max_lead_s) || min_lead_s < 0 || max_lead_s < min_lead_s)
+    throw fail("lead", fmt::format("must satisfy 0 <= min <= max, got [{}, {}] s", min_lead_s, max_lead_s));
+  if (!std::isfinite(max_offset_m) || max_offset_m < 0)
+    throw fail("offset", fmt::format("must be finite and >= 0, got {}", max_offset_m));
+}
+
 SimulatorOptions SimulatorOptions::noiseFree() const {
   SimulatorOptions o = *this;
   o.laser.range_noise_m = 0;
@@ -64,23 +78,71 @@ Simulator::Simulator(const World& world, std::vector<TimedPose> truth, Simulator
       odom_rng_(splitmix(options_.seed ^ 0x6f646f6d6574727fULL)) {
   options_.laser.validate();
   options_.odometry.validate();
+  options_.crowd.validate();
   for (std::size_t i = 0; i < truth_.size(); ++i)
     if (!truth_[i].T_world_robot.isFinite() || !std::isfinite(truth_[i].time_s))
       throw invalidArgument(fmt::format("truth pose {} is not finite", i), ErrorLocation({}, 0, "path"));
+  const Crowd& c = options_.crowd;
+  Rng crowd_rng(splitmix(options_.seed ^ 0x70656f706c650000ULL));
+  for (std::size_t k = 0; k < c.people; ++k) {
+    const double lead = c.min_lead_s + crowd_rng.uniform() * (c.max_lead_s - c.min_lead_s);
+    const double sign = crowd_rng.uniform() < 0.5 ? -1.0 : 1.0;
+    const double offset = (2.0 * crowd_rng.uniform() - 1.0) * c.max_offset_m;
+    people_.emplace_back(sign * lead, offset);
+  }
 }
 
-std::vector<double> Simulator::exactRanges(const SE2& T_world_robot) const {
+std::vector<double> Simulator::exactRanges(const SE2& T_world_robot) const { return ranges(T_world_robot, {}); }
+
+SE2 Simulator::truthAt(double t_s) const {
+  if (truth_.empty()) return SE2();
+  if (t_s <= truth_.front().time_s) return truth_.front().T_world_robot;
+  if (t_s >= truth_.back().time_s) return truth_.back().T_world_robot;
+  const auto it =
+      std::lower_bound(truth_.begin(), truth_.end(), t_s, [](const TimedPose& p, double t) { return p.time_s < t; });
+  const TimedPose& b = *it;
+  const TimedPose& a = *(it - 1);
+  const double f = b.time_s > a.time_s ? (t_s - a.time_s) / (b.time_s - a.time_s) : 0.0;
+  const Eigen::Vector2d p =
+      a.T_world_robot.translation() + f * (b.T_world_robot.translation() - a.T_world_robot.translation());
+  return SE2(p, a.T_world_robot.theta() + f * angleDiff(b.T_world_robot.theta(), a.T_world_robot.theta()));
+}
+
+std::vector<Eigen::Vector2d> Simulator::peopleAt(double t_s) const {
+  std::vector<Eigen::Vector2d> out;
+  out.reserve(people_.size());
+  for (const auto& [lead, offset] : people_) {
+    const SE2 T = truthAt(t_s + lead);
+    out.push_back(T.translation() + offset * Eigen::Vector2d(-std::sin(T.theta()), std::cos(T.theta())));
+  }
+  return out;
+}
+
+std::vector<double> Simulator::ranges(const SE2& T_world_robot, const std::vector<Eigen::Vector2d>& people) const {
   const LaserModel& l = options_.laser;
   const SE2 T_world_laser = T_world_robot * l.T_robot_laser;
   const Eigen::Vector2d origin = T_world_laser.translation();
   const double a0 = l.angleMin(), inc = l.angleIncrement();
-  std::vector<double> ranges(static_cast<std::size_t>(l.beams));
-  for (std::size_t i = 0; i < ranges.size(); ++i) {
+  const double radius = options_.crowd.radius_m;
+  std::vector<Eigen::Vector2d> seen;
+  for (const Eigen::Vector2d& c : people)
+    if ((c - origin).norm() > radius + 0.3) seen.push_back(c);
+  std::vector<double> out(static_cast<std::size_t>(l.beams));
+  for (std::size_t i = 0; i < out.size(); ++i) {
     const double a = T_world_laser.theta() + a0 + static_cast<double>(i) * inc;
-    const double r = world_.castRay(origin, Eigen::Vector2d(std::cos(a), std::sin(a)), l.range_max_m);
-    ranges[i] = r < l.range_max_m ? r : l.range_max_m;
+    const Eigen::Vector2d dir(std::cos(a), std::sin(a));
+    double r = world_.castRay(origin, dir, l.range_max_m);
+    // The nearer intersection of the ray with each person's disc (the laser is outside every disc).
+    for (const Eigen::Vector2d& c : seen) {
+      const Eigen::Vector2d f = origin - c;
+      const double b = f.dot(dir), disc = b * b - (f.squaredNorm() - radius * radius);
+      if (disc < 0) continue;
+      const double t = -b - std::sqrt(disc);
+      if (t > 0 && t < r) r = t;
+    }
+    out[i] = r < l.range_max_m ? r : l.range_max_m;
   }
-  return ranges;
+  return out;
 }
 
 LaserScan Simulator::makeScan(std::vector<double> ranges, double time_s) const {
@@ -101,7 +163,7 @@ std::optional<Frame> Simulator::next() {
   if (k_ >= truth_.size()) return std::nullopt;
   const LaserModel& l = options_.laser;
   const TimedPose& tp = truth_[k_];
-  std::vector<double> ranges = exactRanges(tp.T_world_robot);
+  std::vector<double> ranges = this->ranges(tp.T_world_robot, peopleAt(tp.time_s));
   for (double& r : ranges) {
     // Fixed draws per beam (one Gaussian, one uniform), whether or not the beam hit.
     const double noise = laser_rng_.gaussian(l.range_noise_m);

@@ -6,10 +6,12 @@
 ///
 /// Deterministic per seed: the laser noise and the odometry noise use two independent `Rng`
 /// streams derived from `SimulatorOptions::seed`, and every beam and step draws a fixed number of
-/// random numbers, so switching one noise source off leaves the other unchanged.
+/// random numbers, so switching one noise source off leaves the other unchanged (the people of a
+/// `Crowd` draw from a third).
 
 #include <cstdint>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "lidar2d/core/frame.hpp"
@@ -47,10 +49,30 @@ struct LaserModel {
   void validate() const;
 };
 
+/// People walking the robot's own route, as passers-by in a corridor or a person walking ahead of
+/// the robot do: moving obstacles the world does not hold. Person k is a disc of `radius_m` at the
+/// robot's true position `lead_k` seconds later (earlier when negative; held at the route's ends),
+/// `offset_k` to the left of the route's heading there; |lead_k| is uniform in [min_lead_s,
+/// max_lead_s] with a random sign, offset_k uniform in [-max_offset_m, max_offset_m], drawn once
+/// from a stream of their own (seed-derived), so the laser and odometry noise are the same with
+/// and without people. A person whose centre lies within `radius_m` + 0.3 m of the laser is not seen
+/// (no one stands inside the robot).
+struct Crowd {
+  std::size_t people = 0;
+  double radius_m = 0.25;
+  double min_lead_s = 2.0;
+  double max_lead_s = 20.0;
+  double max_offset_m = 0.5;
+
+  /// Throws `lidar2d::Error` (kInvalidArgument) naming the field out of its domain.
+  void validate() const;
+};
+
 /// Everything the simulator does, in one struct.
 struct SimulatorOptions {
   LaserModel laser;
   OdometryNoise odometry;
+  Crowd crowd;
   std::uint64_t seed = 1;            ///< seeds both noise streams
   bool odom_starts_at_truth = true;  ///< odometry frame = world frame at the first scan (else odometry starts at identity)
 
@@ -77,20 +99,27 @@ class Simulator {
   const SimulatorOptions& options() const { return options_; }
 
   /// The noise-free ranges the laser would measure with the robot at `T_world_robot` (one per
-  /// beam; `range_max_m` for no return).
+  /// beam; `range_max_m` for no return), the world alone (no people).
   std::vector<double> exactRanges(const SE2& T_world_robot) const;
+  /// Where the people of `SimulatorOptions::crowd` are at time `t_s` (see `Crowd`).
+  std::vector<Eigen::Vector2d> peopleAt(double t_s) const;
   /// Those ranges as a scan of this laser (time 0): the noise-free scan at `T_world_robot`, in the
   /// laser frame (`options().laser.T_robot_laser` mounts it on the robot).
   LaserScan exactScan(const SE2& T_world_robot) const;
 
  private:
   LaserScan makeScan(std::vector<double> ranges, double time_s) const;
+  /// exactRanges with the discs of `people` (of radius crowd.radius_m) in the world.
+  std::vector<double> ranges(const SE2& T_world_robot, const std::vector<Eigen::Vector2d>& people) const;
+  /// The truth pose at time `t_s`, interpolated; held at the route's ends.
+  SE2 truthAt(double t_s) const;
 
   const World& world_;
   std::vector<TimedPose> truth_;
   const SimulatorOptions options_;
   Rng laser_rng_;
   Rng odom_rng_;
+  std::vector<std::pair<double, double>> people_;  // each person's lead [s] and offset [m]
   std::size_t k_ = 0;
   SE2 odom_;
 };
