@@ -324,7 +324,9 @@ TEST(Simulator, PeopleWalkTheRouteAndOnlyShortenBeams) {
           *f->T_world_robot * (f->T_robot_laser * Eigen::Vector2d(b * std::cos(ang), b * std::sin(ang)));
       double off_rim = 1e9;
       for (const auto& c : people) off_rim = std::min(off_rim, std::abs((end - c).norm() - 0.25));
-      if (b > 0.0) EXPECT_LE(off_rim, 0.05) << k << " " << i;
+      if (b > 0.0) {
+        EXPECT_LE(off_rim, 0.05) << k << " " << i;
+      }
     }
     // Each person is on the route, within 0.5 m of where the robot is at some time.
     for (const auto& c : people) {
