@@ -135,24 +135,28 @@ void bindIo(py::module_& m) {
       }, py::arg("path"), "Reads a relations file as an (N, 5) array t1, t2, dx, dy, dyaw.");
 
   m.def("list_worlds", &sim::listWorlds, "Names of the simulator's built-in worlds.");
-  m.def("simulate",
-        [](const std::string& world, std::size_t scans, std::uint64_t seed, double rate_hz, bool noise_free) {
-          py::gil_scoped_release release;
-          sim::Scenario s = sim::builtinScenario(world);
-          sim::PathOptions po;
-          po.rate_hz = rate_hz;
-          sim::SimulatorOptions o;
-          o.seed = seed;
-          if (noise_free) o = o.noiseFree();
-          sim::Simulator simulator(s.world, sim::samplePath(s.waypoints, po, scans), o);
-          std::vector<Frame> frames;
-          while (auto f = simulator.next()) frames.push_back(std::move(*f));
-          return frames;
-        },
-        py::arg("world") = "office", py::arg("scans") = 0, py::arg("seed") = 1, py::arg("rate_hz") = 10.0,
-        py::arg("noise_free") = false,
-        "Frames (scan, noisy odometry, truth) of a robot driving a built-in world's route; scans=0\n"
-        "drives the route once. Deterministic per seed.");
+  m.def(
+      "simulate",
+      [](const std::string& world, std::size_t scans, std::uint64_t seed, double rate_hz, bool noise_free,
+         std::size_t people) {
+        py::gil_scoped_release release;
+        sim::Scenario s = sim::builtinScenario(world);
+        sim::PathOptions po;
+        po.rate_hz = rate_hz;
+        sim::SimulatorOptions o;
+        o.seed = seed;
+        if (noise_free) o = o.noiseFree();
+        o.crowd.people = people;
+        sim::Simulator simulator(s.world, sim::samplePath(s.waypoints, po, scans), o);
+        std::vector<Frame> frames;
+        while (auto f = simulator.next()) frames.push_back(std::move(*f));
+        return frames;
+      },
+      py::arg("world") = "office", py::arg("scans") = 0, py::arg("seed") = 1, py::arg("rate_hz") = 10.0,
+      py::arg("noise_free") = false, py::arg("people") = 0,
+      "Frames (scan, noisy odometry, truth) of a robot driving a built-in world's route; scans=0\n"
+      "drives the route once; people: that many people walking the route 2-20 s ahead of or behind\n"
+      "the robot (moving obstacles, `lidar2d simulate --people`). Deterministic per seed.");
   m.def("write_log",
         [](const py::object& path, const std::vector<Frame>& frames, const std::string& comment) {
           const std::string p = py::str(path).cast<std::string>();

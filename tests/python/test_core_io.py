@@ -127,6 +127,14 @@ def test_simulate_and_worlds():
     assert len(a) == 5 and all(np.array_equal(x.ranges, y.ranges) for x, y in zip(a, b))
     with pytest.raises(lidar2d.Error, match="office"):
         lidar2d.simulate("nowhere")
+    # People only shorten beams; the odometry does not see them.
+    c = lidar2d.simulate("corridor", scans=50, seed=4, people=8)
+    d = lidar2d.simulate("corridor", scans=50, seed=4)
+    assert all((x.ranges <= y.ranges).all() for x, y in zip(c, d))
+    assert sum(int((x.ranges < y.ranges).sum()) for x, y in zip(c, d)) > 100
+    assert all(x.odometry.x == y.odometry.x for x, y in zip(c, d))
+    with pytest.raises(lidar2d.Error, match="people"):
+        lidar2d.simulate("corridor", people=5000)
 
 
 def test_read_log_laser_range_max(tmp_path):
