@@ -107,6 +107,7 @@ TEST_F(CliTrack, WritesOneLinePerScanAndTheSummary) {
   EXPECT_GE(j["global_query_ms"]["count"].get<std::size_t>(), fixes);
   EXPECT_TRUE(j["global_fix_ms"]["median"].is_number());
   EXPECT_TRUE(j.contains("relocalizations"));
+  EXPECT_EQ(j["odometry_frozen_scans"], 0);  // the simulator's odometry never reads one pose twice
 }
 
 TEST_F(CliTrack, TimesGoingBackwardsBeforeTheFirstFixGiveNoTimeToIt) {

@@ -109,7 +109,7 @@ void runTrack(const TrackArgs& a) {
   out.stream() << "# lidar2d track: t x y theta status score (status global|tracking|lost; nan pose when lost)\n";
   std::size_t scans = 0, counts[3] = {0, 0, 0}, relocalizations = 0;
   std::size_t within = 0, tracking_within = 0, wrong_tracking = 0, wrong_global = 0;
-  std::size_t beyond_map = 0, beyond_map_within = 0;
+  std::size_t beyond_map = 0, beyond_map_within = 0, odometry_frozen = 0;
   std::optional<double> first_time, first_fix_time, previous_time;
   // Scans before the first fix; and whether the log's time advanced at every scan up to it (a
   // log whose timestamps repeat or go backwards gives no meaningful time to the first fix).
@@ -137,6 +137,7 @@ void runTrack(const TrackArgs& a) {
     }
     relocalizations += r.relocalized ? 1 : 0;
     beyond_map += r.beyond_map ? 1 : 0;
+    odometry_frozen += r.odometry_frozen ? 1 : 0;
     if (r.status == localization::TrackStatus::kTracking) track_ms.push_back(r.track_ms);
     if (r.global_ms > 0) global_ms.push_back(r.global_ms);
     if (r.status == localization::TrackStatus::kGlobal) fix_ms.push_back(r.global_ms);
@@ -188,6 +189,7 @@ void runTrack(const TrackArgs& a) {
         "no time to it (time_to_first_fix_s null), only the {} scans before it (scans_to_first_fix)\n",
         a.log, *scans_to_first_fix);
   j["relocalizations"] = relocalizations;
+  j["odometry_frozen_scans"] = odometry_frozen;
   if (!mirror_check_json.is_null()) j["mirror_check"] = mirror_check_json;
   j["tracking_beyond_map"] = {{"scans", beyond_map}, {"share", share(beyond_map)}};
   j["tracked_scan_ms"] = timing(track_ms);

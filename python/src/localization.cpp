@@ -207,6 +207,7 @@ void bindLocalization(py::module_& m) {
             d["score"] = r.score;
             d["relocalized"] = r.relocalized;
             d["beyond_map"] = r.beyond_map;
+            d["odometry_frozen"] = r.odometry_frozen;
             d["reason"] = r.reason;
             d["iterations"] = r.iterations;
             d["track_seconds"] = r.track_ms / 1e3;
@@ -217,7 +218,8 @@ void bindLocalization(py::module_& m) {
           "Places the next scan (its odometry, when this and the previous frame have it, gives the\n"
           "prior's step; its truth is ignored). Returns a dict: status ('global', 'tracking' or 'lost'),\n"
           "pose (SE2 T_world_robot, None when lost), score in [0, 1], relocalized (a global fix after an\n"
-          "earlier one), beyond_map (tracked on the recent scans where the map explains too little), reason (why a "
+          "earlier one), beyond_map (tracked on the recent scans where the map explains too little),\n"
+          "odometry_frozen (the odometry reads one pose while the robot moves: not used), reason (why a "
           "scan was not tracked), iterations, track_seconds, global_seconds.")
       .def("reset", &localization::Tracker::reset, "Forgets the pose: the next scan is placed by global localization.");
 }

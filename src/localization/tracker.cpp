@@ -93,7 +93,12 @@ struct Tracker::State {
   std::unique_ptr<Localizer> loc;
   registration::LikelihoodField field;
   std::optional<SE2> pose;  ///< last checked pose, or the prior carried over lost scans
-  std::optional<SE2> last_odom;
+  std::optional<SE2> last_odom;  ///< the odometry of the previous scan, when it was used
+  /// Frozen odometry: the previous scan's reading (used or not), the checked pose of the first scan
+  /// that read the current one, and whether it is taken as frozen (noteStill).
+  std::optional<SE2> last_reading;
+  std::optional<SE2> still_from;
+  bool odometry_frozen = false;
   std::optional<SE2> step;  ///< last per-scan motion between checked poses (constant velocity)
   std::optional<SE2> candidate;   ///< last global answer not yet confirmed
   std::size_t confirmations = 0;  ///< global answers in a row agreeing with it
@@ -150,6 +155,22 @@ struct Tracker::State {
     dead_reckoned = T;
     dead_reckoned_path_m = 0.0;
   }
+  /// A scan checked at `T` whose odometry read the previous scan's pose (`still`) or not. Odometry
+  /// that keeps reading one pose while the checked poses move away from where it started reading it
+  /// by more than a match may correct a prior (max_correction_m, max_correction_rad) is frozen (a
+  /// stalled driver, wheels that do not turn while the robot is pushed): until it reads another
+  /// pose it is no odometry, and its first step after that (all the motion it missed) is none
+  /// either. Predicted to stand still, the office run's scans turning 18 degrees each were lost and
+  /// fixed again globally (17 relocalizations in 10 s of frozen odometry).
+  void noteStill(bool still, const SE2& T) {
+    if (!still || !still_from) {
+      still_from = T;
+      return;
+    }
+    const SE2 moved = still_from->inverse() * T;
+    if (moved.translation().norm() > o.max_correction_m || std::abs(moved.theta()) > o.max_correction_rad)
+      odometry_frozen = true;
+  }
   /// Whether `T` is where dead reckoning allows (true when there is none).
   bool withinDeadReckoning(const SE2& T) const {
     if (!dead_reckoned) return true;
@@ -173,6 +194,8 @@ void Tracker::reset() {
   s_->step.reset();
   s_->lost = 0;
   s_->dead_reckoned.reset();
+  s_->still_from.reset();
+  s_->odometry_frozen = false;
   s_->forgetRecent();
 }
 
@@ -185,7 +208,17 @@ TrackResult Tracker::add(const Frame& frame) {
   // The prior's step: odometry when this and the previous frame have it, else the last step
   // between checked poses (constant velocity), else none.
   SE2 step;
-  const bool odom_ok = frame.T_odom_robot && frame.T_odom_robot->isFinite();
+  const bool reading = frame.T_odom_robot && frame.T_odom_robot->isFinite();
+  const bool still = reading && s.last_reading && frame.T_odom_robot->x() == s.last_reading->x() &&
+                     frame.T_odom_robot->y() == s.last_reading->y() &&
+                     frame.T_odom_robot->theta() == s.last_reading->theta();
+  if (!still) {
+    s.odometry_frozen = false;
+    if (!reading) s.still_from.reset();
+  }
+  s.last_reading = reading ? frame.T_odom_robot : std::nullopt;
+  r.odometry_frozen = s.odometry_frozen;
+  const bool odom_ok = reading && !s.odometry_frozen;
   const bool had_odom = s.last_odom.has_value();
   if (odom_ok && s.last_odom) {
     step = s.last_odom->inverse() * *frame.T_odom_robot;
@@ -368,6 +401,7 @@ TrackResult Tracker::add(const Frame& frame) {
       }
       s.remember(sub, m.T_target_source);
       s.placed(m.T_target_source);
+      s.noteStill(still, m.T_target_source);
       r.status = TrackStatus::kTracking;
       r.T_world_robot = m.T_target_source;
       return r;
@@ -410,6 +444,7 @@ TrackResult Tracker::add(const Frame& frame) {
     s.forgetRecent();
     s.remember(subsample(points, o.max_points), g.T_world_robot);
     s.placed(g.T_world_robot);
+    s.noteStill(still, g.T_world_robot);
     // The step between the last two agreeing answers: the constant-velocity prior of the next scan
     // when there is no odometry (standing still would be metres off on a log of keyframes).
     s.step = s.confirmations >= 2 ? std::optional<SE2>(previous->inverse() * g.T_world_robot) : std::nullopt;

@@ -169,6 +169,7 @@ def test_tracker(office_frames, office_map):
         lidar2d.Tracker(office_map, max_degenerate_path_m=float("nan"))
     # In the map of the whole run no scan needs the recent scans; with them off it tracks alike.
     assert not any(r["beyond_map"] for r in results)
+    assert not any(r["odometry_frozen"] for r in results)
     off = lidar2d.Tracker(office_map, recent_scans=0)
     assert [off.add(f)["status"] for f in office_frames] == statuses
     with pytest.raises(TypeError):

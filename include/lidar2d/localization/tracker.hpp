@@ -150,6 +150,9 @@ struct TrackResult {
   /// Localizer::score of the pose (0 when lost; beyond_map: the map and the recent scans together), in [0, 1]
   double score = 0.0;
   bool relocalized = false;  ///< a global fix after an earlier fix (a recovery, not the first fix)
+  /// The odometry keeps reading one pose while the robot moves (Tracker::add): not used, as if the
+  /// scan had none, until it reads another pose
+  bool odometry_frozen = false;
   /// `tracking` on the recent scans where the map explains too little (TrackerOptions::recent_scans):
   /// the pose chains from the last scan the map placed, and drifts
   bool beyond_map = false;
