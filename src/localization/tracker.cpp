@@ -209,9 +209,7 @@ TrackResult Tracker::add(const Frame& frame) {
   // between checked poses (constant velocity), else none.
   SE2 step;
   const bool reading = frame.T_odom_robot && frame.T_odom_robot->isFinite();
-  const bool still = reading && s.last_reading && frame.T_odom_robot->x() == s.last_reading->x() &&
-                     frame.T_odom_robot->y() == s.last_reading->y() &&
-                     frame.T_odom_robot->theta() == s.last_reading->theta();
+  const bool still = reading && s.last_reading && frame.T_odom_robot->isApprox(*s.last_reading, 0.0, 0.0);
   if (!still) {
     s.odometry_frozen = false;
     if (!reading) s.still_from.reset();

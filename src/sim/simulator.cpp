@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "lidar2d/core/error.hpp"
+#include "lidar2d/sim/log_perturbation.hpp"
 
 namespace lidar2d::sim {
 namespace {
@@ -94,25 +95,16 @@ Simulator::Simulator(const World& world, std::vector<TimedPose> truth, Simulator
 
 std::vector<double> Simulator::exactRanges(const SE2& T_world_robot) const { return ranges(T_world_robot, {}); }
 
-SE2 Simulator::truthAt(double t_s) const {
-  if (truth_.empty()) return SE2();
-  if (t_s <= truth_.front().time_s) return truth_.front().T_world_robot;
-  if (t_s >= truth_.back().time_s) return truth_.back().T_world_robot;
-  const auto it =
-      std::lower_bound(truth_.begin(), truth_.end(), t_s, [](const TimedPose& p, double t) { return p.time_s < t; });
-  const TimedPose& b = *it;
-  const TimedPose& a = *(it - 1);
-  const double f = b.time_s > a.time_s ? (t_s - a.time_s) / (b.time_s - a.time_s) : 0.0;
-  const Eigen::Vector2d p =
-      a.T_world_robot.translation() + f * (b.T_world_robot.translation() - a.T_world_robot.translation());
-  return SE2(p, a.T_world_robot.theta() + f * angleDiff(b.T_world_robot.theta(), a.T_world_robot.theta()));
-}
-
 std::vector<Eigen::Vector2d> Simulator::peopleAt(double t_s) const {
   std::vector<Eigen::Vector2d> out;
   out.reserve(people_.size());
   for (const auto& [lead, offset] : people_) {
-    const SE2 T = truthAt(t_s + lead);
+    // From the last scan at or before the time (the route's times increase): sim::truthAt
+    // interpolates forward from there, and holds the route's ends.
+    const double t = t_s + lead;
+    const auto it =
+        std::upper_bound(truth_.begin(), truth_.end(), t, [](double v, const TimedPose& p) { return v < p.time_s; });
+    const SE2 T = truthAt(truth_, it == truth_.begin() ? 0 : static_cast<std::size_t>(it - truth_.begin()) - 1, t);
     out.push_back(T.translation() + offset * Eigen::Vector2d(-std::sin(T.theta()), std::cos(T.theta())));
   }
   return out;

@@ -163,8 +163,8 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
     p.T_odom_scaled = step && opt_.scale_odometry ? *odom_scaled_prev_ * scaled_step : *f.T_odom_robot;
     odom_scaled_ = p.T_odom_scaled;
     // After scans without odometry, or with a frozen reading, the step from the last reading spans
-    // all of them: it says where the robot is, not the step from the previous scan (the simulated
-    // office's odometry back after 10 s: a 6.66 m step, called implausible over one 0.1 s interval).
+    // all of them: it says where the robot is, not the step from the previous scan, and over one
+    // scan interval it would be called implausible.
     bool spans_more = false;
     if (odometry_missing_) {
       notes_.push_back(fmt::format(
@@ -174,8 +174,7 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       spans_more = true;
     }
     odometry_seen_ = true;
-    p.odometry_still = step && !spans_more && f.T_odom_robot->x() == odom_prev_->x() &&
-                       f.T_odom_robot->y() == odom_prev_->y() && f.T_odom_robot->theta() == odom_prev_->theta();
+    p.odometry_still = step && !spans_more && f.T_odom_robot->isApprox(*odom_prev_, 0.0, 0.0);
     if (odometry_frozen_ && !p.odometry_still) {
       notes_.push_back(
           fmt::format("odometry reads another pose after {} scans ({:.1f} s) on one: its first step spans "

@@ -111,8 +111,6 @@ class Simulator {
   LaserScan makeScan(std::vector<double> ranges, double time_s) const;
   /// exactRanges with the discs of `people` (of radius crowd.radius_m) in the world.
   std::vector<double> ranges(const SE2& T_world_robot, const std::vector<Eigen::Vector2d>& people) const;
-  /// The truth pose at time `t_s`, interpolated; held at the route's ends.
-  SE2 truthAt(double t_s) const;
 
   const World& world_;
   std::vector<TimedPose> truth_;
