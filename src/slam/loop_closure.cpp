@@ -83,8 +83,6 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
   std::optional<Points2> sparse;  // the scan for the searches, filtered at the first one
   for (const auto& [dist, s] : candidates) {
     Submap& sm = s_.submaps[s];
-    const SE2& T_world_anchor = s_.nodes[sm.anchor].T_world_robot;
-
     Constraint blank;
     blank.kind = Constraint::Kind::kLoop;
     blank.from = sm.anchor;
@@ -98,19 +96,7 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     }
     if (!every_node || searches_left <= 0) continue;
     --searches_left;
-    ++s_.stats.loop_searches;
-    blank.searched = true;
-    const SE2 guess = T_world_anchor.inverse() * node.T_world_robot;
-    if (!sparse) sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
-    // One branch-and-bound search and the refinement of its answer into c; false when nothing scored.
-    auto attempt = [&](const registration::CorrelativeOptions& window) {
-      c = blank;
-      const auto cr = registration::matchCorrelative(gridOf(s), *sparse, guess, window);
-      c.score = cr.score;
-      if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) return false;
-      refine(c, sm, pts, cr.T_search);
-      return true;
-    };
+    auto attempt = [&](const registration::CorrelativeOptions& window) { return search(n, s, window, sparse, c); };
     // The least window first: where it holds a match, the nearer place is the likelier one (a wider
     // window in a building of look-alike rooms finds a better-scoring wrong place as often as not).
     // Only where it holds none that refines, the window the drift since the latest closure calls
@@ -132,6 +118,60 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     submitSearched(std::move(c), sm, widened ? sm.wide_pending : sm.pending);
   }
   return covered;
+}
+
+bool LoopClosure::search(std::size_t n, std::size_t s, const registration::CorrelativeOptions& window,
+                         std::optional<Points2>& sparse, Constraint& c) {
+  const Submap& sm = s_.submaps[s];
+  const Points2& pts = s_.node_points[n];
+  ++s_.stats.loop_searches;
+  c = Constraint{};
+  c.kind = Constraint::Kind::kLoop;
+  c.from = sm.anchor;
+  c.to = n;
+  c.searched = true;
+  const SE2 guess = s_.nodes[sm.anchor].T_world_robot.inverse() * s_.nodes[n].T_world_robot;
+  if (!sparse) sparse = voxelFilter(pts, 2.0 * opt.scan_voxel_m);
+  const auto cr = registration::matchCorrelative(gridOf(s), *sparse, guess, window);
+  c.score = cr.score;
+  if (!cr.T_search.isFinite() || cr.score < opt.loop_min_score) return false;
+  refine(c, sm, pts, cr.T_search);
+  return true;
+}
+
+void LoopClosure::confirmPendingAtEnd() {
+  const std::size_t N = s_.nodes.size();
+  const auto every = static_cast<std::size_t>(opt.loop_search_every_nodes);
+  const auto confirm_window = static_cast<std::size_t>(opt.loop_confirm_window_nodes);
+  for (std::size_t s = 0; s < s_.submaps.size(); ++s) {
+    Submap& sm = s_.submaps[s];
+    for (const bool wide : {false, true}) {
+      std::optional<Constraint>& pending = wide ? sm.wide_pending : sm.pending;
+      // Only a closure the log's end cut short of its confirmation window: an older one had the
+      // nodes after it to be confirmed by.
+      if (!pending || pending->to + confirm_window < N - 1) continue;
+      const std::size_t p = pending->to;
+      // The nodes the schedule skipped around it: those since the search before it, and every node
+      // after it (a search after it that disagreed would have refuted it already).
+      const std::size_t first = p >= every ? p - every + 1 : 0;
+      const std::size_t last = std::min(N - 1, p + confirm_window);
+      for (std::size_t m = first; m <= last && pending && pending->to == p; ++m) {
+        if (m == p || s_.node_points[m].size() < opt.min_points) continue;
+        if (sm.nodes.back() + static_cast<std::size_t>(opt.local_map_nodes) >= m) continue;
+        registration::CorrelativeOptions window = loop_search;
+        if (wide) window.linear_window_m = std::max(window.linear_window_m, s_.proximityWindowM(m));
+        std::optional<Points2> sparse;
+        Constraint c;
+        if (!search(m, s, window, sparse, c)) continue;
+        if (!c.accepted) {
+          ++s_.stats.loop_rejected;
+          s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+          continue;
+        }
+        submitSearched(std::move(c), sm, pending);
+      }
+    }
+  }
 }
 
 bool LoopClosure::untiedSearchDue(std::size_t age) {
@@ -244,7 +284,8 @@ void LoopClosure::submitSearched(Constraint c, Submap& sm, std::optional<Constra
     const Constraint& p = *pending;
     const SE2 predicted = p.T_from_to * (s_.nodes[p.to].T_local_robot.inverse() * s_.nodes[c.to].T_local_robot);
     const SE2 diff = predicted.inverse() * c.T_from_to;
-    const bool recent = c.to - p.to <= static_cast<std::size_t>(opt.loop_confirm_window_nodes);
+    const std::size_t apart = c.to > p.to ? c.to - p.to : p.to - c.to;  // confirmPendingAtEnd: either order
+    const bool recent = apart <= static_cast<std::size_t>(opt.loop_confirm_window_nodes);
     if (recent && diff.translation().norm() <= opt.loop_confirm_tolerance_m &&
         std::abs(diff.theta()) <= opt.loop_confirm_tolerance_rad) {
       confirmed = p;

@@ -511,6 +511,7 @@ void Slam::finish() {
   // The back end's events were merged a node late: in frame order again.
   std::stable_sort(s.events.begin(), s.events.end(),
                    [](const Event& a, const Event& b) { return a.frame_index < b.frame_index; });
+  impl_->loops.confirmPendingAtEnd();
   impl_->loops.expirePending();
   internal::calibrateFromCycles(s);
   internal::optimize(s, s.opt.graph.max_iterations);

@@ -51,6 +51,14 @@ class LoopClosure {
   /// kUntiedEveryNodes nodes while it is young, then four times per doubling of its length, so that
   /// a fragment that never comes back to the map costs a number of searches logarithmic in its length.
   static bool untiedSearchDue(std::size_t age);
+  /// At the end of the run, the last chance to confirm a closure still pending within
+  /// loop_confirm_window_nodes of the last node: its submap is
+  /// searched from the nodes the schedule (loop_search_every_nodes) skipped since the search before
+  /// the pending one's node, and from every node after it within loop_confirm_window_nodes, as
+  /// submitSearched would have from a later search (either order: the two closures agree through the
+  /// front end's relative pose). A log that ends where it began finds its closure in its last nodes,
+  /// where no later search is left to confirm it.
+  void confirmPendingAtEnd();
   /// Pending closures never confirmed are listed as rejected (at the end of the run).
   void expirePending();
   /// The correlative grid of submap `s`, built on demand; only the most recently used few are kept.
@@ -97,6 +105,11 @@ class LoopClosure {
                                                   std::vector<std::size_t>& lru, std::size_t max_kept,
                                                   const registration::CorrelativeOptions& options);
   void acceptLoop(Constraint c, Submap& sm);
+  /// One branch-and-bound search of node `n` in submap `s` over `window` around the estimate, and
+  /// the refinement of its answer into `c` (a searched closure; refine); false when nothing scored
+  /// loop_min_score. `sparse`: node n's points for the search, filtered on first use.
+  bool search(std::size_t n, std::size_t s, const registration::CorrelativeOptions& window,
+              std::optional<Points2>& sparse, Constraint& c);
   /// Why a searched closure `c` (to node c.to, in the frame of node c.from) contradicts both the
   /// estimate and the latest accepted closure carried on along the front end's chain, beyond
   /// kConsistentM plus loop_window_per_m of the path between them; nullopt when it agrees with
