@@ -112,7 +112,8 @@ class LoopClosure {
               std::optional<Points2>& sparse, Constraint& c);
   /// Why a searched closure `c` (to node c.to, in the frame of node c.from) contradicts both the
   /// estimate and the latest accepted closure carried on along the front end's chain, beyond
-  /// kConsistentM plus loop_window_per_m of the path between them; nullopt when it agrees with
+  /// kConsistentM plus loop_window_per_m of the path since that closure or, where longer, of the
+  /// path the graph's links span between c.from and c.to (untiedPathM); nullopt when it agrees with
   /// either, when no such closure precedes it on the same fragment, or without odometry.
   /// `weak_world` (unit, world frame): the closure's unconstrained direction, left out of both.
   std::optional<std::string> contradictsLatestClosure(const Constraint& c,
@@ -124,6 +125,10 @@ class LoopClosure {
   /// How far (in the odometry step's sigmas) the untied fragment's closure `c` puts the step across
   /// the lost track from the odometry's (the fragment must have its odometry link).
   double carriedSigmas(const Constraint& c) const;
+  /// The shortest path [m] between nodes `a` and `b` through the graph's accepted links, each link
+  /// between consecutive nodes counting the front end's path between them and each closure none:
+  /// the path over which the estimate of one relative to the other drifted.
+  double untiedPathM(std::size_t a, std::size_t b) const;
   /// The share of node n's scan that lies, with the node where the estimate puts it, in the free
   /// space of a finished submap before node `first` (cells seen free within the inlier distance).
   double inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) const;
