@@ -137,7 +137,9 @@ class Slam {
   /// Processes the next frame. Never throws for bad data in a frame (too few points, missing or
   /// jumping odometry, time going backwards): it records an Event and goes on.
   void add(const Frame& frame);
-  /// Final pose-graph optimisation; the estimates are final afterwards. Idempotent.
+  /// Ends the run: a loop closure the last nodes found and no later search confirmed is searched
+  /// for again from the nodes around it, then the final pose-graph optimisation; the estimates are
+  /// final afterwards. Idempotent.
   void finish();
 
   /// Every scan added so far, in input order, with its current estimate.
