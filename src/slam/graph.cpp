@@ -187,12 +187,15 @@ void calibrateFromCycles(SlamState& s) {
   s.cycles_odometry_sigma_rad = s.cycles_sequential_sigma_rad = s.cycles_odometry_sigma_m = 0.0;
   s.stats.odometry_weighted_by_cycles = false;
   const double rotation = m.odometry_rad / m.front_end_rad, position = m.odometry_m / m.front_end_m;
-  if (m.cycles < kCycleMinCount || !(rotation < 1.0) || !(position < 1.0) ||
-      !(std::sqrt(rotation * position) < kCycleOdometryRatio))
-    return;
-  s.cycles_odometry_sigma_rad = std::max(m.odometry_rad, kCycleMinSigmaRad);
-  s.cycles_sequential_sigma_rad = m.front_end_rad;
-  s.cycles_odometry_sigma_m = std::max(m.odometry_m, kCycleMinSigmaM);
+  // The weight of the measure: 1 below kCycleOdometryRatio, fading to 0 at kCycleOdometryRatioNone.
+  const double t = std::clamp(
+      (kCycleOdometryRatioNone - std::sqrt(rotation * position)) / (kCycleOdometryRatioNone - kCycleOdometryRatio), 0.0,
+      1.0);
+  if (m.cycles < kCycleMinCount || !(rotation < 1.0) || !(position < 1.0) || !(t > 0.0)) return;
+  const auto blend = [t](double measured, double own) { return std::pow(measured, t) * std::pow(own, 1.0 - t); };
+  s.cycles_odometry_sigma_rad = blend(std::max(m.odometry_rad, kCycleMinSigmaRad), s.opt.odometry_sigma_rad);
+  s.cycles_sequential_sigma_rad = blend(m.front_end_rad, s.opt.sequential_sigma_rad);
+  s.cycles_odometry_sigma_m = blend(std::max(m.odometry_m, kCycleMinSigmaM), s.opt.odometry_sigma_m);
   s.stats.odometry_weighted_by_cycles = true;
   const Node& last = s.nodes.back();
   s.events.push_back(
@@ -202,7 +205,7 @@ void calibrateFromCycles(SlamState& s) {
            "per node step, the scan matches {:.3f} degrees and {:.4f} m; the final graph holds the odometry "
            "links to {:.3f} degrees and {:.4f} m and the matches' rotation to at least {:.3f} degrees",
            m.cycles, m.odometry_rad / kDeg, m.odometry_m, m.front_end_rad / kDeg, m.front_end_m,
-           s.cycles_odometry_sigma_rad / kDeg, s.cycles_odometry_sigma_m, m.front_end_rad / kDeg)});
+           s.cycles_odometry_sigma_rad / kDeg, s.cycles_odometry_sigma_m, s.cycles_sequential_sigma_rad / kDeg)});
 }
 
 void reportDownweighted(SlamState& s) {

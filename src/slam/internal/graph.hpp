@@ -53,6 +53,12 @@ inline constexpr std::size_t kCycleMinCount = 20;
 /// raw bags' own and the simulated lasers', it was at least 0.37 on every run of the robustness
 /// benchmark with 20 cycles or more; with the truth as odometry 0.02-0.6 (BENCHMARK.md, SLAM).
 inline constexpr double kCycleOdometryRatio = 0.25;
+/// Between kCycleOdometryRatio and this the weighting fades (the sigmas blended geometrically from
+/// the measured ones to the links' own), so that a share just above the threshold weighs almost as
+/// one just below it: a threshold alone turned edmonton with perfect odometry from 0.016 m to 0.454 m
+/// ATE on a change of the beam angles' last digits (shares 0.240 and 0.253). 0.32 lies 1.17 times
+/// below the least share of a realistic run (0.373).
+inline constexpr double kCycleOdometryRatioNone = 0.32;
 /// The narrowest the odometry links' sigmas get (the closures' own error bounds the measure).
 inline constexpr double kCycleMinSigmaRad = 0.02 * kDeg;
 inline constexpr double kCycleMinSigmaM = 0.002;
@@ -60,9 +66,9 @@ CycleMeasure measureCycles(const SlamState& s);
 
 /// Before the final optimisation: measures the cycles (stats loop_cycles, cycle_*) and, when there
 /// are kCycleMinCount of them and the odometry erred clearly less than the front end per step
-/// (kCycleOdometryRatio), has the final optimisation hold the odometry links' sigmas to the
-/// odometry's measured errors (never wider than their own; at least kCycleMinSigmaRad and
-/// kCycleMinSigmaM) and the front end's links' rotation sigma to at least theirs
+/// (kCycleOdometryRatio; partly up to kCycleOdometryRatioNone), has the final optimisation hold the
+/// odometry links' sigmas to the odometry's measured errors (never wider than their own; at least
+/// kCycleMinSigmaRad and kCycleMinSigmaM) and the front end's links' rotation sigma to at least theirs
 /// (SlamState::cycles_*; the state's edges keep their weights), with an event. Odometry better than
 /// the scan matching, which the defaults' odometry weights (made for odometry drifting a degree per
 /// metre) cannot know, then holds the map.
