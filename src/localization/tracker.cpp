@@ -438,14 +438,21 @@ TrackResult Tracker::add(const Frame& frame) {
     r.relocalized = s.fixed_once;
     r.reason.clear();
     s.fixed_once = true;
+    const std::optional<SE2> checked_before = s.lost == 0 ? s.pose : std::nullopt;
     // The recent scans were placed before tracking failed, perhaps elsewhere (a kidnapping).
     s.forgetRecent();
     s.remember(subsample(points, o.max_points), g.T_world_robot);
     s.placed(g.T_world_robot);
     s.noteStill(still, g.T_world_robot);
-    // The step between the last two agreeing answers: the constant-velocity prior of the next scan
-    // when there is no odometry (standing still would be metres off on a log of keyframes).
-    s.step = s.confirmations >= 2 ? std::optional<SE2>(previous->inverse() * g.T_world_robot) : std::nullopt;
+    // The constant-velocity prior of the next scan when there is no odometry (standing still would be
+    // metres off on a log of keyframes): the step from the previous scan's checked pose (tracking
+    // failed on this scan, but the one before was placed), else between the last two agreeing answers.
+    // Without it a fix at once (sure_fix_score) left no step, the next scan's prior stood still, its
+    // match failed, and it was fixed globally in turn: intel's keyframes, 0.7 m and 22 degrees apart,
+    // were tracked on 6% of the scans and fixed globally on 73%.
+    s.step = checked_before         ? std::optional<SE2>(checked_before->inverse() * g.T_world_robot)
+             : s.confirmations >= 2 ? std::optional<SE2>(previous->inverse() * g.T_world_robot)
+                                    : std::nullopt;
     s.lost = 0;
     s.candidate.reset();
     s.confirmations = 0;
