@@ -60,13 +60,11 @@ LogFormat detectFormat(const std::string& path) {
   if (h.rfind("#ROSBAG V", 0) == 0 || h.rfind("#ROSRECORD V", 0) == 0) return LogFormat::kRosbag1;  // 2.0 | 1.2
   if (h.rfind("SQLite format 3", 0) == 0) return LogFormat::kRosbag2;
   if (h.rfind("\x89MCAP", 0) == 0) return LogFormat::kRosbag2;  // rosbag2's MCAP storage
-  if (h.rfind("\x28\xb5\x2f\xfd", 0) == 0)
+  if (h.rfind("\x28\xb5\x2f\xfd", 0) == 0)                      // most likely one file of a zstd-compressed rosbag2 bag
     throw badInput("zstd-compressed file: give the rosbag2 bag folder (its metadata.yaml says how it was compressed), "
                    "or decompress it first",
                    {path});
-  if (n >= 2 && head[0] == 'B' && head[1] == 'Z')
-    throw badInput("bzip2-compressed file: decompress it first (only gzip is read directly)", {path});
-  return LogFormat::kCarmen;  // text; the CARMEN reader reports content it cannot parse
+  return LogFormat::kCarmen;  // text; the CARMEN reader reports other compressions and content it cannot parse
 }
 
 namespace {

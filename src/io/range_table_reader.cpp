@@ -96,21 +96,6 @@ bool nextNumbers(TextLineReader& in, const std::string& path, std::string_view w
   return false;
 }
 
-// Gzip magic aside (read transparently), other compressed files get one clear error.
-void refuseCompressed(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return;  // TextLineReader reports it
-  unsigned char h[6] = {};
-  const std::size_t n = std::fread(h, 1, sizeof h, f);
-  std::fclose(f);
-  const char* what = nullptr;
-  if (n >= 3 && h[0] == 'B' && h[1] == 'Z' && h[2] == 'h') what = "bzip2";
-  if (n >= 4 && h[0] == 0x28 && h[1] == 0xb5 && h[2] == 0x2f && h[3] == 0xfd) what = "zstd";
-  if (n >= 6 && h[0] == 0xfd && h[1] == '7' && h[2] == 'z' && h[3] == 'X' && h[4] == 'Z' && h[5] == 0) what = "xz";
-  if (n >= 4 && h[0] == 0x04 && h[1] == 0x22 && h[2] == 0x4d && h[3] == 0x18) what = "lz4";
-  if (what) throw badInput(fmt::format("{}-compressed file: decompress it first (only gzip is read directly)", what), {path});
-}
-
 class RangeTableSource final : public FrameSource {
  public:
   explicit RangeTableSource(const RangeTableFiles& files) : f_(files) {
@@ -119,7 +104,6 @@ class RangeTableSource final : public FrameSource {
     if (!(f_.range_max_m > 0) || !std::isfinite(f_.range_max_m))
       throw invalidArgument(fmt::format("must be finite and > 0, got {}", f_.range_max_m),
                             {"RangeTableFiles", 0, "range_max_m"});
-    for (const std::string* p : {&f_.poses, &f_.angles, &f_.ranges}) refuseCompressed(*p);
     readAngles();
     poses_ = std::make_unique<TextLineReader>(f_.poses, kTableText);
     ranges_ = std::make_unique<TextLineReader>(f_.ranges, kTableText);

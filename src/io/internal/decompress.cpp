@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <initializer_list>
 #include <memory>
 
 namespace lidar2d::io::internal {
@@ -192,6 +193,23 @@ void decompressZstdFile(const std::filesystem::path& in, const std::filesystem::
   }
   dst.close();
   if (!dst) fail(fmt::format("cannot write the decompressed copy {}", out.string()));
+}
+
+const char* compressionMagic(std::span<const unsigned char> head) {
+  struct Magic {
+    const char* name;
+    std::initializer_list<unsigned char> bytes;
+  };
+  static const Magic kMagics[] = {{"gzip", {0x1f, 0x8b}},
+                                  {"bzip2", {'B', 'Z', 'h'}},
+                                  {"zstd", {0x28, 0xb5, 0x2f, 0xfd}},
+                                  {"xz", {0xfd, '7', 'z', 'X', 'Z', 0x00}},
+                                  {"lz4", {0x04, 0x22, 0x4d, 0x18}},
+                                  {"zip", {'P', 'K', 0x03, 0x04}},
+                                  {"7z", {'7', 'z', 0xbc, 0xaf, 0x27, 0x1c}}};
+  for (const Magic& m : kMagics)
+    if (head.size() >= m.bytes.size() && std::equal(m.bytes.begin(), m.bytes.end(), head.begin())) return m.name;
+  return nullptr;
 }
 
 }  // namespace lidar2d::io::internal

@@ -42,4 +42,10 @@ std::vector<std::uint8_t> decompress(Codec codec, std::span<const std::uint8_t> 
 void decompressZstdFile(const std::filesystem::path& in, const std::filesystem::path& out, std::uint64_t max_bytes,
                         const DecompressContext& context);
 
+/// The compression (or archive) format whose magic number `head`, a file's first bytes, starts
+/// with: "gzip", "bzip2", "zstd", "xz", "lz4", "zip" or "7z"; nullptr for none of them. The log
+/// readers name it in their error for a file they cannot read compressed, where its bytes would
+/// otherwise be reported as a malformed text line.
+const char* compressionMagic(std::span<const unsigned char> head);
+
 }  // namespace lidar2d::io::internal

@@ -1,8 +1,8 @@
 #pragma once
 // Lines of a text file, plain or gzip-compressed (zlib's gzopen reads plain files transparently),
-// with one clear error for what is no such file: binary bytes, a line longer than 64 MiB, corrupt
-// or truncated gzip data (raised at the line where the good data ends). Shared by the text readers
-// (CARMEN logs, range tables).
+// with one clear error for what is no such file: another compression than gzip, binary bytes, a line
+// longer than 64 MiB, corrupt or truncated gzip data (raised at the line where the good data ends). Shared by the text
+// readers (CARMEN logs, range tables).
 
 #include <fmt/format.h>
 #include <zlib.h>
@@ -11,12 +11,14 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
+#include "src/io/internal/decompress.hpp"
 
 namespace lidar2d::io::internal {
 
@@ -38,6 +40,7 @@ class TextLineReader {
     std::error_code ec;
     if (!fs::exists(path, ec)) throw ioError("no such file", {path});
     if (fs::is_directory(path, ec)) throw badInput(fmt::format("is a directory, not a {} file", kind_.name), {path});
+    refuseCompressed(path);
     errno = 0;
     gz_ = gzopen(path.c_str(), "rb");
     if (!gz_) throw ioError(fmt::format("cannot open: {}", errno ? std::strerror(errno) : "out of memory"), {path});
@@ -74,6 +77,16 @@ class TextLineReader {
   std::size_t lineNo() const { return line_; }
 
  private:
+  // A file compressed by another tool than gzip gets one error naming its format, where its bytes
+  // would otherwise be reported as a binary line.
+  static void refuseCompressed(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    unsigned char head[8] = {};
+    in.read(reinterpret_cast<char*>(head), sizeof head);
+    const char* what = compressionMagic({head, static_cast<std::size_t>(in.gcount())});
+    if (what && std::string_view(what) != "gzip")
+      throw badInput(fmt::format("{}-compressed file: decompress it first (only gzip is read directly)", what), {path});
+  }
   bool emit(const char* b, std::size_t len, std::string_view& line) {
     ++line_;
     if (len > 0 && b[len - 1] == '\r') --len;
