@@ -7,7 +7,8 @@ output files behind. A clean error (exit 1 or 2, one message) and a success both
 Use a sanitizer build (make test-asan builds build-asan/lidar2d) to catch memory errors that do not
 crash. Deterministic per --seed. Each finding's input is kept under --work.
 
-  tools/fuzz-cli.py BINARY [--modes carmen bag1 ros2 map db options state] [--runs N] [--seed S]
+  tools/fuzz-cli.py BINARY [--modes carmen bag1 ros2 mcap table map png db options config state]
+                    [--runs N] [--seed S] [-v]
 
 Modes:
   carmen   CARMEN text logs: fields replaced by NaN/inf/garbage, lines cut, dropped, duplicated,
@@ -17,9 +18,21 @@ Modes:
            python3-roslz4 is there: run with /usr/bin/python3), which a check outside the
            compression cannot see.
   ros2     a ROS2 bag: message blobs, topic rows and metadata.yaml damaged.
+  mcap     MCAP files (tests/fixtures/mcap: chunked, unchunked, lz4, zstd, a split bag): bytes,
+           and an uncompressed chunk's records (their bytes or lengths) damaged inside with the
+           chunk's CRC made right again or 0, mostly with the data section's and summary's CRCs set
+           to 0 ("not computed"), so the record and message parsers see the damage.
+  table    range tables (poses.txt, angles.txt, ranges.txt made from a simulated log): tokens,
+           lines cut, dropped, duplicated or binary, angles made uneven, gzip and cut gzip, a file
+           missing.
   map      map YAML keys and PGM bytes (localize-index, map --prior, simulate --map).
+  png      bare PNG maps (localize-index, localize, track, map --prior): the header's size, depth,
+           colour type and interlacing changed, the pixel stream damaged and compressed again,
+           chunks removed or repeated, all with valid CRCs; or plain bytes.
   db       localization database bytes (localize --db).
   options  every numeric option of every command at 0, -1, tiny, huge, NaN and inf.
+  config   SLAM's --config YAML: each option alone at extreme values or of the wrong type, then
+           several at once with lines cut, repeated or renamed.
   state    SLAM state files (state.l2d) through `slam --resume` and `track`: three small states made
            once (a 120-scan simulated log; that state resumed with a second log; the log with a
            kidnapping, for a lost track's fields), their payload decompressed, damaged and compressed
@@ -29,8 +42,9 @@ Modes:
            an array removed or repeated (a scan's beams all removed), random bytes, a cut, bytes
            appended or moved; and a few damaged headers (version, lengths, a wrong CRC, the
            writer string, a damaged zlib stream). An allocation over 2 GiB counts as a finding.
-The shared data (../shared/data, or LIDAR2D_DATA_DIR) is needed by bag1 and ros2; a missing file
-skips its mode with a message.
+The shared data (../shared/data, or LIDAR2D_DATA_DIR) is needed by bag1 and ros2 (and png for the
+rplidar room's map); a missing file skips its mode (or that input) with a message. -v prints every
+run's exit code and last message line.
 """
 import argparse
 import gzip
@@ -48,8 +62,8 @@ DATA = os.environ.get('LIDAR2D_DATA_DIR') or os.path.join(HERE, '..', '..', 'sha
 
 
 class Fuzzer:
-    def __init__(self, binary, work, timeout, rng):
-        self.bin, self.work, self.timeout, self.rng = binary, work, timeout, rng
+    def __init__(self, binary, work, timeout, rng, verbose=False):
+        self.bin, self.work, self.timeout, self.rng, self.verbose = binary, work, timeout, rng, verbose
         self.runs = self.findings = 0
 
     def run(self, args, keep, label, max_alloc_mb=None):
@@ -68,6 +82,8 @@ class Fuzzer:
             return self.report('HANG', label, args, '', keep)
         err = p.stderr.decode('utf-8', 'replace')
         left = os.listdir(out)
+        if self.verbose:
+            print(f'  exit {p.returncode}: {label}: {args[0]}: {(err.strip().splitlines() or [""])[-1][:160]}', flush=True)
         if p.returncode < 0 or p.returncode >= 128:
             return self.report(f'CRASH (exit {p.returncode})', label, args, err, keep)
         if 'runtime error:' in err or 'Sanitizer' in err:
@@ -676,8 +692,292 @@ def fuzzState(f, base, runs):
             f.run(c, f.keepFile(path), f'state #{n} ({what}) {c[0]}', max_alloc_mb=2048)
 
 
+# ---- MCAP, range tables, bare PNG maps ----
+
+MCAP_DIR = os.path.join(HERE, '..', 'tests', 'fixtures', 'mcap')
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+
+
+def mcapRecords(d):
+    """(opcode, content start, content length) of the records after the magic, up to DataEnd."""
+    out, pos = [], len(MCAP_MAGIC)
+    while pos + 9 <= len(d):
+        op, n = d[pos], struct.unpack_from('<Q', d, pos + 1)[0]
+        out.append((op, pos + 9, n))
+        pos += 9 + n
+        if op == 0x0F:
+            break
+    return out
+
+
+def damagedChunk(rng, d):
+    """An MCAP file whose uncompressed chunk is damaged inside (a record's bytes or its length, which
+    the chunk's CRC would catch) with the CRC then made right again, or 0 ("not computed"), so that
+    the reader's own checks of the records must hold. The chunk keeps its size: the summary's offsets
+    stay valid."""
+    d = bytearray(d)
+    chunks = [r for r in mcapRecords(d) if r[0] == 0x06]
+    _, at, n = rng.choice(chunks)
+    comp_len = u32(d, at + 28)
+    records_at = at + 32 + comp_len + 8
+    size = struct.unpack_from('<Q', d, records_at - 8)[0]
+    inner, q = [], records_at
+    while q + 9 <= records_at + size:
+        inner.append(q)
+        q += 9 + struct.unpack_from('<Q', d, q + 1)[0]
+    q = rng.choice(inner)
+    length = struct.unpack_from('<Q', d, q + 1)[0]
+    if rng.random() < 0.3:  # the record's length
+        d[q + 1:q + 9] = struct.pack('<Q', rng.choice([0, 1, length - 1, length + 1, size, 1 << 32, (1 << 64) - 1]))
+    else:  # its content, in place
+        body = mutateBytes(rng, bytes(d[q + 9:q + 9 + length]), 3) if length else b''
+        body = body[:length] + bytes(d[q + 9 + len(body):q + 9 + length])
+        d[q + 9:q + 9 + length] = body
+    plain = bytes(d[records_at:records_at + size])
+    struct.pack_into('<I', d, at + 24, 0 if rng.random() < 0.3 else zlib.crc32(plain))
+    return bytes(d)
+
+
+def withoutDataCrc(original, damaged):
+    """`damaged` with the DataEnd record's data_section_crc, where the original has it, and the
+    Footer's summary_crc set to 0."""
+    ends = [r for r in mcapRecords(original) if r[0] == 0x0F]
+    if not ends or ends[0][1] + 4 > len(damaged):
+        return damaged
+    d = bytearray(damaged)
+    d[ends[0][1]:ends[0][1] + 4] = b'\0\0\0\0'
+    if len(d) == len(original) and original[-37] == 0x02:  # the Footer's summary_crc too
+        d[-12:-8] = b'\0\0\0\0'
+    return bytes(d)
+
+
+def fuzzMcap(f, base, runs):
+    files = sorted(x for x in os.listdir(MCAP_DIR) if x.endswith('.mcap')) if os.path.isdir(MCAP_DIR) else []
+    if not files:
+        print(f'mcap: skipped, no MCAP fixtures in {MCAP_DIR}')
+        return
+    commands = [['info', '{f}'], ['poses', '{f}', '-o', '{o}/p.txt'], ['map', '{f}', '-o', '{o}/m', '-q'],
+                ['match', '{f}', '-o', '{o}/x.txt'], ['slam', '{f}', '-o', '{o}/s', '-q']]
+    split = os.path.join(MCAP_DIR, 'split')
+    rng = f.rng
+    for n in range(runs):
+        what = rng.choice(['bytes', 'bytes', 'chunk', 'chunk', 'split'])
+        if what == 'split' and os.path.isdir(split):  # one file of a split bag, or its metadata
+            path = os.path.join(f.work, 'in_split')
+            shutil.rmtree(path, ignore_errors=True)
+            shutil.copytree(split, path)
+            name = rng.choice(sorted(os.listdir(path)))
+            target = os.path.join(path, name)
+            os.chmod(target, 0o644)
+            data = open(target, 'rb').read()
+            if name.endswith('.yaml'):
+                m = data.decode().split('\n')
+                i = rng.randrange(len(m))
+                m[i] = m[i][:rng.randrange(len(m[i]) + 1)] + rng.choice(['', 'x', ': [', '-1', '999999999999', 'zstd'])
+                data = '\n'.join(m).encode()
+            else:
+                data = mutateBytes(rng, data)
+            open(target, 'wb').write(data)
+            label = f'mcap #{n} (split, {name})'
+        else:
+            src = rng.choice(['chunked.mcap'] if what == 'chunk' else files)
+            data = open(os.path.join(MCAP_DIR, src), 'rb').read()
+            path = os.path.join(f.work, 'in.mcap')
+            damaged = damagedChunk(rng, data) if what == 'chunk' else mutateBytes(rng, data)
+            if rng.random() < 0.8:  # the data section's CRC (which would catch most damage) set to 0, "not computed"
+                damaged = withoutDataCrc(data, damaged)
+            open(path, 'wb').write(damaged)
+            label = f'mcap #{n} ({src}, {what})'
+        runLogCommands(f, path, label, commands)
+
+
+def carmenScans(path):
+    """(start angle, increment, count, ranges, truth pose) of each scan of lidar2d's own CARMEN log."""
+    scans, truth = [], []
+    for line in open(path):
+        t = line.split()
+        if t and t[0] == 'ROBOTLASER1':
+            k = int(t[8])
+            scans.append((float(t[2]), float(t[4]), [float(x) for x in t[9:9 + k]]))
+        elif t and t[0] == 'TRUEPOS':
+            truth.append(tuple(float(x) for x in t[1:4]))
+    return scans, truth
+
+
+def fuzzTable(f, base, runs):
+    """Range tables (poses.txt, angles.txt, ranges.txt): tokens replaced, lines cut, dropped,
+    duplicated or binary, the angles made uneven, files gzipped (and cut), one removed."""
+    scans, truth = carmenScans(os.path.join(base, 'office.log'))
+    start, inc, first = scans[0]
+    files = {'angles.txt': [' '.join(repr(start + i * inc) for i in range(len(first)))],
+             'ranges.txt': [', '.join(repr(r) for r in s[2]) for s in scans],
+             'poses.txt': ['# x y theta'] + [' '.join(repr(v) for v in p) for p in truth]}
+    rng = f.rng
+    for n in range(runs):
+        d = os.path.join(f.work, 'in_table')
+        shutil.rmtree(d, ignore_errors=True)
+        os.makedirs(d)
+        damaged, what = {k: list(v) for k, v in files.items()}, []
+        for _ in range(rng.randrange(1, 4)):
+            name = rng.choice(list(damaged))
+            ls = damaged[name]
+            if not ls:
+                continue
+            i = rng.randrange(len(ls))
+            op = rng.choice('tttcdbue')
+            what.append(f'{name}:{op}')
+            toks = ls[i].replace(',', ' ').split()
+            if op == 't' and toks:
+                toks[rng.randrange(len(toks))] = rng.choice(TOKENS + ['1e6', '30', '0', '-0', ',', '#'])
+                ls[i] = ' '.join(toks)
+            elif op == 'c':
+                ls[i] = ls[i][:rng.randrange(len(ls[i]) + 1)]
+            elif op == 'd':
+                ls.insert(i, ls[rng.randrange(len(ls))]) if rng.random() < 0.5 else ls.pop(i)
+            elif op == 'b':
+                ls.insert(i, ''.join(chr(rng.randrange(1, 256)) for _ in range(rng.randrange(1, 30))))
+            elif op == 'u' and len(toks) > 2:  # a value moved: uneven or decreasing angles
+                j = rng.randrange(len(toks))
+                try:
+                    toks[j] = repr(float(toks[j]) + rng.choice([1e-3, -1e-3, 1.0, -10.0]))
+                except ValueError:
+                    pass
+                ls[i] = ' '.join(toks)
+            elif op == 'e':
+                damaged[name] = ls[:i]
+        for name, ls in damaged.items():
+            data = ('\n'.join(ls) + '\n').encode('latin-1', 'replace')
+            if rng.random() < 0.1:
+                data = gzip.compress(data)
+                if rng.random() < 0.4:
+                    data = data[:rng.randrange(len(data))]
+            if rng.random() < 0.03:
+                what.append(f'{name} missing')
+                continue
+            open(os.path.join(d, name), 'wb').write(data)
+        runLogCommands(f, d, f'table #{n} ({", ".join(what)})',
+                       [['info', '{f}'], ['map', '{f}', '-o', '{o}/m', '-q'], ['slam', '{f}', '-o', '{o}/s', '-q'],
+                        ['poses', '{f}', '-o', '{o}/p.txt']])
+
+
+def pngChunks(d):
+    out, pos = [], 8
+    while pos + 12 <= len(d):
+        n = struct.unpack_from('>I', d, pos)[0]
+        out.append([bytes(d[pos + 4:pos + 8]), bytes(d[pos + 8:pos + 8 + n])])
+        pos += 12 + n
+    return out
+
+
+def packPng(chunks):
+    return b'\x89PNG\r\n\x1a\n' + b''.join(struct.pack('>I', len(data)) + kind + data
+                                           + struct.pack('>I', zlib.crc32(kind + data)) for kind, data in chunks)
+
+
+def damagedPng(rng, d):
+    """A PNG damaged with its CRCs made right again: the header's size, depth, colour type or
+    interlacing changed; the pixel stream decompressed, damaged (filter bytes, rows cut or added)
+    and compressed again; chunks removed or repeated. Or plain bytes (caught by the CRCs)."""
+    chunks = pngChunks(d)
+    what = rng.choice(['header', 'header', 'pixels', 'pixels', 'chunks', 'bytes'])
+    if what == 'bytes':
+        return mutateBytes(rng, d), what
+    if what == 'header':
+        h = bytearray(chunks[0][1])
+        field = rng.choice(['width', 'height', 'depth', 'colour', 'interlace', 'filter'])
+        if field in ('width', 'height'):
+            v = rng.choice([0, 1, 2, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFF, 1 << 20, 100000])
+            struct.pack_into('>I', h, 0 if field == 'width' else 4, v)
+        else:
+            h[{'depth': 8, 'colour': 9, 'filter': 11, 'interlace': 12}[field]] = rng.choice([0, 1, 2, 3, 4, 6, 16, 255])
+        chunks[0][1] = bytes(h)
+        return packPng(chunks), f'header {field}'
+    idat = [c for c in chunks if c[0] == b'IDAT']
+    if what == 'pixels' and idat:
+        raw = bytearray(zlib.decompress(b''.join(c[1] for c in idat)))
+        op = rng.choice(['filter', 'bytes', 'cut', 'more'])
+        if op == 'filter':
+            width = struct.unpack_from('>I', chunks[0][1], 0)[0]
+            row = len(raw) // max(1, struct.unpack_from('>I', chunks[0][1], 4)[0])
+            raw[rng.randrange(0, len(raw), max(1, row))] = rng.choice([5, 6, 255])
+            del width
+        elif op == 'bytes':
+            raw = bytearray(mutateBytes(rng, bytes(raw)))
+        elif op == 'cut':
+            raw = raw[:rng.randrange(len(raw))]
+        else:
+            raw += bytes(rng.randrange(1, 5000))
+        rest = [c for c in chunks if c[0] != b'IDAT']
+        return packPng(rest[:-1] + [[b'IDAT', zlib.compress(bytes(raw))]] + rest[-1:]), f'pixels {op}'
+    i = rng.randrange(len(chunks))
+    chunks.insert(i, chunks[rng.randrange(len(chunks))]) if rng.random() < 0.5 else chunks.pop(i)
+    return packPng(chunks), 'chunks'
+
+
+def fuzzPng(f, base, runs):
+    """Bare PNG maps (MAP.png --resolution R --origin X,Y,YAW) and map --prior masks."""
+    sources = [os.path.join(base, 'map.png'), os.path.join(DATA, 'bags', 'rplidar-flipped', 'gridmap.png')]
+    sources = [s for s in sources if os.path.exists(s)]
+    query = os.path.join(base, 'query.log')
+    rng = f.rng
+    for n in range(runs):
+        src = sources[n % len(sources)]
+        data, what = damagedPng(rng, open(src, 'rb').read())
+        path = os.path.join(f.work, 'in.png')
+        open(path, 'wb').write(data)
+        label = f'png #{n} ({os.path.basename(src)}, {what})'
+        for c in (['localize-index', path, '--resolution', '0.05', '-o', '{o}/x.db', '--step', '1.0', '-q'],
+                  ['localize', path, query, '--resolution', '0.05', '--origin', '-1,-1,0', '-o', '{o}/l.txt'],
+                  ['track', path, query, '--resolution', '0.05', '-o', '{o}/t.txt', '-q'],
+                  ['map', query, '-o', '{o}/m', '-q', '--prior', path, '--prior-resolution', '0.05']):
+            f.run(c, f.keepFile(path), f'{label} {c[0]}', max_alloc_mb=2048)
+
+
+CONFIG_VALUES = ['0', '-1', '1e-300', '1e308', 'nan', '.inf', '-.inf', '4294967296', '18446744073709551616',
+                 '99999999', 'x', '[1, 2]', '{a: 1}', '', 'true', '1e9']
+
+
+def fuzzConfig(f, base, runs):
+    """SLAM's --config YAML: each option (from --dump-config) alone at extreme values and of the
+    wrong type, then `runs` files with several options changed at once and lines damaged."""
+    log = os.path.join(base, 'office.log')
+    dump = subprocess.run([f.bin, 'slam', log, '--dump-config'], capture_output=True, check=True).stdout.decode()
+    lines = dump.split('\n')
+    keys = [i for i, l in enumerate(lines) if l and not l.startswith('#') and ':' in l]
+    path = os.path.join(f.work, 'config.yaml')
+    rng = f.rng
+
+    def runWith(ls, label):
+        open(path, 'w').write('\n'.join(ls))
+        f.run(['slam', log, '--config', path, '-o', '{o}/s', '-q'], f.keepFile(path), label, max_alloc_mb=4096)
+
+    for i in keys:
+        name = lines[i].split(':')[0]
+        for v in rng.sample(CONFIG_VALUES, 3):
+            ls = list(lines)
+            ls[i] = f'{name}: {v}'
+            runWith(ls, f'config {name}: {v}')
+    for n in range(runs):
+        ls, what = list(lines), []
+        for _ in range(rng.randrange(2, 6)):
+            i = rng.choice(keys)
+            name = ls[i].split(':')[0]
+            op = rng.choice('vvvcdu')
+            if op == 'v':
+                ls[i] = f'{name}: {rng.choice(CONFIG_VALUES)}'
+            elif op == 'c':
+                ls[i] = ls[i][:rng.randrange(len(ls[i]) + 1)]
+            elif op == 'd':
+                ls.insert(i, ls[i])
+            else:
+                ls[i] = f'{name}_unknown: 1'
+            what.append(f'{name} {op}')
+        runWith(ls, f'config #{n} ({", ".join(what)})')
+
+
 MODES = {'carmen': fuzzCarmen, 'bag1': fuzzBag1, 'ros2': fuzzRos2, 'map': fuzzMap, 'db': fuzzDb, 'options': fuzzOptions,
-         'state': fuzzState}
+         'state': fuzzState, 'mcap': fuzzMcap, 'table': fuzzTable, 'png': fuzzPng,
+         'config': fuzzConfig}
 
 
 def main():
@@ -688,10 +988,11 @@ def main():
     ap.add_argument('--seed', type=int, default=1)
     ap.add_argument('--timeout', type=float, default=120, help='seconds before a run counts as a hang')
     ap.add_argument('--work', default='fuzz-work', help='folder for inputs and findings (emptied first)')
+    ap.add_argument('-v', '--verbose', action='store_true', help='print every run\'s exit code and last message line')
     a = ap.parse_args()
     shutil.rmtree(a.work, ignore_errors=True)
     os.makedirs(a.work)
-    f = Fuzzer(os.path.abspath(a.binary), os.path.abspath(a.work), a.timeout, random.Random(a.seed))
+    f = Fuzzer(os.path.abspath(a.binary), os.path.abspath(a.work), a.timeout, random.Random(a.seed), a.verbose)
     base = prepare(f)
     for m in a.modes:
         before = (f.runs, f.findings)
