@@ -212,7 +212,7 @@ MotionPrediction MotionPrior::predictImpl(const Frame& f) {
       const SE2& bad = anchor_->implausible;
       const bool taken_back = (!anchor_->too_far || span.translation().norm() < bad.translation().norm()) &&
                               (!anchor_->too_turned || std::abs(span.theta()) < std::abs(bad.theta()));
-      if (taken_back && plausibleOver(span, std::max(f.time - anchor_->time, usual))) {
+      if ((taken_back || !anchor_->pinned) && plausibleOver(span, std::max(f.time - anchor_->time, usual))) {
         step_used = anchor_->taken.inverse() * span;
         plausible = step_used->isFinite();
         notes_.push_back(
@@ -288,6 +288,7 @@ void MotionPrior::remember(const Frame& f, const MotionPrediction& p, const SE2&
   if (!first && pending_anchor_) {
     anchor_ = std::move(pending_anchor_);
     anchor_->taken = step;
+    anchor_->pinned = pinned;
   }
   pending_anchor_.reset();
   if (!first) {

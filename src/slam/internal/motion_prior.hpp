@@ -225,6 +225,7 @@ class MotionPrior {
     SE2 implausible;
     bool too_far = false, too_turned = false;
     SE2 taken;
+    bool pinned = true;  ///< the scan pinned the step it took (else its pose is the prior's guess)
   };
   std::optional<OdometryAnchor> pending_anchor_;  // the frame being predicted had an implausible step
   std::optional<OdometryAnchor> anchor_;          // the previous frame had one
