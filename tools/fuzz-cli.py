@@ -136,6 +136,17 @@ def runLogCommands(f, path, label, commands=LOG_COMMANDS):
         f.run([a.replace('{f}', path) for a in c], f.keepFile(path), f'{label} {c[0]}')
 
 
+def damageLine(rng, ls, i, op):
+    """The damages every text mode shares, to line i of ls: 'c' cut, 'd' a line repeated here or
+    this one dropped, 'b' a binary line inserted."""
+    if op == 'c':
+        ls[i] = ls[i][:rng.randrange(len(ls[i]) + 1)]
+    elif op == 'd':
+        ls.insert(i, ls[rng.randrange(len(ls))]) if rng.random() < 0.5 else ls.pop(i)
+    elif op == 'b':
+        ls.insert(i, ''.join(chr(rng.randrange(1, 256)) for _ in range(rng.randrange(1, 30))))
+
+
 def fuzzCarmen(f, base, runs):
     lines = open(os.path.join(base, 'office.log'), encoding='latin-1').read().split('\n')
     rng = f.rng
@@ -148,12 +159,8 @@ def fuzzCarmen(f, base, runs):
             if op == 't':
                 toks[rng.randrange(len(toks))] = rng.choice(TOKENS)
                 ls[i] = ' '.join(toks)
-            elif op == 'c':
-                ls[i] = ls[i][:rng.randrange(len(ls[i]) + 1)]
-            elif op == 'd':
-                ls.insert(i, ls[rng.randrange(len(ls))]) if rng.random() < 0.5 else ls.pop(i)
-            elif op == 'b':
-                ls.insert(i, ''.join(chr(rng.randrange(1, 256)) for _ in range(rng.randrange(1, 30))))
+            elif op in 'cdb':
+                damageLine(rng, ls, i, op)
             elif op == 'n' and len(toks) > 1:
                 toks[1] = rng.choice(['0', '1', '2', '-5', '1000000000', '360'])
                 ls[i] = ' '.join(toks)
@@ -830,12 +837,8 @@ def fuzzTable(f, base, runs):
             if op == 't' and toks:
                 toks[rng.randrange(len(toks))] = rng.choice(TOKENS + ['1e6', '30', '0', '-0', ',', '#'])
                 ls[i] = ' '.join(toks)
-            elif op == 'c':
-                ls[i] = ls[i][:rng.randrange(len(ls[i]) + 1)]
-            elif op == 'd':
-                ls.insert(i, ls[rng.randrange(len(ls))]) if rng.random() < 0.5 else ls.pop(i)
-            elif op == 'b':
-                ls.insert(i, ''.join(chr(rng.randrange(1, 256)) for _ in range(rng.randrange(1, 30))))
+            elif op in 'cdb':
+                damageLine(rng, ls, i, op)
             elif op == 'u' and len(toks) > 2:  # a value moved: uneven or decreasing angles
                 j = rng.randrange(len(toks))
                 try:
