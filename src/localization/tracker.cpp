@@ -102,6 +102,9 @@ struct Tracker::State {
   std::optional<SE2> step;  ///< last per-scan motion between checked poses (constant velocity)
   std::optional<SE2> candidate;   ///< last global answer not yet confirmed
   std::size_t confirmations = 0;  ///< global answers in a row agreeing with it
+  /// How far the agreeing answers moved from the first of them (the sums of their steps' distances
+  /// and turns): what their views differ by [m, rad].
+  double confirm_path_m = 0.0, confirm_turn_rad = 0.0;
   std::size_t lost = 0;     ///< failed scans in a row since the last checked pose
   bool fixed_once = false;
   /// Dead reckoning: the last checked pose moved by every odometry step since, and the odometry
@@ -420,6 +423,9 @@ TrackResult Tracker::add(const Frame& frame) {
     const bool agrees = s.candidate && e.translation().norm() <= 2 * o.max_correction_m &&
                         std::abs(e.theta()) <= 2 * o.max_correction_rad;
     s.confirmations = agrees ? s.confirmations + 1 : 1;
+    const SE2 moved = agrees ? previous->inverse() * g.T_world_robot : SE2();
+    s.confirm_path_m = agrees ? s.confirm_path_m + moved.translation().norm() : 0.0;
+    s.confirm_turn_rad = agrees ? s.confirm_turn_rad + std::abs(moved.theta()) : 0.0;
     s.candidate = g.T_world_robot;
   } else {
     s.candidate.reset();
@@ -427,11 +433,17 @@ TrackResult Tracker::add(const Frame& frame) {
   }
   // Without odometry no dead reckoning vouches for an answer: like one that contradicts it, it needs
   // confirm_fixes_against_odometry answers (freiburg-079's half map without odometry: three wrong
-  // fixes in the half the map lacks, each found three times in a row, and 61 scans tracked from them).
+  // fixes in the half the map lacks, each found three times in a row, and 61 scans tracked from them),
+  // and they must come from views that differ (the robot moved max_correction_m or turned
+  // max_correction_rad over them): six scans of a room the map lacks, taken within 13 cm and 8
+  // degrees of one another, are one view, and their six agreeing answers put freiburg-079's robot
+  // 7.6 m and 89 degrees off, then 13 scans tracked from there.
   const bool expected = answered && odom_ok && s.withinDeadReckoning(g.T_world_robot);
   const bool sure = answered && (expected || !odom_ok) && g.score >= o.sure_fix_score;
   const std::size_t needed = expected ? o.confirm_fixes : std::max(o.confirm_fixes, o.confirm_fixes_against_odometry);
-  if (answered && (s.confirmations >= needed || sure)) {
+  const bool views_differ =
+      odom_ok || s.confirm_path_m >= o.max_correction_m || s.confirm_turn_rad >= o.max_correction_rad;
+  if (answered && ((s.confirmations >= needed && views_differ) || sure)) {
     r.status = TrackStatus::kGlobal;
     r.T_world_robot = g.T_world_robot;
     r.score = g.score;
