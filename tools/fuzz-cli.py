@@ -900,10 +900,8 @@ def damagedPng(rng, d):
         raw = bytearray(zlib.decompress(b''.join(c[1] for c in idat)))
         op = rng.choice(['filter', 'bytes', 'cut', 'more'])
         if op == 'filter':
-            width = struct.unpack_from('>I', chunks[0][1], 0)[0]
-            row = len(raw) // max(1, struct.unpack_from('>I', chunks[0][1], 4)[0])
-            raw[rng.randrange(0, len(raw), max(1, row))] = rng.choice([5, 6, 255])
-            del width
+            row = len(raw) // max(1, struct.unpack_from('>I', chunks[0][1], 4)[0])  # bytes per row
+            raw[rng.randrange(0, len(raw), max(1, row))] = rng.choice([5, 6, 255])  # a row's filter byte
         elif op == 'bytes':
             raw = bytearray(mutateBytes(rng, bytes(raw)))
         elif op == 'cut':

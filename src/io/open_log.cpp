@@ -8,10 +8,12 @@
 #include <fstream>
 #include <map>
 #include <numbers>
+#include <string_view>
 #include <vector>
 
 #include "lidar2d/core/error.hpp"
 #include "lidar2d/io/frame_source.hpp"
+#include "src/io/internal/decompress.hpp"
 #include "src/io/internal/readers.hpp"
 
 namespace lidar2d::io {
@@ -55,12 +57,14 @@ LogFormat detectFormat(const std::string& path) {
   const auto n = static_cast<std::size_t>(in.gcount());
   if (n == 0) throw badInput("file is empty", {path});
   const std::string h(head, n);
-  if (n >= 2 && static_cast<unsigned char>(head[0]) == 0x1f && static_cast<unsigned char>(head[1]) == 0x8b)
-    return LogFormat::kCarmen;  // gzip: only CARMEN text logs are read compressed
+  const char* magic = internal::compressionMagic({reinterpret_cast<const unsigned char*>(head), n});
+  const std::string_view compressed = magic ? magic : "";
+  if (compressed == "gzip") return LogFormat::kCarmen;  // only CARMEN text logs are read compressed
   if (h.rfind("#ROSBAG V", 0) == 0 || h.rfind("#ROSRECORD V", 0) == 0) return LogFormat::kRosbag1;  // 2.0 | 1.2
   if (h.rfind("SQLite format 3", 0) == 0) return LogFormat::kRosbag2;
   if (h.rfind("\x89MCAP", 0) == 0) return LogFormat::kRosbag2;  // rosbag2's MCAP storage
-  if (h.rfind("\x28\xb5\x2f\xfd", 0) == 0)                      // most likely one file of a zstd-compressed rosbag2 bag
+  // A zstd file is most likely one file of a zstd-compressed rosbag2 bag.
+  if (compressed == "zstd")
     throw badInput("zstd-compressed file: give the rosbag2 bag folder (its metadata.yaml says how it was compressed), "
                    "or decompress it first",
                    {path});

@@ -423,9 +423,13 @@ TrackResult Tracker::add(const Frame& frame) {
     const bool agrees = s.candidate && e.translation().norm() <= 2 * o.max_correction_m &&
                         std::abs(e.theta()) <= 2 * o.max_correction_rad;
     s.confirmations = agrees ? s.confirmations + 1 : 1;
-    const SE2 moved = agrees ? previous->inverse() * g.T_world_robot : SE2();
-    s.confirm_path_m = agrees ? s.confirm_path_m + moved.translation().norm() : 0.0;
-    s.confirm_turn_rad = agrees ? s.confirm_turn_rad + std::abs(moved.theta()) : 0.0;
+    if (agrees) {
+      const SE2 moved = previous->inverse() * g.T_world_robot;
+      s.confirm_path_m += moved.translation().norm();
+      s.confirm_turn_rad += std::abs(moved.theta());
+    } else {
+      s.confirm_path_m = s.confirm_turn_rad = 0.0;
+    }
     s.candidate = g.T_world_robot;
   } else {
     s.candidate.reset();
@@ -459,9 +463,8 @@ TrackResult Tracker::add(const Frame& frame) {
     // The constant-velocity prior of the next scan when there is no odometry (standing still would be
     // metres off on a log of keyframes): the step from the previous scan's checked pose (tracking
     // failed on this scan, but the one before was placed), else between the last two agreeing answers.
-    // Without it a fix at once (sure_fix_score) left no step, the next scan's prior stood still, its
-    // match failed, and it was fixed globally in turn: intel's keyframes, 0.7 m and 22 degrees apart,
-    // were tracked on 6% of the scans and fixed globally on 73%.
+    // A fix at once (sure_fix_score) has no agreeing answers before it, so the checked pose is what
+    // keeps the next scan from being fixed globally in turn.
     s.step = checked_before         ? std::optional<SE2>(checked_before->inverse() * g.T_world_robot)
              : s.confirmations >= 2 ? std::optional<SE2>(previous->inverse() * g.T_world_robot)
                                     : std::nullopt;

@@ -1,8 +1,8 @@
 #pragma once
 // Lines of a text file, plain or gzip-compressed (zlib's gzopen reads plain files transparently),
-// with one clear error for what is no such file: another compression than gzip, binary bytes, a line
-// longer than 64 MiB, corrupt or truncated gzip data (raised at the line where the good data ends). Shared by the text
-// readers (CARMEN logs, range tables).
+// with one clear error for what is no such file: another compression than gzip, binary bytes, a
+// line longer than 64 MiB, corrupt or truncated gzip data (raised at the line where the good data
+// ends). Shared by the text readers (CARMEN logs, range tables).
 
 #include <fmt/format.h>
 #include <zlib.h>
