@@ -159,8 +159,9 @@ TEST_P(RealLogTest, MatchesAwk) {
         EXPECT_DOUBLE_EQ(r[10], s.r10) << "scan " << n;
       }
       EXPECT_DOUBLE_EQ(r.back(), s.r_last) << "scan " << n;
+      // The file's first pose triple is the laser's: the truth is the robot's pose under it.
       const SE2 expected(s.x, s.y, s.theta);
-      const SE2 got = e.corrected ? *f->T_world_robot : *f->T_odom_robot;
+      const SE2 got = e.corrected ? *f->T_world_robot * f->T_robot_laser : *f->T_odom_robot;
       EXPECT_TRUE(IsNearPose(expected, got, 1e-9, 1e-7)) << "scan " << n;
     }
     if (next_odom < e.odom.size() && e.odom[next_odom].index == n) {
@@ -324,6 +325,39 @@ TEST_F(CarmenSynthetic, ParamsOverrideAnglesRangeAndMounting) {
   EXPECT_DOUBLE_EQ(rs.rangeMax(), 80.0);  // the front laser's max does not apply
   // Rear laser: mounted backwards at robot_rearlaser_offset.
   EXPECT_TRUE(IsNearPose(SE2(-0.3, 0, std::numbers::pi), r.frames[0].T_robot_laser, 1e-12, 1e-9));
+}
+
+TEST_F(CarmenSynthetic, TheLaserMessagesPoseIsTheLasersAndTheRobotIsUnderIt) {
+  // CARMEN's FLASER/RLASER: x y theta is the laser's pose, odom_* the robot's odometry. With the
+  // laser 0.25 m ahead and 0.1 m left, facing 90 degrees left, a laser at (2, 1) facing +y puts
+  // the robot at (1.75, 0.9) facing +x (read as the robot's pose, 0.27 m and 90 degrees off).
+  const std::string log =
+      "PARAM robot_frontlaser_offset 0.25\n"
+      "PARAM robot_frontlaser_side_offset 0.1\n"
+      "PARAM robot_frontlaser_angular_offset 1.5707963267948966\n"
+      "PARAM robot_rearlaser_offset -0.3\n" +
+      flaser(4, 1.0, 2.0, 1.0, std::numbers::pi / 2, 5.0, 6.0, 0.5) +
+      flaser(4, 1.0, 2.0, 1.0, -std::numbers::pi / 2, 5.0, 6.0, 0.5, "RLASER");
+  const std::string path = write(log);
+  ReaderOptions o;
+  o.carmen_poses = CarmenPoses::kTruth;
+  auto r = readWithNotes(path, o);
+  ASSERT_EQ(r.frames.size(), 1u);
+  ASSERT_TRUE(r.frames[0].T_world_robot);
+  EXPECT_TRUE(IsNearPose(SE2(1.75, 0.9, 0.0), *r.frames[0].T_world_robot, 1e-6, 1e-4));
+  EXPECT_TRUE(IsNearPose(SE2(2.0, 1.0, std::numbers::pi / 2), *r.frames[0].T_world_robot * r.frames[0].T_robot_laser,
+                         1e-6, 1e-4));
+  o.carmen_poses = CarmenPoses::kOdometry;
+  r = readWithNotes(path, o);
+  ASSERT_EQ(r.frames.size(), 1u);
+  EXPECT_TRUE(IsNearPose(SE2(5.0, 6.0, 0.5), *r.frames[0].T_odom_robot, 1e-6, 1e-4));  // the robot's, as it is
+  // The rear laser, mounted backwards 0.3 m behind: a laser at (2, 1) facing -y puts the robot at
+  // (2, 1.3) facing +y.
+  o.carmen_poses = CarmenPoses::kTruth;
+  o.carmen_laser = "RLASER";
+  r = readWithNotes(path, o);
+  ASSERT_EQ(r.frames.size(), 1u);
+  EXPECT_TRUE(IsNearPose(SE2(2.0, 1.3, std::numbers::pi / 2), *r.frames[0].T_world_robot, 1e-6, 1e-4));
 }
 
 TEST_F(CarmenSynthetic, RangeMaxMarksNoReturn) {

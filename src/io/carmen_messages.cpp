@@ -28,6 +28,10 @@
 //   robot_frontlaser_angular_offset); RLASER at the rear equivalents, turned by pi (mounted
 //   backwards). ROBOTLASER: T_robot_laser = robot_pose^-1 * laser_pose. RAWLASER1 uses the front
 //   mounting, RAWLASER2 the rear one, RAWLASER3/4 identity.
+// - FLASER/RLASER's x y theta is the laser's pose, odom_x odom_y odom_theta the robot's odometry
+//   (writelog.c writes laser_pose, then robot_pose); the robot's pose is x y theta * T_robot_laser^-1.
+//   Radish's corrected logs write one corrected pose, the laser's, into both triples
+//   (docs/file-formats.md, CARMEN poses).
 
 #include "src/io/internal/carmen_messages.hpp"
 
@@ -193,7 +197,7 @@ LaserMsg parseOldLaser(const LineParser& p, const LaserType& type, const Params&
   LaserScanFields fields;
   p.ranges(2, n, fields.ranges);
   LaserMsg m;
-  m.pose = p.pose(2 + n, "x", "y", "theta");
+  const SE2 laser_pose = p.pose(2 + n, "x", "y", "theta");
   m.odom = p.pose(5 + n, "odom_x", "odom_y", "odom_theta");
   m.time = p.finite(8 + n, "ipc_timestamp");
   // Beam angles: see the file comment.
@@ -216,6 +220,9 @@ LaserMsg parseOldLaser(const LineParser& p, const LaserType& type, const Params&
   m.scan = p.makeScan(std::move(fields));
   m.T_robot_laser = SE2(params.offset_x[side], params.offset_y[side],
                         params.offset_theta[side] + (side == 1 ? std::numbers::pi : 0.0));
+  // The first pose triple is the laser's (CARMEN's robot module adds the mounting to the robot's
+  // pose); the robot's pose is that less the mounting, as ROBOTLASER states it outright.
+  m.pose = laser_pose * m.T_robot_laser.inverse();
   return m;
 }
 

@@ -30,8 +30,9 @@ const char* toString(LogFormat f);
 enum class CarmenPoses {
   /// TRUEPOS lines give truth when present. Otherwise, when the log also has ODOM lines whose motion
   /// disagrees with the laser messages' poses (logs corrected by a SLAM system, as in Radish), the
-  /// laser poses are taken as truth and odometry is interpolated from the ODOM lines; else the laser
-  /// messages' odometry triple is odometry and there is no truth.
+  /// robot's poses under those laser poses are taken as truth and odometry is interpolated from the
+  /// ODOM lines; else the laser messages' odometry triple is odometry and there is no truth.
+  /// FLASER/RLASER's first triple is the laser's pose: the robot's is that less the mounting.
   kAuto,
   kTruth,     ///< the laser messages' robot pose is ground truth; odometry from ODOM lines if any
   kOdometry,  ///< the laser messages' odometry triple is odometry; no truth unless TRUEPOS lines
