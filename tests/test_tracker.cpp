@@ -368,6 +368,49 @@ TEST(Tracker, AnAnswerAwayFromDeadReckoningNeedsMoreConfirmations) {
   EXPECT_LT(fix, to + opt.confirm_fixes) << (fix < blind_res.size() ? blind_res[fix].reason : "never");
 }
 
+// Without odometry the prior carried since the last checked pose is the only dead reckoning: a sure
+// answer farther from it than the robot can have driven since (max_speed_m_per_s) waits (for
+// agreeing answers from views that differ, or for the prior to be dropped after max_lost_scans)
+// instead of being a fix at once. freiburg-079's half map without odometry: 0.6 s after the last
+// tracked scan, an answer scoring 0.95 put the robot 23 m and 176 degrees off, and 47 scans were
+// tracked from it. A carried robot (here 0.2 s between scans) is still found within ten scans of
+// each cut; one allowed to drive 100 m/s is fixed at once.
+TEST(Tracker, WithoutOdometryASureAnswerAwayFromTheLastPoseWaits) {
+  const Office& o = office();
+  std::vector<std::size_t> cuts;
+  std::vector<Frame> frames = reassembled(o, true, cuts);
+  for (Frame& f : frames) f.T_odom_robot.reset();
+  const TrackerOptions opt = fastOptions();
+  Tracker tracker(o.map, std::nullopt, opt);
+  const auto res = trackAll(tracker, frames);
+  std::size_t far_cuts = 0;
+  for (const std::size_t c : cuts) {
+    std::size_t k = c;
+    while (k < res.size() && res[k].status == TrackStatus::kLost) ++k;
+    ASSERT_LT(k, res.size());
+    EXPECT_EQ(res[k].status, TrackStatus::kGlobal) << "cut at " << c << ", scan " << k;
+    EXPECT_LT(k, c + 10) << "cut at " << c;
+    EXPECT_FALSE(wrong(*frames[k].T_world_robot, res[k].T_world_robot));
+    // Carried farther than 5 m/s over 0.2 s and twice max_correction_m, with a margin for the prior's
+    // own step: not a fix at once.
+    const double carried = (frames[c].T_world_robot->translation() - frames[c - 1].T_world_robot->translation()).norm();
+    if (carried < 3.0) continue;
+    ++far_cuts;
+    EXPECT_GE(k, c + 2) << "cut at " << c << ": fixed at once";
+    EXPECT_NE(res[c].reason.find("away from the last pose"), std::string::npos) << res[c].reason;
+  }
+  EXPECT_GE(far_cuts, 1u);
+  TrackerOptions fast = opt;
+  fast.max_speed_m_per_s = 100.0;
+  Tracker fast_tracker(o.map, std::nullopt, fast);
+  const auto fast_res = trackAll(fast_tracker, frames);
+  for (const std::size_t c : cuts) {
+    std::size_t k = c;
+    while (k < fast_res.size() && fast_res[k].status == TrackStatus::kLost) ++k;
+    EXPECT_LT(k, c + 2) << "cut at " << c;
+  }
+}
+
 // Lifelong use: one tracker, never reset, fed the same run three times in a row (at each wrap the
 // robot is carried from the route's end to its start). Every pass is placed as well as the first:
 // the tracker carries nothing from one pass into the next but its pose.
@@ -555,6 +598,10 @@ TEST(Tracker, BadOptionsAndAnotherMapsDatabaseAreRefused) {
   bad.max_beyond_map_m = 0.0;
   EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
                                 {"max_beyond_map_m"}));
+  bad = fastOptions();
+  bad.max_speed_m_per_s = 0.0;
+  EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,
+                                {"max_speed_m_per_s"}));
   bad = fastOptions();
   bad.slide_score_margin = -0.1;
   EXPECT_TRUE(test::throwsError([&] { Tracker t(o.map, std::nullopt, bad); }, ErrorKind::kInvalidArgument,

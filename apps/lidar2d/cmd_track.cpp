@@ -281,6 +281,11 @@ void addTrackCommand(CLI::App& app) {
   sub->add_option("--max-lost", a->options.max_lost_scans,
                   "failed scans in a row after which the prior is dropped (global localization only)")
       ->capture_default_str();
+  sub->add_option("--max-speed", a->options.max_speed_m_per_s,
+                  "without odometry, the fastest the robot may have driven since its last placed scan: a global "
+                  "answer farther than that from the prior waits for agreeing answers even when its score is sure "
+                  "[m/s]")
+      ->capture_default_str();
   sub->add_option("--recent-scans", a->options.recent_scans,
                   "with odometry, where the map explains too little of a scan, it is matched against this many "
                   "last placed scans too and tracked when both together explain it (0: off)")

@@ -160,7 +160,8 @@ void bindLocalization(py::module_& m) {
                        double min_global_score, std::size_t confirm_fixes, double sure_fix_score,
                        std::size_t max_lost_scans, std::size_t confirm_fixes_against_odometry,
                        double correction_score_slope, double slide_score_margin, double prior_score_margin,
-                       std::size_t recent_scans, double max_beyond_map_m, double max_degenerate_path_m) {
+                       std::size_t recent_scans, double max_beyond_map_m, double max_degenerate_path_m,
+                       double max_speed_m_per_s) {
              localization::TrackerOptions o;
              o.min_track_score = min_track_score;
              o.min_global_score = min_global_score;
@@ -174,6 +175,7 @@ void bindLocalization(py::module_& m) {
              o.recent_scans = recent_scans;
              o.max_beyond_map_m = max_beyond_map_m;
              o.max_degenerate_path_m = max_degenerate_path_m;
+             o.max_speed_m_per_s = max_speed_m_per_s;
              o.validate();  // before the database is taken over, so a bad option leaves it usable
              std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
@@ -189,9 +191,10 @@ void bindLocalization(py::module_& m) {
            py::arg("prior_score_margin") = defaults.prior_score_margin, py::arg("recent_scans") = defaults.recent_scans,
            py::arg("max_beyond_map_m") = defaults.max_beyond_map_m,
            py::arg("max_degenerate_path_m") = defaults.max_degenerate_path_m,
+           py::arg("max_speed_m_per_s") = defaults.max_speed_m_per_s,
            "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md;\n"
            "recent_scans: --recent-scans, max_beyond_map_m: --max-beyond-map,\n"
-           "max_degenerate_path_m: --max-degenerate-path);\n"
+           "max_degenerate_path_m: --max-degenerate-path, max_speed_m_per_s: --max-speed);\n"
            "bad options or a database of another map raise lidar2d.Error.")
       .def(
           "add",

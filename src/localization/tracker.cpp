@@ -46,6 +46,8 @@ void TrackerOptions::validate() const {
     throw badOption("dead_reckoning_drift_rad_per_m", dead_reckoning_drift_rad_per_m);
   if (!(sure_fix_score >= 0) || std::isnan(sure_fix_score)) throw badOption("sure_fix_score", sure_fix_score);
   if (max_lost_scans < 1) throw badOption("max_lost_scans", static_cast<double>(max_lost_scans));
+  if (!(max_speed_m_per_s > 0) || !std::isfinite(max_speed_m_per_s))
+    throw badOption("max_speed_m_per_s", max_speed_m_per_s);
   if (!(max_beyond_map_m > 0) || !std::isfinite(max_beyond_map_m))
     throw badOption("max_beyond_map_m", max_beyond_map_m);
   if (!(max_degenerate_path_m >= 0) || std::isnan(max_degenerate_path_m))
@@ -106,6 +108,7 @@ struct Tracker::State {
   /// and turns): what their views differ by [m, rad].
   double confirm_path_m = 0.0, confirm_turn_rad = 0.0;
   std::size_t lost = 0;     ///< failed scans in a row since the last checked pose
+  double placed_time = std::numeric_limits<double>::quiet_NaN();  ///< the last checked pose's scan time
   bool fixed_once = false;
   /// Dead reckoning: the last checked pose moved by every odometry step since, and the odometry
   /// path since [m]; none before the first fix or after a scan without odometry.
@@ -402,6 +405,7 @@ TrackResult Tracker::add(const Frame& frame) {
       }
       s.remember(sub, m.T_target_source);
       s.placed(m.T_target_source);
+      s.placed_time = frame.time;
       s.noteStill(still, m.T_target_source);
       r.status = TrackStatus::kTracking;
       r.T_world_robot = m.T_target_source;
@@ -443,7 +447,16 @@ TrackResult Tracker::add(const Frame& frame) {
   // degrees of one another, are one view, and their six agreeing answers put freiburg-079's robot
   // 7.6 m and 89 degrees off, then 13 scans tracked from there.
   const bool expected = answered && odom_ok && s.withinDeadReckoning(g.T_world_robot);
-  const bool sure = answered && (expected || !odom_ok) && g.score >= o.sure_fix_score;
+  // Without odometry the prior carried since the last checked pose is the only dead reckoning: an
+  // answer farther from it than the robot can have driven since (max_speed_m_per_s) is not sure on
+  // its score alone until the prior is dropped (max_lost_scans). freiburg-079's half map: 0.6 s
+  // after the last tracked scan, an answer scoring 0.95 put the robot 23 m and 176 degrees off, and
+  // 47 scans were tracked from it. Where the times do not increase nothing bounds the motion.
+  const double since_s = frame.time - s.placed_time;
+  const bool near_prior = !prior || !(since_s > 0) ||
+                          (g.T_world_robot.translation() - prior->translation()).norm() <=
+                              o.max_speed_m_per_s * since_s + 2.0 * o.max_correction_m;
+  const bool sure = answered && (expected || (!odom_ok && near_prior)) && g.score >= o.sure_fix_score;
   const std::size_t needed = expected ? o.confirm_fixes : std::max(o.confirm_fixes, o.confirm_fixes_against_odometry);
   const bool views_differ =
       odom_ok || s.confirm_path_m >= o.max_correction_m || s.confirm_turn_rad >= o.max_correction_rad;
@@ -459,6 +472,7 @@ TrackResult Tracker::add(const Frame& frame) {
     s.forgetRecent();
     s.remember(subsample(points, o.max_points), g.T_world_robot);
     s.placed(g.T_world_robot);
+    s.placed_time = frame.time;
     s.noteStill(still, g.T_world_robot);
     // The constant-velocity prior of the next scan when there is no odometry (standing still would be
     // metres off on a log of keyframes): the step from the previous scan's checked pose (tracking
@@ -473,9 +487,10 @@ TrackResult Tracker::add(const Frame& frame) {
     s.confirmations = 0;
     return r;
   }
-  const std::string why = answered     ? (expected  ? "unconfirmed"
-                                          : odom_ok ? "unconfirmed, away from dead reckoning"
-                                                    : "unconfirmed, no odometry")
+  const std::string why = answered     ? (expected     ? "unconfirmed"
+                                          : odom_ok    ? "unconfirmed, away from dead reckoning"
+                                          : near_prior ? "unconfirmed, no odometry"
+                                                       : "unconfirmed, no odometry, away from the last pose")
                           : g.declined ? g.reason
                                        : "low score";
   return fail(prior ? r.reason + ", global " + why : (s.fixed_once ? "global " : "no fix yet, global ") + why);

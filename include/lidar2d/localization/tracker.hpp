@@ -107,6 +107,12 @@ struct TrackerOptions {
   double max_correction_rad = 15.0 * std::numbers::pi / 180.0;  ///< the same for the heading [rad], > 0
   /// Failed scans in a row after which the prior is dropped and only global localization runs, >= 1
   std::size_t max_lost_scans = 5;
+  /// Without odometry, the fastest the robot may have moved since its last checked pose: a global
+  /// answer farther from the prior carried since than this speed over the time since (plus twice
+  /// max_correction_m) is not a fix on its score alone (sure_fix_score) until the prior is dropped;
+  /// it needs confirm_fixes_against_odometry agreeing answers. Unused where the scans' times do not
+  /// increase. [m/s], > 0 (the same bound as slam's max_speed_m_per_s)
+  double max_speed_m_per_s = 5.0;
   /// With odometry, a scan whose map match fails (the map explains too little of it: a room the map
   /// lacks, the map's edge, a turn in place facing unmapped ground) is matched against the last this
   /// many placed scans (ICP from the prior), and tracked when the map and those scans together
