@@ -7,8 +7,8 @@ For every scan of LOG (which needs truth poses), the share of its returns under 
 0.6, 0.7), the share of scans at or above it. `lidar2d track` needs a map match scoring at least
 0.5 (`min_track_score`: this share minus the beams through walls), so the share of scans at 0.5 is
 an upper bound on what a map alone can track, whatever the tracker: the rest see mostly ground the
-map lacks (a map from half a log). The truth pose is taken as the laser's (the corrected logs mount
-their lasers at the robot's origin).
+map lacks (a map from half a log). The returns are placed from the laser's pose (the truth pose and
+the log's laser mounting).
 """
 import argparse
 import sys
@@ -37,7 +37,7 @@ def explained_shares(image: lidar2d.MapImage, log: str, max_range: float = 30.0,
     for frame in lidar2d.read_log(log):
         if frame.truth is None:
             raise ValueError(f"{log}: scan {frame.index} has no truth pose")
-        t = frame.truth
+        t = frame.truth * frame.laser_pose
         ok = np.isfinite(frame.ranges) & (frame.ranges > 0) & (frame.ranges < max_range)
         r, a = frame.ranges[ok], frame.angles[ok]
         if r.size == 0:
