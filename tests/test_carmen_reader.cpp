@@ -180,7 +180,8 @@ TEST_P(RealLogTest, MatchesAwk) {
   EXPECT_EQ(notes.scan_source, "FLASER");
   if (e.corrected) {
     // Auto decision: FLASER poses disagree with the ODOM lines (corrected by SLAM) -> truth.
-    EXPECT_EQ(notes.truth_source.rfind("FLASER pose (corrected log", 0), 0u) << notes.truth_source;
+    EXPECT_EQ(notes.truth_source.rfind("FLASER pose less the laser mounting (corrected log", 0), 0u)
+        << notes.truth_source;
     EXPECT_EQ(notes.odom_source, "ODOM lines (interpolated)");
   } else {
     EXPECT_EQ(notes.odom_source, "FLASER odometry fields (no ODOM lines)");

@@ -187,7 +187,7 @@ Decision decide(const std::string& path, const ReaderOptions& options) {
   auto truthMode = [&](const std::string& why) {
     if (has_pose) {
       d.truth = TruthFrom::kLaserPose;
-      d.truth_source = (robot ? name + " robot pose" : name + " pose") + why;
+      d.truth_source = (robot ? name + " robot pose" : name + " pose less the laser mounting") + why;
     } else if (truepos) {
       d.truth = TruthFrom::kTruepos;
       d.truth_source = "TRUEPOS";
