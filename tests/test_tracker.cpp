@@ -411,6 +411,34 @@ TEST(Tracker, WithoutOdometryASureAnswerAwayFromTheLastPoseWaits) {
   }
 }
 
+// Without odometry the prior carried over failed scans is the last velocity extrapolated: the first
+// match from it is tracked only once global localization (which ignores the prior) agrees, so that
+// scan runs a global query; with odometry dead reckoning carries the prior and none runs.
+TEST(Tracker, WithoutOdometryTheFirstMatchAfterLostScansIsConfirmedGlobally) {
+  const Office& o = office();
+  std::vector<Frame> frames(o.frames.begin(), o.frames.begin() + 60);
+  const std::size_t from = 40, to = 43;  // three scans without a return
+  for (std::size_t k = from; k < to; ++k) {
+    LaserScanFields blank = frames[k].scan.fields();
+    for (double& r : blank.ranges) r = std::numeric_limits<double>::quiet_NaN();
+    frames[k].scan = LaserScan::create(blank);
+  }
+  Tracker with_odometry(o.map, std::nullopt, fastOptions());
+  const auto odo = trackAll(with_odometry, frames);
+  ASSERT_EQ(odo[to - 1].status, TrackStatus::kLost);
+  ASSERT_EQ(odo[to].status, TrackStatus::kTracking) << odo[to].reason;
+  EXPECT_EQ(odo[to].global_ms, 0.0);
+  for (Frame& f : frames) f.T_odom_robot.reset();
+  Tracker without(o.map, std::nullopt, fastOptions());
+  const auto res = trackAll(without, frames);
+  ASSERT_EQ(res[to - 1].status, TrackStatus::kLost);
+  ASSERT_EQ(res[to - 4].status, TrackStatus::kTracking) << res[to - 4].reason;
+  EXPECT_EQ(res[to - 4].global_ms, 0.0);  // tracked after a tracked scan: no query
+  EXPECT_EQ(res[to].status, TrackStatus::kTracking) << res[to].reason;
+  EXPECT_GT(res[to].global_ms, 0.0);
+  EXPECT_TRUE(near(*frames[to].T_world_robot, res[to].T_world_robot, 0.1, 2.0));
+}
+
 // Lifelong use: one tracker, never reset, fed the same run three times in a row (at each wrap the
 // robot is carried from the route's end to its start). Every pass is placed as well as the first:
 // the tracker carries nothing from one pass into the next but its pose.
