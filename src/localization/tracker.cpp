@@ -155,9 +155,10 @@ struct Tracker::State {
     unpinned_path_m = 0.0;
   }
 
-  /// A checked pose: the new pose and the new start of dead reckoning.
-  void placed(const SE2& T) {
+  /// A checked pose at scan time `time`: the new pose and the new start of dead reckoning.
+  void placed(const SE2& T, double time) {
     pose = T;
+    placed_time = time;
     dead_reckoned = T;
     dead_reckoned_path_m = 0.0;
   }
@@ -176,6 +177,13 @@ struct Tracker::State {
     const SE2 moved = still_from->inverse() * T;
     if (moved.translation().norm() > o.max_correction_m || std::abs(moved.theta()) > o.max_correction_rad)
       odometry_frozen = true;
+  }
+  /// Whether global localization, which ignores the prior, places the scan where a match put it at
+  /// `T` (within twice the hit distance and a third of max_correction_rad).
+  bool confirms(const LocalizationResult& g, const SE2& T) const {
+    const SE2 e = g.T_world_robot.inverse() * T;
+    return !g.declined && e.translation().norm() <= 2.0 * loc->options().hit_distance_m &&
+           std::abs(e.theta()) <= o.max_correction_rad / 3.0;
   }
   /// Whether `T` is where dead reckoning allows (true when there is none).
   bool withinDeadReckoning(const SE2& T) const {
@@ -380,9 +388,7 @@ TrackResult Tracker::add(const Frame& frame) {
       const auto tg = Clock::now();
       cached = s.loc->localize(points, sensor);
       r.global_ms = msSince(tg);
-      const SE2 e = cached->T_world_robot.inverse() * m.T_target_source;
-      if (cached->declined || e.translation().norm() > 2.0 * s.loc->options().hit_distance_m ||
-          std::abs(e.theta()) > o.max_correction_rad / 3.0)
+      if (!s.confirms(*cached, m.T_target_source))
         why = "after lost scans, global localization does not confirm the match";
     }
     if (why.empty()) {
@@ -398,10 +404,7 @@ TrackResult Tracker::add(const Frame& frame) {
         const auto tg = Clock::now();
         const LocalizationResult g = s.loc->localize(points, sensor);
         r.global_ms = msSince(tg);
-        const SE2 e = g.T_world_robot.inverse() * m.T_target_source;
-        if (!g.declined && e.translation().norm() <= 2.0 * s.loc->options().hit_distance_m &&
-            std::abs(e.theta()) <= o.max_correction_rad / 3.0)
-          s.unpinned_path_m = 0.0;
+        if (s.confirms(g, m.T_target_source)) s.unpinned_path_m = 0.0;
       }
       if (along_prior || s.unpinned_path_m > o.max_degenerate_path_m)
         s.unpinned_path_m += step.translation().norm();
@@ -419,8 +422,7 @@ TrackResult Tracker::add(const Frame& frame) {
         return r;
       }
       s.remember(sub, m.T_target_source);
-      s.placed(m.T_target_source);
-      s.placed_time = frame.time;
+      s.placed(m.T_target_source, frame.time);
       s.noteStill(still, m.T_target_source);
       r.status = TrackStatus::kTracking;
       r.T_world_robot = m.T_target_source;
@@ -486,8 +488,7 @@ TrackResult Tracker::add(const Frame& frame) {
     // The recent scans were placed before tracking failed, perhaps elsewhere (a kidnapping).
     s.forgetRecent();
     s.remember(subsample(points, o.max_points), g.T_world_robot);
-    s.placed(g.T_world_robot);
-    s.placed_time = frame.time;
+    s.placed(g.T_world_robot, frame.time);
     s.noteStill(still, g.T_world_robot);
     // The constant-velocity prior of the next scan when there is no odometry (standing still would be
     // metres off on a log of keyframes): the step from the previous scan's checked pose (tracking

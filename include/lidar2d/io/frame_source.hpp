@@ -122,8 +122,8 @@ inline bool laserMountOffsetOk(double x, double y) {
 struct SourceNotes {
   std::string scan_source;   ///< e.g. "FLASER" or "/scan"
   std::string odom_source;   ///< e.g. "ODOM lines (interpolated)", "/odom", or empty if none
-  std::string
-      truth_source;  ///< e.g. "FLASER pose less the laser mounting (corrected log)", "TRUEPOS", or empty if none
+  /// e.g. "FLASER pose less the laser mounting (corrected log)", "TRUEPOS", or empty if none
+  std::string truth_source;
   std::string container;     ///< how the log is stored when there is a choice, e.g. "mcap storage, 2 files"
   /// e.g. "timestamps repeat (12 times)"; openLog adds readings beyond the range max that are not
   /// the no-return code (1% of the beams or more) and timestamps that repeat or go backwards
