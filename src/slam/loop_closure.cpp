@@ -319,6 +319,30 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   const double sigmas = ties_untied && s_.untiedHasOdometryLink() ? carriedSigmas(c) : 0.0;
   if (sigmas > opt.prior_gate_sigmas) {
     const double in_free = inFreeSpaceWhereEstimated(c.to, *s_.untied_since);
+    // In a corridor of look-alike doors the relocalization may be the look-alike, a few sigmas
+    // beyond the odometry's gate, while the right place lies within it: where a match within the
+    // gate explains the scan as well, the scans cannot tell the two apart and the odometry stands.
+    const double near_explained = in_free < kCarriedInFree ? 0.0 : explainedNearEstimate(c.to, *s_.untied_since);
+    if (near_explained >= c.explained - kCarriedExplainsMore) {
+      ++s_.stats.loop_rejected;
+      c.accepted = false;
+      c.reason = fmt::format(
+          "contradicts the odometry across the lost track, and a match within its gate explains {:.0f}% of the scan "
+          "against this one's {:.0f}%: no evidence the robot was carried",
+          100.0 * near_explained, 100.0 * c.explained);
+      if (carry_refused_for != s_.untied_since) {  // one event per fragment
+        carry_refused_for = s_.untied_since;
+        s_.back_end_events.push_back(
+            {s_.node_frame_index[c.to], s_.nodes[c.to].time,
+             fmt::format("a closure would tie the fragment from node {} to submap {} {:.1f} sigmas from the odometry "
+                         "across the lost track, but a match within the odometry's gate explains {:.0f}% of the scan "
+                         "against its {:.0f}%: no evidence the robot was carried, the odometry is kept",
+                         *s_.untied_since, s_.nodes[c.from].submap, sigmas, 100.0 * near_explained,
+                         100.0 * c.explained)});
+      }
+      s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
+      return;
+    }
     if (in_free < kCarriedInFree) {
       ++s_.stats.loop_rejected;
       c.accepted = false;
@@ -558,6 +582,31 @@ double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) 
     }
   }
   return static_cast<double>(std::count(in_free.begin(), in_free.end(), 1)) / static_cast<double>(pts.size());
+}
+
+double LoopClosure::explainedNearEstimate(std::size_t n, std::size_t first) {
+  const SlamState::RestartOdometry& ro = *s_.restart_odometry;
+  const Constraint& odo = s_.constraints[ro.constraint];
+  const MotionPrediction p =
+      odometryPrediction(opt, odo.T_from_to, s_.nodes[ro.node].time - s_.nodes[ro.node - 1].time);
+  registration::CorrelativeOptions gate = loop_search;
+  gate.linear_window_m = std::min(opt.prior_gate_sigmas * p.sigma_m, opt.loop_max_linear_window_m);
+  gate.angular_window_rad =
+      std::max(loop_search.angular_window_rad, std::min(opt.prior_gate_sigmas * p.sigma_rad, std::numbers::pi));
+  const double radius_m = std::max(opt.loop_search_radius_m, gate.linear_window_m);
+  const Eigen::Vector2d at = s_.nodes[n].T_world_robot.translation();
+  double best = 0.0;
+  std::optional<Points2> sparse;
+  for (std::size_t k = 0; k < s_.submaps.size(); ++k) {
+    const Submap& sm = s_.submaps[k];
+    if (!sm.finished || sm.nodes.back() >= first) continue;
+    double d = std::numeric_limits<double>::infinity();
+    for (const std::size_t m : sm.nodes) d = std::min(d, (s_.nodes[m].T_world_robot.translation() - at).norm());
+    if (d > radius_m) continue;
+    Constraint c;
+    if (search(n, k, gate, sparse, c) && c.accepted) best = std::max(best, c.explained);
+  }
+  return best;
 }
 
 void LoopClosure::dropCarriedOdometry(double sigmas) {

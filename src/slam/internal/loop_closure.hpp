@@ -90,6 +90,9 @@ class LoopClosure {
   // lies in the map's free space at the estimate's pose (about twice what noise and a slightly
   // misplaced pose put there).
   static constexpr double kCarriedInFree = 0.1;
+  // acceptLoop: ... and only where no match within the odometry's gate explains the scan nearly as
+  // well (within this share of its points).
+  static constexpr double kCarriedExplainsMore = 0.05;
   // contradictsLatestClosure: what a closure may differ from the latest one's prediction and from
   // the estimate over no path at all. Two closures' errors and the estimate's (pending corrections
   // not yet optimized in) stay well within it; a look-alike room or corridor stretch, the wrong
@@ -129,6 +132,11 @@ class LoopClosure {
   /// between consecutive nodes counting the front end's path between them and each closure none:
   /// the path over which the estimate of one relative to the other drifted.
   double untiedPathM(std::size_t a, std::size_t b) const;
+  /// The share of node n's scan (of the untied fragment, with its odometry link) that the best match
+  /// within the odometry's gate around its estimate explains (searched in every finished submap before
+  /// node `first` near it, refined, and passing refine's tests; prior_gate_sigmas of the odometry
+  /// step's sigmas across the lost track); 0 when none does.
+  double explainedNearEstimate(std::size_t n, std::size_t first);
   /// The share of node n's scan that lies, with the node where the estimate puts it, in the free
   /// space of a finished submap before node `first` (cells seen free within the inlier distance).
   double inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) const;
