@@ -10,6 +10,7 @@
 #include <limits>
 #include <numbers>
 #include <queue>
+#include <string>
 #include <utility>
 
 #include "lidar2d/mapping/export.hpp"
@@ -318,46 +319,32 @@ void LoopClosure::acceptLoop(Constraint c, Submap& sm) {
   const bool ties_untied = s_.untied_since && c.from < *s_.untied_since && c.to >= *s_.untied_since;
   const double sigmas = ties_untied && s_.untiedHasOdometryLink() ? carriedSigmas(c) : 0.0;
   if (sigmas > opt.prior_gate_sigmas) {
+    std::optional<std::string> no_evidence;  // why the scans do not show the robot carried
     const double in_free = inFreeSpaceWhereEstimated(c.to, *s_.untied_since);
-    // In a corridor of look-alike doors the relocalization may be the look-alike, a few sigmas
-    // beyond the odometry's gate, while the right place lies within it: where a match within the
-    // gate explains the scan as well, the scans cannot tell the two apart and the odometry stands.
-    const double near_explained = in_free < kCarriedInFree ? 0.0 : explainedNearEstimate(c.to, *s_.untied_since);
-    if (near_explained >= c.explained - kCarriedExplainsMore) {
-      ++s_.stats.loop_rejected;
-      c.accepted = false;
-      c.reason = fmt::format(
-          "contradicts the odometry across the lost track, and a match within its gate explains {:.0f}% of the scan "
-          "against this one's {:.0f}%: no evidence the robot was carried",
-          100.0 * near_explained, 100.0 * c.explained);
-      if (carry_refused_for != s_.untied_since) {  // one event per fragment
-        carry_refused_for = s_.untied_since;
-        s_.back_end_events.push_back(
-            {s_.node_frame_index[c.to], s_.nodes[c.to].time,
-             fmt::format("a closure would tie the fragment from node {} to submap {} {:.1f} sigmas from the odometry "
-                         "across the lost track, but a match within the odometry's gate explains {:.0f}% of the scan "
-                         "against its {:.0f}%: no evidence the robot was carried, the odometry is kept",
-                         *s_.untied_since, s_.nodes[c.from].submap, sigmas, 100.0 * near_explained,
-                         100.0 * c.explained)});
-      }
-      s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
-      return;
-    }
     if (in_free < kCarriedInFree) {
+      no_evidence = fmt::format("where the odometry puts the scan only {:.0f}% of it lies in the map's free space",
+                                100.0 * in_free);
+    } else {
+      // In a corridor of look-alike doors the relocalization may be the look-alike, a few sigmas
+      // beyond the odometry's gate, while the right place lies within it: where a match within the
+      // gate explains the scan as well, the scans cannot tell the two apart and the odometry stands.
+      const double near_explained = explainedNearEstimate(c.to, *s_.untied_since);
+      if (near_explained >= c.explained - kCarriedExplainsMore)
+        no_evidence = fmt::format("a match within the odometry's gate explains {:.0f}% of the scan against its {:.0f}%",
+                                  100.0 * near_explained, 100.0 * c.explained);
+    }
+    if (no_evidence) {
       ++s_.stats.loop_rejected;
       c.accepted = false;
       c.reason = fmt::format(
-          "contradicts the odometry across the lost track, and where the odometry puts the scan only {:.0f}% of "
-          "it lies in the map's free space: no evidence the robot was carried",
-          100.0 * in_free);
+          "contradicts the odometry across the lost track, but {}: no evidence the robot was carried", *no_evidence);
       if (carry_refused_for != s_.untied_since) {  // one event per fragment
         carry_refused_for = s_.untied_since;
         s_.back_end_events.push_back(
             {s_.node_frame_index[c.to], s_.nodes[c.to].time,
              fmt::format("a closure would tie the fragment from node {} to submap {} {:.1f} sigmas from the odometry "
-                         "across the lost track, but where the odometry puts the scan only {:.0f}% of it lies in "
-                         "the map's free space: no evidence the robot was carried, the odometry is kept",
-                         *s_.untied_since, s_.nodes[c.from].submap, sigmas, 100.0 * in_free)});
+                         "across the lost track, but {}: no evidence the robot was carried, the odometry is kept",
+                         *s_.untied_since, s_.nodes[c.from].submap, sigmas, *no_evidence)});
       }
       s_.addEdge(std::move(c), Eigen::Matrix3d::Zero(), 0.0);
       return;
