@@ -7,8 +7,10 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <random>
 
 #include "lidar2d/core/error.hpp"
@@ -326,6 +328,35 @@ TEST(DegeneracyRemap, ProjectorFromAMatchersInformationInACorridor) {
   const SE2 remapped = remapPose(SE2(0.1, 0.05, 0.02), SE2(0.6, 0.06, 0.021), P);
   EXPECT_NEAR(remapped.x(), 0.1, 0.03);
   EXPECT_NEAR(remapped.y(), 0.06, 0.01);
+}
+
+// The same corridor's match, its translational information per inlier: weak along the corridor's
+// axis (x) below the threshold, nothing weak in a room's match, and always the least constrained
+// direction with an infinite threshold.
+TEST(DegeneracyRemap, TheWeakestDirectionOfAMatchIsTheCorridorsAxis) {
+  const auto corridor = walls({{V(-100, -1), V(100, -1)}, {V(-100, 1), V(100, 1)}});
+  const auto room = walls({{V(-3, -2), V(3, -2)}, {V(3, -2), V(3, 2)}, {V(3, 2), V(-3, 2)}, {V(-3, 2), V(-3, -2)}});
+  registration::MatcherOptions mo;
+  mo.method = registration::Method::kP2L;
+  auto perInlier = [&](const auto& w) {
+    const Points2 target = scan(w, SE2(), {}, 1), source = scan(w, SE2(0.1, 0.05, 0.02), {}, 2);
+    const registration::Result r = registration::matchScans(target, source, SE2(0.1, 0.05, 0.02), mo);
+    EXPECT_GT(r.num_inliers, 100u);
+    return Eigen::Matrix2d(r.information.topLeftCorner<2, 2>() / static_cast<double>(r.num_inliers));
+  };
+  const Eigen::Matrix2d H_corridor = perInlier(corridor), H_room = perInlier(room);
+  const std::optional<Eigen::Vector2d> axis = weakestDirection(H_corridor, 0.05);
+  ASSERT_TRUE(axis.has_value()) << H_corridor;
+  EXPECT_NEAR(axis->norm(), 1.0, 1e-12);
+  EXPECT_GT(std::abs(axis->x()), 0.99) << axis->transpose();
+  EXPECT_FALSE(weakestDirection(H_room, 0.05).has_value()) << H_room;
+  const std::optional<Eigen::Vector2d> least = weakestDirection(H_room, std::numeric_limits<double>::infinity());
+  ASSERT_TRUE(least.has_value());
+  // The room is 6 m x 4 m: the walls across x are farther apart, fewer returns pin x.
+  EXPECT_GT(std::abs(least->x()), std::abs(least->y())) << least->transpose();
+  Eigen::Matrix2d bad = H_corridor;
+  bad(0, 1) = bad(1, 0) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(weakestDirection(bad, std::numeric_limits<double>::infinity()).has_value());
 }
 
 TEST(DegeneracyRemap, ConstrainMatchKeepsThePriorAlongTheCorridor) {

@@ -416,6 +416,13 @@ Result analyze(const Points2& points_scan, const Options& options) {
   return r;
 }
 
+std::optional<Eigen::Vector2d> weakestDirection(const Eigen::Matrix2d& H_per_point, double threshold) {
+  if (!H_per_point.allFinite()) return std::nullopt;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(H_per_point);
+  if (es.info() != Eigen::Success || !(es.eigenvalues()(0) < threshold)) return std::nullopt;
+  return es.eigenvectors().col(0).normalized();
+}
+
 Eigen::Matrix3d wellConstrainedProjector(const Eigen::Matrix3d& H, double min_eigenvalue) {
   if (!H.allFinite()) return Eigen::Matrix3d::Zero();
   const Eigen::Matrix3d S = 0.5 * (H + H.transpose());

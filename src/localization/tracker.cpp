@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <Eigen/Core>
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -11,6 +10,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -290,8 +290,10 @@ TrackResult Tracker::add(const Frame& frame) {
     // match's weakest direction, it settles elsewhere and explains the scan nearly as well.
     auto slides = [&](const Points2& pts, const registration::Result& match, double score, const Eigen::Vector2d& at) {
       if (o.slide_score_margin <= 0.0 || !match.information.allFinite()) return false;
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(match.information.topLeftCorner<2, 2>());
-      const Eigen::Vector2d dir = eig.eigenvectors().col(0);  // eigenvalues ascending: the weakest
+      const std::optional<Eigen::Vector2d> weakest = degeneracy::weakestDirection(
+          match.information.topLeftCorner<2, 2>(), std::numeric_limits<double>::infinity());
+      if (!weakest) return false;
+      const Eigen::Vector2d dir = *weakest;
       const SE2& T = match.T_target_source;
       for (const double d : {-1.0, -0.5, 0.5, 1.0}) {
         const SE2 moved(T.x() + d * dir.x(), T.y() + d * dir.y(), T.theta());

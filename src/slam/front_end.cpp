@@ -425,7 +425,7 @@ FrontEnd::MatchOutcome FrontEnd::frontEndMatch(const Points2& pts, const Predict
 void FrontEnd::remapDegenerate(Candidate& c, const Prediction& p, const SE2& T_pred) const {
   const registration::Result& res = c.res;
   if (res.num_inliers == 0) return;
-  const std::optional<Eigen::Vector2d> dir = weakestDirection(
+  const std::optional<Eigen::Vector2d> dir = degeneracy::weakestDirection(
       res.information.topLeftCorner<2, 2>() / static_cast<double>(res.num_inliers), opt.degeneracy_threshold);
   if (!dir) return;
   c.degenerate = true;

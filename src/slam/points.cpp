@@ -1,9 +1,10 @@
 #include "src/slam/internal/points.hpp"
 
-#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <cstdint>
 #include <unordered_map>
+
+#include "lidar2d/degeneracy/degeneracy.hpp"
 
 namespace lidar2d::slam::internal {
 
@@ -87,13 +88,7 @@ std::optional<Eigen::Vector2d> weakDirection(const registration::IcpTarget& targ
     ++matched;
   }
   if (matched == 0) return std::nullopt;
-  return weakestDirection(H / static_cast<double>(matched), threshold);
-}
-
-std::optional<Eigen::Vector2d> weakestDirection(const Eigen::Matrix2d& H_per_point, double threshold) {
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(H_per_point);
-  if (es.info() != Eigen::Success || !(es.eigenvalues()(0) < threshold)) return std::nullopt;
-  return es.eigenvectors().col(0).normalized();
+  return degeneracy::weakestDirection(H / static_cast<double>(matched), threshold);
 }
 
 }  // namespace lidar2d::slam::internal

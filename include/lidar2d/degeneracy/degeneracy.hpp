@@ -35,6 +35,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -215,6 +216,13 @@ Result analyze(const Points2& points_scan, const Options& options = {});
 // ---------------------------------------------------------------------------------------------
 // Using the verdict: solution remapping and odometry along the degenerate direction
 // ---------------------------------------------------------------------------------------------
+
+/// The information detector's test on a matcher's result: the unit eigen-direction of a translational
+/// information matrix per matched point (the top-left 2x2 of `registration::Result::information`
+/// divided by its inliers; a corridor's axis) whose eigenvalue is the smallest, when that eigenvalue
+/// is below `threshold` (infinity: always, the least constrained direction); nullopt otherwise, or
+/// when the decomposition fails (a matrix that is not finite).
+std::optional<Eigen::Vector2d> weakestDirection(const Eigen::Matrix2d& H_per_point, double threshold);
 
 /// Zhang et al. 2016 solution remapping: the projector P = V diag(m) V^T onto the eigenvectors of the
 /// symmetric information matrix `H` (3x3, parameters (x, y, theta)) whose eigenvalue is at least

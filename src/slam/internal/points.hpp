@@ -24,14 +24,10 @@ double explainedFraction(const registration::IcpTarget& target, const Points2& p
 /// frame), or nullopt when it pins every direction: the weakest eigen-direction of the
 /// translational information per matched point (the mean of n n^T over the points within
 /// `inlier_m` of a target point with a line, n its normal), when its eigenvalue is below
-/// `threshold`; nullopt also when no point matches a line (nothing shows a direction to be weak).
+/// `threshold` (degeneracy::weakestDirection); nullopt also when no point matches a line (nothing
+/// shows a direction to be weak).
 std::optional<Eigen::Vector2d> weakDirection(const registration::IcpTarget& target, const Points2& pts, const SE2& T,
                                              double inlier_m, double threshold);
-
-/// The eigen-direction of a translational information matrix per matched point (2x2) whose
-/// eigenvalue is the smallest, when that eigenvalue is below `threshold` (Zhang, Kaess & Singh
-/// 2016); nullopt otherwise or when the decomposition fails.
-std::optional<Eigen::Vector2d> weakestDirection(const Eigen::Matrix2d& H_per_point, double threshold);
 
 /// How much of a scan a target explains where they overlap.
 struct Overlap {
