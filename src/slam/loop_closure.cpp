@@ -60,12 +60,7 @@ std::optional<std::vector<char>> LoopClosure::searchNear(std::size_t n) {
     // session, or a lost track without odometry), lies where it was only guessed to be: its distance
     // to that map's submaps means nothing (searchUntied and the descriptors look for its place).
     if (unplaced && sm.nodes.back() < *s_.untied_since) continue;
-    // The distance to the submap's nearest node, not to its centre: on a log with scans metres apart
-    // a submap's nodes span tens of metres of path, and a revisit of one end lies far from the
-    // centre of an L-shaped or U-shaped stretch.
-    double d = std::numeric_limits<double>::infinity();
-    for (std::size_t k : sm.nodes)
-      d = std::min(d, (s_.nodes[k].T_world_robot.translation() - node.T_world_robot.translation()).norm());
+    const double d = nearestNodeM(sm, node.T_world_robot.translation());
     if (d <= radius_m) {
       candidates.emplace_back(d, s);
       covered[s] = 1;
@@ -519,16 +514,26 @@ double LoopClosure::untiedPathM(std::size_t a, std::size_t b) const {
 }
 
 double LoopClosure::carriedSigmas(const Constraint& c) const {
-  const SlamState::RestartOdometry& ro = *s_.restart_odometry;
-  const std::size_t r = ro.node;
+  const std::size_t r = s_.restart_odometry->node;
   // The step across the lost track the closure implies (node r - 1 as estimated, node c.to where
   // the closure puts it, node r by the front end's poses after the lost track), in the odometry
   // step's own sigmas.
-  const Constraint& odo = s_.constraints[ro.constraint];
   const SE2 T_world_to_by_closure = s_.nodes[c.from].T_world_robot * c.T_from_to;
   const SE2 T_r_to = s_.nodes[r].T_local_robot.inverse() * s_.nodes[c.to].T_local_robot;
   const SE2 step = s_.nodes[r - 1].T_world_robot.inverse() * T_world_to_by_closure * T_r_to.inverse();
-  return odometryPrediction(opt, odo.T_from_to, s_.nodes[r].time - s_.nodes[r - 1].time).distance(step);
+  return carriedOdometry().distance(step);
+}
+
+MotionPrediction LoopClosure::carriedOdometry() const {
+  const SlamState::RestartOdometry& ro = *s_.restart_odometry;
+  const Constraint& odo = s_.constraints[ro.constraint];
+  return odometryPrediction(opt, odo.T_from_to, s_.nodes[ro.node].time - s_.nodes[ro.node - 1].time);
+}
+
+double LoopClosure::nearestNodeM(const Submap& sm, const Eigen::Vector2d& at) const {
+  double d = std::numeric_limits<double>::infinity();
+  for (const std::size_t k : sm.nodes) d = std::min(d, (s_.nodes[k].T_world_robot.translation() - at).norm());
+  return d;
 }
 
 double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) const {
@@ -572,10 +577,7 @@ double LoopClosure::inFreeSpaceWhereEstimated(std::size_t n, std::size_t first) 
 }
 
 double LoopClosure::explainedNearEstimate(std::size_t n, std::size_t first) {
-  const SlamState::RestartOdometry& ro = *s_.restart_odometry;
-  const Constraint& odo = s_.constraints[ro.constraint];
-  const MotionPrediction p =
-      odometryPrediction(opt, odo.T_from_to, s_.nodes[ro.node].time - s_.nodes[ro.node - 1].time);
+  const MotionPrediction p = carriedOdometry();
   registration::CorrelativeOptions gate = loop_search;
   gate.linear_window_m = std::min(opt.prior_gate_sigmas * p.sigma_m, opt.loop_max_linear_window_m);
   gate.angular_window_rad =
@@ -586,10 +588,7 @@ double LoopClosure::explainedNearEstimate(std::size_t n, std::size_t first) {
   std::optional<Points2> sparse;
   for (std::size_t k = 0; k < s_.submaps.size(); ++k) {
     const Submap& sm = s_.submaps[k];
-    if (!sm.finished || sm.nodes.back() >= first) continue;
-    double d = std::numeric_limits<double>::infinity();
-    for (const std::size_t m : sm.nodes) d = std::min(d, (s_.nodes[m].T_world_robot.translation() - at).norm());
-    if (d > radius_m) continue;
+    if (!sm.finished || sm.nodes.back() >= first || nearestNodeM(sm, at) > radius_m) continue;
     Constraint c;
     if (search(n, k, gate, sparse, c) && c.accepted) best = std::max(best, c.explained);
   }

@@ -10,6 +10,7 @@
 #include <optional>
 #include <vector>
 
+#include "src/slam/internal/motion_prior.hpp"
 #include "src/slam/internal/state.hpp"
 
 namespace lidar2d::slam::internal {
@@ -128,6 +129,13 @@ class LoopClosure {
   /// How far (in the odometry step's sigmas) the untied fragment's closure `c` puts the step across
   /// the lost track from the odometry's (the fragment must have its odometry link).
   double carriedSigmas(const Constraint& c) const;
+  /// The odometry step across the lost track of the untied fragment (it must have its odometry
+  /// link) as a prediction: the step and its sigmas for the time it took.
+  MotionPrediction carriedOdometry() const;
+  /// The distance [m] from `at` (world frame) to the estimate of submap `sm`'s nearest node, not to its
+  /// centre: on a log with scans metres apart a submap's nodes span tens of metres of path, and a
+  /// revisit of one end lies far from the centre of an L-shaped or U-shaped stretch.
+  double nearestNodeM(const Submap& sm, const Eigen::Vector2d& at) const;
   /// The shortest path [m] between nodes `a` and `b` through the graph's accepted links, each link
   /// between consecutive nodes counting the front end's path between them and each closure none:
   /// the path over which the estimate of one relative to the other drifted.
