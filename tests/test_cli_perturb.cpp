@@ -322,6 +322,26 @@ TEST(PerturbCli, FreezeOdometryKeepsTheScansAndHoldsTheirOdometryThroughATurn) {
   EXPECT_EQ(runCli({"perturb", in, "--keep-odometry", "--freeze-odometry", "abc", "-o", out}).exit_code, 2);
 }
 
+TEST(PerturbCli, OdometrySlipAddsMotionTheRobotDidNotMakeDuringATurn) {
+  TempDir tmp;
+  const std::string in = (tmp / "odo.log").string(), out = (tmp / "slip.log").string();
+  test::writeFile(in, turningOdometryLog());
+  const CliResult r = runCli({"perturb", in, "--keep-odometry", "--odom-slip", "2@turn,1,-30", "-o", out});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("(odometry slip 1 m, -30 deg 4.9-6.9 s, turn 190 deg: 20 scans)"), std::string::npos) << r.out;
+  EXPECT_NE(test::readFile(out).find("gaps=odometry-slip(1m,-30deg)[4.900,6.900)"), std::string::npos);
+  const auto src = readAll(in), got = readAll(out);
+  ASSERT_EQ(got.size(), src.size());
+  // After the window every reading is the log's offset by the slip: 30 degrees less turn.
+  const SE2 offset = src.back().T_odom_robot->inverse() * *got.back().T_odom_robot;
+  EXPECT_NEAR(offset.theta(), -30.0 * kDeg, 1e-6);
+  for (std::size_t i = 0; i < 49; ++i)
+    EXPECT_TRUE(test::IsNearPose(*src[i].T_odom_robot, *got[i].T_odom_robot, 1e-9, 1e-7)) << i;
+  // A window without its motion, or a motion that is not a number, is a usage error.
+  EXPECT_EQ(runCli({"perturb", in, "--keep-odometry", "--odom-slip", "2@turn", "-o", out}).exit_code, 2);
+  EXPECT_EQ(runCli({"perturb", in, "--keep-odometry", "--odom-slip", "2@turn,x", "-o", out}).exit_code, 2);
+}
+
 TEST(PerturbCli, KeepOdometryOnARealBagWithAGapDuringATurn) {
   LIDAR2D_REQUIRE_DATA("raw/mit-csail.orig.bag");
   TempDir tmp;

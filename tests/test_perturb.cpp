@@ -367,6 +367,52 @@ TEST(LogPerturber, AFrozenOdometryWindowKeepsItsScansAndHoldsTheirOdometry) {
   EXPECT_THROW(both.validate(), Error);
 }
 
+TEST(LogPerturber, AnOdometrySlipWindowAddsItsMotionToTheStepsItSpans) {
+  // Every scan is kept; the steps before and after the window are the plain log's, and the steps
+  // the window spans carry, on top of theirs, its slip in all: the metres forward and the turn.
+  const auto in = simulatedLog("office");
+  GapRequest slip{10.0, GapPlacement::kMiddle, 0.0};
+  slip.odometry_slip = true;
+  slip.slip_m = -1.5;
+  slip.slip_rad = 0.5;
+  for (const OdometrySource source : {OdometrySource::kNoisyFromTruth, OdometrySource::kKeepLog}) {
+    LogPerturbationOptions o;
+    o.odometry_source = source;
+    PerturbationStats st;
+    const auto plain = perturbLog(in, o, {});
+    const auto out = perturbLog(in, o, {slip}, &st);
+    ASSERT_EQ(out.size(), in.size());
+    EXPECT_EQ(st.dropped_by_gaps, 0u);
+    ASSERT_EQ(st.dropped_per_gap.size(), 1u);
+    EXPECT_GT(st.dropped_per_gap[0], 50u);
+    // The window's scans, and the first after it (its step ends the window).
+    EXPECT_GE(st.slipped_odometry, st.dropped_per_gap[0]);
+    EXPECT_LE(st.slipped_odometry, st.dropped_per_gap[0] + 1);
+    double moved = 0.0, turned = 0.0;
+    std::size_t slipped = 0;
+    for (std::size_t k = 1; k < out.size(); ++k) {
+      const SE2 plain_step = plain[k - 1].T_odom_robot->inverse() * *plain[k].T_odom_robot;
+      const SE2 step = out[k - 1].T_odom_robot->inverse() * *out[k].T_odom_robot;
+      const double dm = (step.translation() - plain_step.translation()).norm();
+      const double dth = angleDiff(step.theta(), plain_step.theta());
+      if (dm > 1e-9 || std::abs(dth) > 1e-9) ++slipped;
+      moved += dm;
+      turned += dth;
+      EXPECT_EQ(out[k].time, plain[k].time);
+    }
+    EXPECT_TRUE(IsNearPose(*plain[0].T_odom_robot, *out[0].T_odom_robot, 0.0, 0.0));
+    EXPECT_EQ(slipped, st.slipped_odometry);
+    EXPECT_NEAR(moved, 1.5, 1e-6);
+    EXPECT_NEAR(turned, 0.5, 1e-6);
+  }
+  GapRequest both = slip;
+  both.frozen_odometry = true;
+  EXPECT_THROW(both.validate(), Error);
+  both = slip;
+  both.slip_m = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(both.validate(), Error);
+}
+
 TEST(LogPerturber, AGapAtTheStartKeepsOdometryAnchoredAtTheFirstTruth) {
   const auto in = simulatedLog("office");
   LogPerturbationOptions o;

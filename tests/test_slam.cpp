@@ -1667,6 +1667,31 @@ TEST(Slam, FrozenOdometryIsNoticedAndLeftOutUntilItMovesAgain) {
   EXPECT_LT(e.rms, 0.02);
 }
 
+TEST(Slam, WheelSlipTheScansContradictIsNotFollowed) {
+  // For 3 s in the middle of the office route the odometry counts a metre forward and 30 degrees
+  // of turn the robot did not make (wheels spinning, a robot pushed): the scans say otherwise, and
+  // SLAM stays as close to the truth as without the slip while the odometry ends metres off.
+  const auto frames = simulateWorld("office", 2);
+  sim::GapRequest slip{3.0, sim::GapPlacement::kMiddle, 0.0};
+  slip.odometry_slip = true;
+  slip.slip_m = 1.0;
+  slip.slip_rad = 30.0 * std::numbers::pi / 180.0;
+  sim::LogPerturbationOptions po;
+  po.odometry_source = sim::OdometrySource::kKeepLog;
+  sim::PerturbationStats st;
+  const auto slipped = sim::perturbLog(frames, po, {slip}, &st);
+  ASSERT_EQ(slipped.size(), frames.size());
+  ASSERT_GT(st.slipped_odometry, 10u);
+  const auto est = runSlam(slipped, {});
+  ASSERT_EQ(est.size(), slipped.size());
+  const Errors e = poseErrors(est, slipped);
+  const Errors plain = poseErrors(runSlam(frames, {}), frames);
+  const Errors odo = poseErrors(odometryInTruthFrame(slipped), slipped);
+  EXPECT_GT(odo.rms, 1.0);
+  EXPECT_LT(e.rms, 0.02) << "without the slip " << plain.rms << ", odometry " << odo.rms;
+  EXPECT_LT(e.max, plain.max + 0.05);
+}
+
 TEST(Slam, KidnappedRobotIsReportedAndTheRunContinues) {
   // Two stretches of the office route glued together: the second starts elsewhere (7 m away,
   // turned by 90 degrees, in another room) with odometry that does not know it (a robot carried

@@ -32,12 +32,13 @@
 #   raw        the three raw bags as they are, with a 10 s gap at their largest turn (perturb
 #              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), with their
 #              odometry frozen for the 10 s of that turn (--freeze-odometry 10@turn: a stalled driver),
-#              and with slam --no-odometry. Error: Kuemmerle relations (mean +- std).
+#              with its odometry slipping there (--odom-slip 3@turn,1,30: 1 m and 30 degrees the robot
+#              did not make, counted over the 3 s of its largest turn), and with slam --no-odometry. Error: Kuemmerle relations (mean +- std).
 #   sim        the simulator's worlds (office, corridor, symmetric, open) as simulated (seed 1), with
 #              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, kidnapped (perturb
 #              --keep-odometry --kidnap 15: the robot carried for the 15 s in the middle of the log,
 #              its odometry unaware), with their odometry frozen for the 10 s of the largest turn
-#              (--freeze-odometry 10@turn), and with 5 and 20 people walking the robot's route
+#              (--freeze-odometry 10@turn), slipping there (--odom-slip 3@turn,1,30), and with 5 and 20 people walking the robot's route
 #              (simulate --people N: moving obstacles). Error: ATE.
 #   lasers     the same worlds seen by other lasers than the simulator's default (270 degrees, 30 m,
 #              541 beams, 10 Hz): a low-cost 360-degree laser (360 beams, 12 m, 2 cm noise, 5% of
@@ -227,6 +228,10 @@ if want_part raw; then
     if perturb "$bag" --keep-odometry --freeze-odometry 10@turn -o "$p"; then
       run "$d bag odometry frozen10@turn" "$p" "$rel" "$p"
     fi
+    p=$OUT/logs/$d-slip3-turn.log
+    if perturb "$bag" --keep-odometry --odom-slip 3@turn,1,30 -o "$p"; then
+      run "$d bag odometry slip3@turn" "$p" "$rel" "$p"
+    fi
     run "$d bag no-odometry" "$bag" "$rel" - --no-odometry
   done
 fi
@@ -247,6 +252,8 @@ if want_part sim; then
     perturb "$s" --keep-odometry --kidnap 15 -o "$k" && run "sim $w kidnapped" "$k" "$k" "$k"
     k=$OUT/logs/sim-$w-frozen.log
     perturb "$s" --keep-odometry --freeze-odometry 10@turn -o "$k" && run "sim $w odometry frozen" "$k" "$k" "$k"
+    k=$OUT/logs/sim-$w-slip.log
+    perturb "$s" --keep-odometry --odom-slip 3@turn,1,30 -o "$k" && run "sim $w odometry slip" "$k" "$k" "$k"
     for n in 5 20; do
       k=$OUT/logs/sim-$w-people$n.log
       "$BIN" simulate --world "$w" --seed 1 --people "$n" -o "$k" >/dev/null

@@ -141,6 +141,36 @@ std::optional<sim::GapRequest> parseGap(const std::string& s) {
   return r;
 }
 
+// --odom-slip DURATION_S[@START_S|@turn],METRES[,DEG].
+std::optional<sim::GapRequest> parseSlip(const std::string& s) {
+  const auto comma = s.find(',');
+  if (comma == std::string::npos) return std::nullopt;
+  auto r = parseGap(s.substr(0, comma));
+  if (!r) return std::nullopt;
+  const std::string motion = s.substr(comma + 1);
+  const auto second = motion.find(',');
+  const auto metres = parseNumber(motion.substr(0, second));
+  if (!metres) return std::nullopt;
+  double degrees = 0.0;
+  if (second != std::string::npos) {
+    const auto d = parseNumber(motion.substr(second + 1));
+    if (!d) return std::nullopt;
+    degrees = *d;
+  }
+  r->odometry_slip = true;
+  r->slip_m = *metres;
+  r->slip_rad = degrees * kDeg;
+  return r;
+}
+
+std::string slipError(const std::string& v) {
+  return parseSlip(v) ? std::string()
+                      : fmt::format(
+                            "expected DURATION_S[@START_S|@turn],METRES[,DEG], DURATION_S > 0, START_S >= 0 and "
+                            "finite METRES and DEG, got '{}'",
+                            v);
+}
+
 std::string gapError(const std::string& v) {
   return parseGap(v) ? std::string()
                      : fmt::format("expected DURATION_S[@START_S|@turn], DURATION_S > 0 and START_S >= 0, got '{}'", v);
@@ -168,6 +198,7 @@ struct PerturbArgs {
   std::vector<std::string> gaps;
   std::vector<std::string> kidnaps;
   std::vector<std::string> freezes;
+  std::vector<std::string> slips;
   double time_jitter_s = 0.0;
   std::string odom_lag;  // MEAN_S[,SIGMA_S]
   std::size_t time_bursts = 1;
@@ -177,8 +208,8 @@ struct PerturbArgs {
        drift_given = false, bursts_given = false, jitter_given = false, synth_given = false;
   bool legacy() const {
     return odom_model == "constant" && !trans_given && !rot_rad_given && !rot_m_given && !scale_given && !drift_given &&
-           !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && freezes.empty() && !jitter_given &&
-           !bursts_given && !synth_given && odom_lag.empty();
+           !keep_odometry && keyframes.empty() && gaps.empty() && kidnaps.empty() && freezes.empty() && slips.empty() &&
+           !jitter_given && !bursts_given && !synth_given && odom_lag.empty();
   }
 };
 
@@ -305,6 +336,7 @@ void run(const PerturbArgs& a) {
     requests.push_back(*parseGap(g));
     requests.back().frozen_odometry = true;
   }
+  for (const std::string& g : a.slips) requests.push_back(*parseSlip(g));  // validated by the option's check
 
   // First pass: place the gaps on the log's times and poses; keep the truth for the odometry lag.
   double t_first = 0.0;
@@ -331,7 +363,11 @@ void run(const PerturbArgs& a) {
   std::string gaps_desc;
   for (const sim::GapWindow& g : o.gaps)
     gaps_desc += fmt::format(" {}[{:.3f},{:.3f})",
-                             g.request.carried ? "kidnap" : (g.request.frozen_odometry ? "frozen-odometry" : ""),
+                             g.request.carried           ? "kidnap"
+                             : g.request.frozen_odometry ? "frozen-odometry"
+                             : g.request.odometry_slip   ? fmt::format("odometry-slip({:g}m,{:g}deg)", g.request.slip_m,
+                                                                       g.request.slip_rad / kDeg)
+                                                         : "",
                              g.begin_s, g.end_s);
   writer.comment(fmt::format(
       "lidar2d perturb: source={} seed={} odometry={} keyframes={} gaps={} synthesize_hz={} time_jitter_s={} "
@@ -363,9 +399,13 @@ void run(const PerturbArgs& a) {
     const sim::GapWindow& g = o.gaps[k];
     gaps_summary += fmt::format(
         "{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ",
-        g.request.carried ? "kidnapping " : (g.request.frozen_odometry ? "odometry frozen " : ""), g.begin_s - t_first,
-        g.end_s - t_first, std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg),
-        st.dropped_per_gap[k]);
+        g.request.carried           ? "kidnapping "
+        : g.request.frozen_odometry ? "odometry frozen "
+        : g.request.odometry_slip
+            ? fmt::format("odometry slip {:g} m, {:g} deg ", g.request.slip_m, g.request.slip_rad / kDeg)
+            : "",
+        g.begin_s - t_first, g.end_s - t_first,
+        std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg), st.dropped_per_gap[k]);
   }
   if (!gaps_summary.empty()) gaps_summary += ")";
   std::string odometry = "odometry kept from the log";
@@ -388,8 +428,7 @@ void addPerturbCommand(CLI::App& app) {
       "perturb",
       "Derive a log for robustness tests from a log with truth; writes a CARMEN log with TRUEPOS lines (scans, "
       "truth and laser mounting kept). Steps: --synthesize-times (clock), --gap (drop time windows; --freeze-odometry "
-      "keeps them, "
-      "odometry frozen), --keyframes "
+      "keeps them, odometry frozen; --odom-slip keeps them, odometry slipping), --keyframes "
       "(drop scans too close to the last kept one), odometry (replaced, read --odom-lag off each scan's time, or "
       "kept with --keep-odometry), "
       "--time-jitter and --time-bursts (stamps). Odometry: odom_0 = truth_0; each kept scan k after the previously "
@@ -477,6 +516,13 @@ void addPerturbCommand(CLI::App& app) {
                   "counted. Repeatable")
       ->allow_extra_args(false)
       ->check(check("DURATION_S[@START_S|@turn]", gapError));
+  sub->add_option("--odom-slip", a->slips,
+                  "DURATION_S[@START_S|@turn],METRES[,DEG]: a window (placed as --gap) whose scans are kept but whose "
+                  "odometry counts METRES of forward motion (negative: backward) and DEG of turn (counter-clockwise "
+                  "positive) the robot did not make, spread evenly over it (wheels spinning, a robot pushed); after "
+                  "it the odometry reads on, offset by the slip. Repeatable")
+      ->allow_extra_args(false)
+      ->check(check("DURATION_S[@START_S|@turn],METRES[,DEG]", slipError));
   sub->add_option("--time-jitter", a->time_jitter_s,
                   "SIGMA_S: add Gaussian noise of this std to every kept scan's stamp [s] (seeded)")
       ->check(nonNegativeNumber())

@@ -158,6 +158,12 @@ void GapRequest::validate() const {
   if (carried && frozen_odometry)
     throw invalidArgument("a window is either carried (its scans dropped) or freezes the odometry (its scans kept)",
                           ErrorLocation({}, 0, "frozen_odometry"));
+  if (odometry_slip && (carried || frozen_odometry))
+    throw invalidArgument("a window of odometry slip is neither carried nor frozen",
+                          ErrorLocation({}, 0, "odometry_slip"));
+  if (!std::isfinite(slip_m) || !std::isfinite(slip_rad))
+    throw invalidArgument(fmt::format("odometry slip must be finite, got {} m, {} rad", slip_m, slip_rad),
+                          ErrorLocation({}, 0, "slip_m"));
 }
 
 void TimeFaults::validate() const {
@@ -354,6 +360,7 @@ std::vector<Frame> LogPerturber::push(Frame f) {
   for (std::size_t k = 0; k < options_.gaps.size(); ++k)
     if (options_.gaps[k].contains(t)) {
       ++stats_.dropped_per_gap[k];
+      if (options_.gaps[k].request.odometry_slip) continue;  // kept: slipped below
       if (options_.gaps[k].request.frozen_odometry) {
         frozen = true;
         continue;
@@ -402,6 +409,7 @@ std::vector<Frame> LogPerturber::push(Frame f) {
   } else if (!frozen) {
     frozen_reading_.reset();
   }
+  f.T_odom_robot = slipped(f.T_odom_robot, t);
   f.time = t;
   if (options_.time.jitter_sigma_s > 0) f.time += jitter_rng_.gaussian(options_.time.jitter_sigma_s);
   ++stats_.scans_kept;
@@ -410,6 +418,31 @@ std::vector<Frame> LogPerturber::push(Frame f) {
   burst_.push_back(std::move(f));
   if (burst_.size() >= options_.time.burst_size) return flush();
   return {};
+}
+
+std::optional<SE2> LogPerturber::slipped(const std::optional<SE2>& odom, double t) {
+  if (!odom) return odom;
+  SE2 extra;
+  bool slips = false;
+  for (const GapWindow& g : options_.gaps) {
+    if (!g.request.odometry_slip) continue;
+    slips = true;
+    if (!slip_read_prev_) continue;
+    const double overlap = std::min(t, g.end_s) - std::max(slip_t_prev_, g.begin_s);
+    if (overlap <= 0.0 || g.end_s <= g.begin_s) continue;
+    const double f = overlap / (g.end_s - g.begin_s);
+    extra = extra * SE2(f * g.request.slip_m, 0.0, f * g.request.slip_rad);
+  }
+  if (!slips) return odom;
+  SE2 out = *odom;
+  if (slip_read_prev_) {
+    if (extra.translation().squaredNorm() > 0.0 || extra.theta() != 0.0) ++stats_.slipped_odometry;
+    out = *slip_out_prev_ * (slip_read_prev_->inverse() * *odom) * extra;
+  }
+  slip_read_prev_ = odom;
+  slip_out_prev_ = out;
+  slip_t_prev_ = t;
+  return out;
 }
 
 SE2 LogPerturber::odometryReadingPoint(const Frame& frame, std::size_t index, double t) {

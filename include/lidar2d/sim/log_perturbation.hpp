@@ -13,7 +13,8 @@
 ///  1. Clock: t_i = s_i, or t_i = s_0 + i / rate with `TimeFaults::synthesize_rate_hz` > 0. Gaps and
 ///     the output stamps use this clock.
 ///  2. Gaps: a frame with t_i inside a `GapWindow` [begin, end) is dropped, unless the window only
-///     freezes the odometry (`GapRequest::frozen_odometry`): such frames are kept.
+///     freezes the odometry (`GapRequest::frozen_odometry`) or makes it slip
+///     (`GapRequest::odometry_slip`): such frames are kept.
 ///  3. Keyframes: a frame outside the gaps is kept when no frame was kept yet, or when its reference
 ///     pose (below) moved at least `min_distance_m` or turned at least `min_turn_rad` away from the
 ///     last kept frame's (a threshold of 0 is no criterion; without keyframes every frame is kept).
@@ -30,6 +31,9 @@
 ///     Inside a frozen-odometry window every kept frame's odometry is the last kept frame's before
 ///     the window (its own, when none was kept); after it the odometry reads on as made above (the
 ///     wheels kept counting: the motion across the window comes in one step).
+///     With slip windows, each kept frame k after the previously kept j reads
+///       odom'_k = odom'_j * (odom_j^-1 * odom_k) * SE2(f slip_m, 0, f slip_rad)
+///     summed over the windows, f = the part of [t_j, t_k) inside the window over its length.
 ///  5. Stamps of the kept frames: t_i + N(0, jitter_sigma^2); then, with bursts of N, each group of N
 ///     consecutive kept frames (the last group may be shorter) carries the stamp of its last frame.
 /// Scans, truth and laser mounting are never changed; odometry and truth stay with their scan.
@@ -95,9 +99,17 @@ struct GapRequest {
   /// the last scan before the window (a stalled driver, or wheels that do not turn while the robot
   /// is pushed), then what the wheels counted. Not with `carried`.
   bool frozen_odometry = false;
+  /// The window's scans are kept, but the odometry counts motion the robot did not make: `slip_m`
+  /// forward (negative: backward) and `slip_rad` of turn (counter-clockwise positive), spread evenly
+  /// over the window's time and added to the steps it spans (wheels spinning on a threshold, a robot
+  /// pushed against a wall, a caster turning on the spot). After it the odometry reads on, offset by
+  /// the slip. Not with `carried` or `frozen_odometry`.
+  bool odometry_slip = false;
+  double slip_m = 0.0;
+  double slip_rad = 0.0;
 
   /// Throws `lidar2d::Error` (kInvalidArgument) for a duration <= 0, a negative or non-finite value,
-  /// or a window both carried and frozen.
+  /// or a window of two kinds (carried, frozen, slip).
   void validate() const;
 };
 
@@ -234,6 +246,7 @@ struct PerturbationStats {
   std::size_t dropped_by_keyframes = 0;  ///< outside the gaps, but too close to the last kept frame
   std::size_t dropped_by_gaps = 0;       ///< inside at least one gap that drops its frames
   std::size_t frozen_odometry = 0;       ///< kept frames whose odometry a frozen-odometry window froze
+  std::size_t slipped_odometry = 0;      ///< kept frames whose odometry step a slip window added motion to
   /// Frames whose time lies in each of `LogPerturbationOptions::gaps` (a frame in two gaps counts in
   /// both; in a frozen-odometry window, frames are kept unless keyframing drops them).
   std::vector<std::size_t> dropped_per_gap;
@@ -279,6 +292,12 @@ class LogPerturber {
   bool carried_ = false;               // a carried gap dropped frames since the last kept one
   std::optional<SE2> frozen_reading_;  // inside a frozen-odometry window: what the odometry reads there
   std::optional<SE2> log_odom_shift_;  // kKeepLog after a carried gap: output odometry = shift * the log's
+  // With slip windows: the previous kept frame's odometry before and after the slip, and its time.
+  std::optional<SE2> slip_read_prev_, slip_out_prev_;
+  double slip_t_prev_ = 0.0;
+  /// Adds the slip of the windows overlapping [slip_t_prev_, t) to the odometry step since the
+  /// previous kept frame (options_.gaps' slip windows; none: `odom` unchanged).
+  std::optional<SE2> slipped(const std::optional<SE2>& odom, double t);
   std::vector<Frame> burst_;
 };
 
