@@ -33,13 +33,14 @@
 #              --keep-odometry --gap 10@turn: the bag's own odometry, turn planned on it), with their
 #              odometry frozen for the 10 s of that turn (--freeze-odometry 10@turn: a stalled driver),
 #              with its odometry slipping there (--odom-slip 3@turn,1,30: 1 m and 30 degrees the robot
-#              did not make, counted over the 3 s of its largest turn), and with slam --no-odometry. Error: Kuemmerle relations (mean +- std).
+#              did not make, counted over the 3 s of its largest turn), and with slam --no-odometry.
+#              Error: Kuemmerle relations (mean +- std).
 #   sim        the simulator's worlds (office, corridor, symmetric, open) as simulated (seed 1), with
 #              realistic odometry as keyframes (--keyframes 1,30), seeds 1 2 3, kidnapped (perturb
 #              --keep-odometry --kidnap 15: the robot carried for the 15 s in the middle of the log,
 #              its odometry unaware), with their odometry frozen for the 10 s of the largest turn
-#              (--freeze-odometry 10@turn), slipping there (--odom-slip 3@turn,1,30), and with 5 and 20 people walking the robot's route
-#              (simulate --people N: moving obstacles). Error: ATE.
+#              (--freeze-odometry 10@turn), slipping there (--odom-slip 3@turn,1,30), and with 5 and 20
+#              people walking the robot's route (simulate --people N: moving obstacles). Error: ATE.
 #   lasers     the same worlds seen by other lasers than the simulator's default (270 degrees, 30 m,
 #              541 beams, 10 Hz): a low-cost 360-degree laser (360 beams, 12 m, 2 cm noise, 5% of
 #              returns lost), a depth camera's fake laser (58 degrees, 640 beams, 0.5-6 m, 30 Hz) and

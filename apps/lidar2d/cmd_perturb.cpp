@@ -171,6 +171,19 @@ std::string slipError(const std::string& v) {
                             v);
 }
 
+// What a placed window does, for the summary line ("kidnapping ", ...) or the output's first comment
+// ("kidnap", ...); empty for a plain gap.
+std::string windowKind(const sim::GapRequest& r, bool in_comment) {
+  if (r.carried) return in_comment ? "kidnap" : "kidnapping ";
+  if (r.frozen_odometry) return in_comment ? "frozen-odometry" : "odometry frozen ";
+  if (r.odometry_slip) {
+    const double deg = r.slip_rad / kDeg;
+    return in_comment ? fmt::format("odometry-slip({:g}m,{:g}deg)", r.slip_m, deg)
+                      : fmt::format("odometry slip {:g} m, {:g} deg ", r.slip_m, deg);
+  }
+  return {};
+}
+
 std::string gapError(const std::string& v) {
   return parseGap(v) ? std::string()
                      : fmt::format("expected DURATION_S[@START_S|@turn], DURATION_S > 0 and START_S >= 0, got '{}'", v);
@@ -362,13 +375,7 @@ void run(const PerturbArgs& a) {
   io::CarmenWriter writer(a.output);
   std::string gaps_desc;
   for (const sim::GapWindow& g : o.gaps)
-    gaps_desc += fmt::format(" {}[{:.3f},{:.3f})",
-                             g.request.carried           ? "kidnap"
-                             : g.request.frozen_odometry ? "frozen-odometry"
-                             : g.request.odometry_slip   ? fmt::format("odometry-slip({:g}m,{:g}deg)", g.request.slip_m,
-                                                                       g.request.slip_rad / kDeg)
-                                                         : "",
-                             g.begin_s, g.end_s);
+    gaps_desc += fmt::format(" {}[{:.3f},{:.3f})", windowKind(g.request, true), g.begin_s, g.end_s);
   writer.comment(fmt::format(
       "lidar2d perturb: source={} seed={} odometry={} keyframes={} gaps={} synthesize_hz={} time_jitter_s={} "
       "time_bursts={} (model: docs/perturb.md)",
@@ -397,15 +404,10 @@ void run(const PerturbArgs& a) {
   std::string gaps_summary;
   for (std::size_t k = 0; k < o.gaps.size(); ++k) {
     const sim::GapWindow& g = o.gaps[k];
-    gaps_summary += fmt::format(
-        "{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ",
-        g.request.carried           ? "kidnapping "
-        : g.request.frozen_odometry ? "odometry frozen "
-        : g.request.odometry_slip
-            ? fmt::format("odometry slip {:g} m, {:g} deg ", g.request.slip_m, g.request.slip_rad / kDeg)
-            : "",
-        g.begin_s - t_first, g.end_s - t_first,
-        std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg), st.dropped_per_gap[k]);
+    gaps_summary += fmt::format("{}{}{:.1f}-{:.1f} s{}: {} scans", k == 0 ? " (" : "; ", windowKind(g.request, false),
+                                g.begin_s - t_first, g.end_s - t_first,
+                                std::isnan(g.turn_rad) ? "" : fmt::format(", turn {:.0f} deg", g.turn_rad / kDeg),
+                                st.dropped_per_gap[k]);
   }
   if (!gaps_summary.empty()) gaps_summary += ")";
   std::string odometry = "odometry kept from the log";

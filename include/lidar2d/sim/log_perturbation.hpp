@@ -248,7 +248,7 @@ struct PerturbationStats {
   std::size_t frozen_odometry = 0;       ///< kept frames whose odometry a frozen-odometry window froze
   std::size_t slipped_odometry = 0;      ///< kept frames whose odometry step a slip window added motion to
   /// Frames whose time lies in each of `LogPerturbationOptions::gaps` (a frame in two gaps counts in
-  /// both; in a frozen-odometry window, frames are kept unless keyframing drops them).
+  /// both; in a frozen-odometry or slip window, frames are kept unless keyframing drops them).
   std::vector<std::size_t> dropped_per_gap;
   std::optional<SE2> last_T_odom_robot;   ///< odometry of the last kept frame
   std::optional<SE2> last_T_world_robot;  ///< truth of the last kept frame
