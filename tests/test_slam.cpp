@@ -1428,7 +1428,7 @@ TEST(SlamGraph, OdometryBetterThanTheMatchesHoldsTheFinalGraph) {
   // weights; so do too few cycles.
   for (const auto& [odometry_deg, front_end_deg, loops, odometry_m] :
        {std::tuple{0.5, 0.5, std::size_t{100}, 0.0}, std::tuple{2.0, 0.2, std::size_t{100}, 0.0},
-        std::tuple{0.02, 0.5, std::size_t{100}, 0.05}, std::tuple{0.02, 0.5, internal::kCycleMinCount - 1, 0.0}}) {
+        std::tuple{0.02, 0.5, std::size_t{100}, 0.05}, std::tuple{0.02, 0.5, internal::kCycleFadeFrom, 0.0}}) {
     internal::SlamState s = cycleGraph(odometry_deg, front_end_deg, loops, 3, odometry_m);
     internal::calibrateFromCycles(s);
     EXPECT_FALSE(s.stats.odometry_weighted_by_cycles)
@@ -1465,6 +1465,37 @@ TEST(SlamGraph, TheCyclesWeightingFadesAboveItsThreshold) {
   ASSERT_GT(none_share, internal::kCycleOdometryRatioNone);
   EXPECT_EQ(none_odometry, 0.0);
   EXPECT_EQ(none_sequential, 0.0);
+}
+
+// From kCycleFadeFrom to kCycleMinCount cycles the weighting fades in, so that one closure more or
+// less does not switch it on or off (edmonton with perfect odometry: 19 cycles as read, 20 with its
+// beams turned by half a degree).
+TEST(SlamGraph, TheCyclesWeightingFadesInWithTheirNumber) {
+  const SlamOptions o;
+  // Odometry a twenty-fifth as noisy as the front end: the share alone would weigh it fully.
+  for (std::size_t loops = internal::kCycleFadeFrom + 1; loops < internal::kCycleMinCount; ++loops) {
+    internal::SlamState s = cycleGraph(0.02, 0.5, loops, 2);
+    internal::calibrateFromCycles(s);
+    const internal::CycleMeasure m = internal::measureCycles(s);
+    ASSERT_EQ(m.cycles, loops);
+    ASSERT_LT(std::sqrt(m.odometry_rad / m.front_end_rad * m.odometry_m / m.front_end_m),
+              internal::kCycleOdometryRatio);
+    EXPECT_TRUE(s.stats.odometry_weighted_by_cycles) << loops;
+    // Partly: between the measure and the links' own, nearer the measure the more cycles there are.
+    const double t = static_cast<double>(loops - internal::kCycleFadeFrom) /
+                     static_cast<double>(internal::kCycleMinCount - internal::kCycleFadeFrom);
+    EXPECT_NEAR(std::log(s.cycles_odometry_sigma_rad),
+                t * std::log(std::max(m.odometry_rad, internal::kCycleMinSigmaRad)) +
+                    (1.0 - t) * std::log(o.odometry_sigma_rad),
+                1e-9)
+        << loops;
+    EXPECT_GT(s.cycles_odometry_sigma_rad, m.odometry_rad);
+    EXPECT_LT(s.cycles_odometry_sigma_rad, o.odometry_sigma_rad);
+  }
+  internal::SlamState full = cycleGraph(0.02, 0.5, internal::kCycleMinCount, 2);
+  internal::calibrateFromCycles(full);
+  EXPECT_DOUBLE_EQ(full.cycles_odometry_sigma_rad,
+                   std::max(internal::measureCycles(full).odometry_rad, internal::kCycleMinSigmaRad));
 }
 
 TEST(Slam, OdometryBetterThanShortRangeMatchesHoldsTheMap) {

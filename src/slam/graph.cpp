@@ -187,11 +187,16 @@ void calibrateFromCycles(SlamState& s) {
   s.cycles_odometry_sigma_rad = s.cycles_sequential_sigma_rad = s.cycles_odometry_sigma_m = 0.0;
   s.stats.odometry_weighted_by_cycles = false;
   const double rotation = m.odometry_rad / m.front_end_rad, position = m.odometry_m / m.front_end_m;
-  // The weight of the measure: 1 below kCycleOdometryRatio, fading to 0 at kCycleOdometryRatioNone.
-  const double t = std::clamp(
+  // The weight of the measure: 1 below kCycleOdometryRatio, fading to 0 at kCycleOdometryRatioNone;
+  // times 1 from kCycleMinCount cycles, fading to 0 at kCycleFadeFrom.
+  const double t_share = std::clamp(
       (kCycleOdometryRatioNone - std::sqrt(rotation * position)) / (kCycleOdometryRatioNone - kCycleOdometryRatio), 0.0,
       1.0);
-  if (m.cycles < kCycleMinCount || !(rotation < 1.0) || !(position < 1.0) || !(t > 0.0)) return;
+  const double t_count = std::clamp((static_cast<double>(m.cycles) - static_cast<double>(kCycleFadeFrom)) /
+                                        static_cast<double>(kCycleMinCount - kCycleFadeFrom),
+                                    0.0, 1.0);
+  const double t = t_share * t_count;
+  if (!(rotation < 1.0) || !(position < 1.0) || !(t > 0.0)) return;
   const auto blend = [t](double measured, double own) { return std::pow(measured, t) * std::pow(own, 1.0 - t); };
   s.cycles_odometry_sigma_rad = blend(std::max(m.odometry_rad, kCycleMinSigmaRad), s.opt.odometry_sigma_rad);
   s.cycles_sequential_sigma_rad = blend(m.front_end_rad, s.opt.sequential_sigma_rad);
