@@ -190,6 +190,7 @@ void runTrack(const TrackArgs& a) {
         a.log, *scans_to_first_fix);
   j["relocalizations"] = relocalizations;
   j["odometry_frozen_scans"] = odometry_frozen;
+  j["odometry_scale"] = {{"factor", tracker->odometryScale()}, {"evidence_m", tracker->odometryScaleEvidenceM()}};
   if (!mirror_check_json.is_null()) j["mirror_check"] = mirror_check_json;
   j["tracking_beyond_map"] = {{"scans", beyond_map}, {"share", share(beyond_map)}};
   j["tracked_scan_ms"] = timing(track_ms);
@@ -294,6 +295,10 @@ void addTrackCommand(CLI::App& app) {
                   "odometry path since the map alone last explained a scan beyond which the recent scans no longer "
                   "track one [m]")
       ->capture_default_str();
+  sub->add_flag_callback(
+      "--no-odometry-scale", [a] { a->options.learn_odometry_scale = false; },
+      "with odometry, take its distances as read (default: scaled by the metres the map matches measure per metre "
+      "of it, once 5 m of steps between scans the map pins are measured)");
   sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
   addReaderOptions(sub, a->reader);
   sub->callback([a] { runTrack(*a); });

@@ -161,7 +161,7 @@ void bindLocalization(py::module_& m) {
                        std::size_t max_lost_scans, std::size_t confirm_fixes_against_odometry,
                        double correction_score_slope, double slide_score_margin, double prior_score_margin,
                        std::size_t recent_scans, double max_beyond_map_m, double max_degenerate_path_m,
-                       double max_speed_m_per_s) {
+                       double max_speed_m_per_s, bool learn_odometry_scale) {
              localization::TrackerOptions o;
              o.min_track_score = min_track_score;
              o.min_global_score = min_global_score;
@@ -176,6 +176,7 @@ void bindLocalization(py::module_& m) {
              o.max_beyond_map_m = max_beyond_map_m;
              o.max_degenerate_path_m = max_degenerate_path_m;
              o.max_speed_m_per_s = max_speed_m_per_s;
+             o.learn_odometry_scale = learn_odometry_scale;
              o.validate();  // before the database is taken over, so a bad option leaves it usable
              std::optional<localization::Database> db = takeDatabase(database);
              py::gil_scoped_release release;
@@ -192,9 +193,11 @@ void bindLocalization(py::module_& m) {
            py::arg("max_beyond_map_m") = defaults.max_beyond_map_m,
            py::arg("max_degenerate_path_m") = defaults.max_degenerate_path_m,
            py::arg("max_speed_m_per_s") = defaults.max_speed_m_per_s,
+           py::arg("learn_odometry_scale") = defaults.learn_odometry_scale,
            "map: a MapImage; database as for Localizer. Options as `lidar2d track` (docs/localization.md;\n"
            "recent_scans: --recent-scans, max_beyond_map_m: --max-beyond-map,\n"
-           "max_degenerate_path_m: --max-degenerate-path, max_speed_m_per_s: --max-speed);\n"
+           "max_degenerate_path_m: --max-degenerate-path, max_speed_m_per_s: --max-speed,\n"
+           "learn_odometry_scale=False: --no-odometry-scale);\n"
            "bad options or a database of another map raise lidar2d.Error.")
       .def(
           "add",
@@ -224,7 +227,10 @@ void bindLocalization(py::module_& m) {
           "earlier one), beyond_map (tracked on the recent scans where the map explains too little),\n"
           "odometry_frozen (the odometry reads one pose while the robot moves: not used), reason (why a "
           "scan was not tracked), iterations, track_seconds, global_seconds.")
-      .def("reset", &localization::Tracker::reset, "Forgets the pose: the next scan is placed by global localization.");
+      .def("reset", &localization::Tracker::reset, "Forgets the pose: the next scan is placed by global localization.")
+      .def_property_readonly("odometry_scale", &localization::Tracker::odometryScale,
+                             "the factor the odometry's distances are scaled by (1 until 5 m of steps between "
+                             "scans the map pins are measured, or with learn_odometry_scale=False)");
 }
 
 }  // namespace lidar2d::python

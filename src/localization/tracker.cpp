@@ -124,6 +124,33 @@ struct Tracker::State {
   /// scans tracked in a row (their position along the corridor from odometry alone) and, once that
   /// passed max_degenerate_path_m, until a scan's match agrees with global localization [m].
   double unpinned_path_m = 0.0;
+  /// The odometry's distance scale: the map matches' metres and the odometry's on chords along runs
+  /// of scans the map pinned in every direction, each sum fading with kScaleMemoryM of odometry path;
+  /// and whether the last scan was pinned so.
+  double scale_matched_m = 0.0, scale_odometry_m = 0.0;
+  bool pinned = false;
+  /// The start of the current run of pinned scans (its pose and odometry) and the odometry path
+  /// since: each kScaleChordM of it, the matched chord is compared with the odometry's.
+  std::optional<SE2> chord_pose, chord_odom;
+  double chord_path_m = 0.0;
+  static constexpr double kScaleMemoryM = 100.0;
+  static constexpr double kScaleMinEvidenceM = 5.0;
+  static constexpr double kScaleMaxDeviation = 0.1;
+  // A chord this long: a scan's step of a few centimetres (a laser at 10-40 Hz) is no longer than a
+  // match's noise, which would lengthen every matched step [m].
+  static constexpr double kScaleChordM = 0.5;
+  // A chord at least this share of the odometry's path along it (not a turn doubling back).
+  static constexpr double kScaleChordStraight = 0.8;
+
+  double odometryScale() const {
+    if (!o.learn_odometry_scale || scale_odometry_m < kScaleMinEvidenceM) return 1.0;
+    return std::clamp(scale_matched_m / scale_odometry_m, 1.0 - kScaleMaxDeviation, 1.0 + kScaleMaxDeviation);
+  }
+  void observeScale(double matched_m, double odometry_m) {
+    const double keep = std::exp(-odometry_m / kScaleMemoryM);
+    scale_matched_m = keep * scale_matched_m + matched_m;
+    scale_odometry_m = keep * scale_odometry_m + odometry_m;
+  }
 
   /// Remembers the points (robot frame) of a scan placed at `T`.
   void remember(Points2 points, const SE2& T) {
@@ -200,6 +227,8 @@ Tracker::~Tracker() = default;
 
 const Localizer& Tracker::localizer() const { return *s_->loc; }
 const TrackerOptions& Tracker::options() const { return s_->o; }
+double Tracker::odometryScale() const { return s_->odometryScale(); }
+double Tracker::odometryScaleEvidenceM() const { return s_->scale_odometry_m; }
 
 void Tracker::reset() {
   s_->pose.reset();
@@ -222,6 +251,9 @@ TrackResult Tracker::add(const Frame& frame) {
   // The prior's step: odometry when this and the previous frame have it, else the last step
   // between checked poses (constant velocity), else none.
   SE2 step;
+  double odometry_step_m = 0.0;  // the odometry's own distance of this step, before its scale
+  if (!s.pinned) s.chord_pose.reset();
+  s.pinned = false;
   const bool reading = frame.T_odom_robot && frame.T_odom_robot->isFinite();
   const bool still = reading && s.last_reading && frame.T_odom_robot->isApprox(*s.last_reading, 0.0, 0.0);
   if (!still) {
@@ -233,7 +265,10 @@ TrackResult Tracker::add(const Frame& frame) {
   const bool odom_ok = reading && !s.odometry_frozen;
   const bool had_odom = s.last_odom.has_value();
   if (odom_ok && s.last_odom) {
-    step = s.last_odom->inverse() * *frame.T_odom_robot;
+    const SE2 read = s.last_odom->inverse() * *frame.T_odom_robot;
+    odometry_step_m = read.translation().norm();
+    const double k = s.odometryScale();
+    step = SE2(k * read.x(), k * read.y(), read.theta());
     s.beyond_map_path_m += step.translation().norm();
     if (s.dead_reckoned) {
       s.dead_reckoned = *s.dead_reckoned * step;
@@ -304,7 +339,9 @@ TrackResult Tracker::add(const Frame& frame) {
       }
       return false;
     };
+    bool took_prior_position = false;  // the map could not tell the match from the prior's position
     for (const SE2& init : priors) {
+      took_prior_position = false;
       m = registration::matchLikelihoodField(s.field, sub, init, o.field);
       r.iterations += m.iterations;
       if (along_prior && m.T_target_source.isFinite())
@@ -331,6 +368,7 @@ TrackResult Tracker::add(const Frame& frame) {
             const SE2 near(init.x(), init.y(), m.T_target_source.theta());
             const double near_score = s.loc->score(sub, near, sensor);
             if (near_score >= r.score - o.prior_score_margin) {
+              took_prior_position = true;
               m.T_target_source = near;
               r.score = near_score;
               correction = init.inverse() * near;
@@ -396,6 +434,25 @@ TrackResult Tracker::add(const Frame& frame) {
     if (why.empty()) {
       // The step is measured between checked poses only; carried priors are not evidence.
       if (s.lost == 0) s.step = s.pose->inverse() * m.T_target_source;
+      // The odometry's scale from steps whose both ends the map placed in every direction: not along
+      // a corridor (the position there is the odometry's), not on the recent scans, not where the
+      // prior's position was kept.
+      const bool pinned = with_odometry && !along_prior && !r.beyond_map && !took_prior_position &&
+                          !(s.unpinned_path_m > o.max_degenerate_path_m);
+      if (pinned && s.chord_pose && s.lost == 0) {
+        s.chord_path_m += odometry_step_m;
+        if (s.chord_path_m >= State::kScaleChordM) {
+          const double odometry_m = (s.chord_odom->inverse() * *frame.T_odom_robot).translation().norm();
+          if (odometry_m >= State::kScaleChordStraight * s.chord_path_m)
+            s.observeScale((s.chord_pose->inverse() * m.T_target_source).translation().norm(), odometry_m);
+          s.chord_pose.reset();
+        }
+      }
+      if (pinned && !s.chord_pose) {
+        s.chord_pose = m.T_target_source;
+        s.chord_odom = frame.T_odom_robot;
+        s.chord_path_m = 0.0;
+      }
       if (!r.beyond_map) s.beyond_map_path_m = 0.0;
       s.lost = 0;
       s.candidate.reset();
@@ -427,6 +484,7 @@ TrackResult Tracker::add(const Frame& frame) {
       s.placed(m.T_target_source, frame.time);
       s.noteStill(still, m.T_target_source);
       r.status = TrackStatus::kTracking;
+      s.pinned = pinned;
       r.T_world_robot = m.T_target_source;
       return r;
     }

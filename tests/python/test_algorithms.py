@@ -172,6 +172,12 @@ def test_tracker(office_frames, office_map):
     assert not any(r["odometry_frozen"] for r in results)
     off = lidar2d.Tracker(office_map, recent_scans=0)
     assert [off.add(f)["status"] for f in office_frames] == statuses
+    # The odometry's distance scale: learnt from the pinned steps, or 1 as read.
+    assert 0.9 <= tracker.odometry_scale <= 1.1
+    as_read = lidar2d.Tracker(office_map, learn_odometry_scale=False)
+    for f in office_frames[:100]:
+        as_read.add(f)
+    assert as_read.odometry_scale == 1.0
     with pytest.raises(TypeError):
         tracker.add(np.zeros((10, 2)))
 

@@ -131,6 +131,13 @@ struct TrackerOptions {
   /// is tracked from it). The default allows the odometry 5% of drift before a pose 0.5 m off would be
   /// reported. >= 0; 0: off (the map match places degenerate scans along the corridor too)
   double max_degenerate_path_m = 10.0;
+  /// With odometry, the odometry's steps are scaled by the metres the map matches measured per
+  /// metre of odometry (Tracker::odometryScale): on chords of 0.5 m of odometry path along runs of
+  /// scans the map pinned in every direction (tracked, not degenerate, not on the recent scans), the
+  /// last ~100 m of them weighing most; once 5 m of chords are measured, within 0.9-1.1. Along a corridor the
+  /// position is the odometry's alone (max_degenerate_path_m), and a wheel radius 2% off puts it
+  /// 2 cm per metre behind or ahead. false: the odometry's distances as read
+  bool learn_odometry_scale = true;
   void validate() const;
   static registration::LikelihoodFieldOptions trackingField() {
     registration::LikelihoodFieldOptions o;
@@ -190,6 +197,11 @@ class Tracker {
 
   const Localizer& localizer() const;
   const TrackerOptions& options() const;
+  /// The factor the odometry's distances are scaled by (TrackerOptions::learn_odometry_scale): 1
+  /// until 5 m of chords between pinned scans are measured, or when the option is off.
+  double odometryScale() const;
+  /// Metres of odometry chords the scale is measured over (fading with ~100 m).
+  double odometryScaleEvidenceM() const;
 
  private:
   struct State;
