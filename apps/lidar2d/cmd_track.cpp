@@ -298,7 +298,7 @@ void addTrackCommand(CLI::App& app) {
   sub->add_flag_callback(
       "--no-odometry-scale", [a] { a->options.learn_odometry_scale = false; },
       "with odometry, take its distances as read (default: scaled by the metres the map matches measure per metre "
-      "of it, once 5 m of steps between scans the map pins are measured)");
+      "of it on 0.5 m chords between scans the map pins, once 5 m of them are measured)");
   sub->add_flag("-q,--quiet", a->quiet, "no summary on stderr");
   addReaderOptions(sub, a->reader);
   sub->callback([a] { runTrack(*a); });

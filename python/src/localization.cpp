@@ -229,7 +229,7 @@ void bindLocalization(py::module_& m) {
           "scan was not tracked), iterations, track_seconds, global_seconds.")
       .def("reset", &localization::Tracker::reset, "Forgets the pose: the next scan is placed by global localization.")
       .def_property_readonly("odometry_scale", &localization::Tracker::odometryScale,
-                             "the factor the odometry's distances are scaled by (1 until 5 m of steps between "
+                             "the factor the odometry's distances are scaled by (1 until 5 m of chords between "
                              "scans the map pins are measured, or with learn_odometry_scale=False)");
 }
 

@@ -437,9 +437,11 @@ TrackResult Tracker::add(const Frame& frame) {
       // The odometry's scale from steps whose both ends the map placed in every direction: not along
       // a corridor (the position there is the odometry's), not on the recent scans, not where the
       // prior's position was kept.
-      const bool pinned = with_odometry && !along_prior && !r.beyond_map && !took_prior_position &&
-                          !(s.unpinned_path_m > o.max_degenerate_path_m);
-      if (pinned && s.chord_pose && s.lost == 0) {
+      const bool pinned = o.learn_odometry_scale && with_odometry && !along_prior && !r.beyond_map &&
+                          !took_prior_position && !(s.unpinned_path_m > o.max_degenerate_path_m);
+      // A chord exists only from a scan tracked and pinned just before this one (reset otherwise at
+      // the start of add).
+      if (pinned && s.chord_pose) {
         s.chord_path_m += odometry_step_m;
         if (s.chord_path_m >= State::kScaleChordM) {
           const double odometry_m = (s.chord_odom->inverse() * *frame.T_odom_robot).translation().norm();

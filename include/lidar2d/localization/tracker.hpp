@@ -134,9 +134,10 @@ struct TrackerOptions {
   /// With odometry, the odometry's steps are scaled by the metres the map matches measured per
   /// metre of odometry (Tracker::odometryScale): on chords of 0.5 m of odometry path along runs of
   /// scans the map pinned in every direction (tracked, not degenerate, not on the recent scans), the
-  /// last ~100 m of them weighing most; once 5 m of chords are measured, within 0.9-1.1. Along a corridor the
-  /// position is the odometry's alone (max_degenerate_path_m), and a wheel radius 2% off puts it
-  /// 2 cm per metre behind or ahead. false: the odometry's distances as read
+  /// last ~100 m of them weighing most; once 5 m of chords are measured, within 0.9-1.1. Along a
+  /// corridor the position is the odometry's alone (max_degenerate_path_m), and a wheel radius 2%
+  /// off puts it 2 cm per metre behind or ahead. false: the odometry's distances as read (nothing
+  /// measured)
   bool learn_odometry_scale = true;
   void validate() const;
   static registration::LikelihoodFieldOptions trackingField() {

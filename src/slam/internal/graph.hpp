@@ -71,12 +71,13 @@ inline constexpr double kCycleMinSigmaM = 0.002;
 CycleMeasure measureCycles(const SlamState& s);
 
 /// Before the final optimisation: measures the cycles (stats loop_cycles, cycle_*) and, when there
-/// are kCycleMinCount of them (partly from kCycleFadeFrom) and the odometry erred clearly less than
-/// the front end per step (kCycleOdometryRatio; partly up to kCycleOdometryRatioNone), has the final optimisation hold
-/// the odometry links' sigmas to the odometry's measured errors (never wider than their own; at least kCycleMinSigmaRad
-/// and kCycleMinSigmaM) and the front end's links' rotation sigma to at least theirs (SlamState::cycles_*; the state's
-/// edges keep their weights), with an event. Odometry better than the scan matching, which the defaults' odometry
-/// weights (made for odometry drifting a degree per metre) cannot know, then holds the map.
+/// are kCycleMinCount of them (partly from kCycleFadeFrom) and the odometry erred clearly less
+/// than the front end per step (kCycleOdometryRatio; partly up to kCycleOdometryRatioNone), has
+/// the final optimisation hold the odometry links' sigmas to the odometry's measured errors (never
+/// wider than their own; at least kCycleMinSigmaRad and kCycleMinSigmaM) and the front end's links'
+/// rotation sigma to at least theirs (SlamState::cycles_*; the state's edges keep their weights),
+/// with an event. Odometry better than the scan matching, which the defaults' odometry weights
+/// (made for odometry drifting a degree per metre) cannot know, then holds the map.
 void calibrateFromCycles(SlamState& s);
 /// How checkAtEnd's event of a fragment no closure tied begins.
 inline constexpr std::string_view kFragmentEvent = "fragment from node ";
