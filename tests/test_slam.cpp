@@ -1498,6 +1498,49 @@ TEST(SlamGraph, TheCyclesWeightingFadesInWithTheirNumber) {
                    std::max(internal::measureCycles(full).odometry_rad, internal::kCycleMinSigmaRad));
 }
 
+TEST(SlamGraph, StepsTheFrontEndDidNotMatchWidenTheLoopSearchWindow) {
+  // Keyframes 3 m apart along a line. Matched steps leave the proximity search's window to the
+  // drift rule (loop_window_per_m of the path); a step placed by the odometry adds its prior's
+  // sigmas, and its heading sigma turns every later node by the lever between them, until a closure.
+  const SlamOptions o;
+  internal::SlamState s{o};
+  const internal::StepSigmas prior{0.3, 3.0 * kDeg};  // the motion prior's of every step
+  const auto add = [&](internal::Placement placement) {
+    const std::size_t n = s.nodes.size();
+    Node node;
+    node.T_world_robot = node.T_local_robot = SE2(3.0 * static_cast<double>(n), 0.0, 0.0);
+    s.nodes.push_back(node);
+    s.node_path_m.push_back(3.0 * static_cast<double>(n));
+    internal::propagatePlacedCovariance(s, n, false, placement, prior);
+  };
+  const auto driftRule = [&](std::size_t n) {
+    return std::clamp(o.loop_window_per_m * s.node_path_m[n], o.loop_linear_window_m, o.loop_max_linear_window_m);
+  };
+  for (int i = 0; i < 5; ++i) add(internal::Placement::kMatched);
+  EXPECT_EQ(s.node_placed_sigma_m[4], 0.0);
+  EXPECT_DOUBLE_EQ(s.proximityWindowM(4), driftRule(4));
+  add(internal::Placement::kOdometry);  // node 5
+  EXPECT_NEAR(s.node_placed_sigma_m[5], prior.m, 1e-12);
+  for (int i = 0; i < 20; ++i) add(internal::Placement::kMatched);  // node 25, 60 m on
+  EXPECT_NEAR(s.node_placed_sigma_m[25], std::hypot(prior.m, 60.0 * prior.rad), 1e-9);
+  const double placed = internal::SlamState::kPlacedWindowSigmas * s.node_placed_sigma_m[25];
+  EXPECT_NEAR(s.proximityWindowM(25),
+              std::clamp(std::hypot(o.loop_window_per_m * s.node_path_m[25], placed), o.loop_linear_window_m,
+                         o.loop_max_linear_window_m),
+              1e-9);
+  EXPECT_GT(s.proximityWindowM(25), driftRule(25) + 1.0);
+  // A refined placement counts as its link in the graph does, as a loop closure.
+  add(internal::Placement::kRefined);
+  EXPECT_NEAR(s.node_placed_sigma_m[26],
+              std::sqrt(prior.m * prior.m + std::pow(63.0 * prior.rad, 2) + o.loop_sigma_m * o.loop_sigma_m), 1e-9);
+  // An accepted closure starts the count again.
+  s.last_loop_node = 26;
+  add(internal::Placement::kMatched);
+  EXPECT_EQ(s.node_placed_sigma_m[27], 0.0);
+  s.last_loop_node.reset();
+  EXPECT_DOUBLE_EQ(s.proximityWindowM(27), driftRule(27));
+}
+
 TEST(Slam, OdometryBetterThanShortRangeMatchesHoldsTheMap) {
   // The office with perfect odometry and a 3 m laser (a low-cost robot's): the front end's matches
   // of a few metres of wall err more per step than the odometry, which the defaults' odometry links

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -48,6 +49,37 @@ void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, Placeme
     if (restart) s.restart_odometry = {s.edges.size(), s.constraints.size(), n};
     s.addEdge(std::move(o), diagSqrtInfo(sm, sr), 0.0);
   }
+}
+
+void propagatePlacedCovariance(SlamState& s, std::size_t n, bool restart, Placement placement, StepSigmas prior) {
+  if (restart || n == 0 || s.last_loop_node != s.placed_cov_since) {
+    s.placed_cov.setZero();
+    s.placed_cov_since = s.last_loop_node;
+  }
+  if (n > 0 && !restart) {
+    const SE2& a = s.nodes[n - 1].T_world_robot;
+    const SE2& b = s.nodes[n].T_world_robot;
+    // x_n = x_{n-1} (+) step: a heading error at n-1 moves node n by the lever between them.
+    Eigen::Matrix3d J = Eigen::Matrix3d::Identity();
+    J(0, 2) = -(b.translation().y() - a.translation().y());
+    J(1, 2) = b.translation().x() - a.translation().x();
+    s.placed_cov = J * s.placed_cov * J.transpose();
+    if (placement != Placement::kMatched) {
+      // The odometry's error as the motion prior knows it (its learnt noise), not the graph's
+      // odometry links' (made for odometry drifting a degree per metre and more): with those, the
+      // simulated office's keyframes from a 58-degree depth camera searched look-alike rooms 5-7 m
+      // away and took them (BENCHMARK.md, SLAM, sparser keyframes).
+      const bool refined = placement == Placement::kRefined;
+      const double sm = refined ? s.opt.loop_sigma_m : prior.m;
+      const double sr = refined ? s.opt.loop_sigma_rad : prior.rad;
+      Eigen::Matrix3d G = Eigen::Matrix3d::Identity();
+      G.topLeftCorner<2, 2>() = a.rotation();
+      s.placed_cov += G * Eigen::Vector3d(sm * sm, sm * sm, sr * sr).asDiagonal() * G.transpose();
+    }
+  }
+  if (s.node_placed_sigma_m.size() < n) s.node_placed_sigma_m.resize(n, 0.0);  // nodes of a resumed state
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(s.placed_cov.topLeftCorner<2, 2>());
+  s.node_placed_sigma_m.push_back(std::sqrt(std::max(0.0, eig.eigenvalues()(1))));
 }
 
 namespace {

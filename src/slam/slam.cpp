@@ -413,7 +413,8 @@ struct Slam::Impl {
         state.scans.push_back(rec);
         addNode(f, scan_index, t.T_local_robot, std::move(pts), raw, t.degenerate, t.dir, t.restart,
                 prediction.source == internal::PriorSource::kOdometry ? prediction.T_odom_scaled : std::nullopt,
-                t.placement.value_or(internal::Placement::kMatched));  // a restart's link: `restart`
+                t.placement.value_or(internal::Placement::kMatched),  // a restart's link: `restart`
+                {prediction.sigma_m, prediction.sigma_rad});
       } else {
         rec.node = nodes_added - 1;
         rec.T_node_scan = rel;
@@ -434,14 +435,15 @@ struct Slam::Impl {
   /// nodes behind and the run is the same as without its thread.
   void addNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                bool degenerate, const Eigen::Vector2d& dir_local, bool restart, std::optional<SE2> odometry,
-               internal::Placement placement = internal::Placement::kMatched) {
+               internal::Placement placement = internal::Placement::kMatched, internal::StepSigmas prior = {}) {
     ++nodes_added;
     last_node_time = f.time;
     last_node_T_local = T_local;
     front_end.addNode(T_local, pts, restart);
     auto work = [this, f, scan_index, T_local, pts = std::move(pts), raw, degenerate, dir_local, restart, odometry,
-                 placement]() mutable {
-      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odometry, placement);
+                 placement, prior]() mutable {
+      graphNode(f, scan_index, T_local, std::move(pts), raw, degenerate, dir_local, restart, odometry, placement,
+                prior);
       publish();
     };
     if (back_end)
@@ -454,7 +456,7 @@ struct Slam::Impl {
   /// then the back end's searches and optimisation (backEnd).
   void graphNode(const Frame& f, std::size_t scan_index, const SE2& T_local, Points2 pts, const Points2& raw,
                  bool degenerate, const Eigen::Vector2d& dir_local, bool restart, const std::optional<SE2>& odometry,
-                 internal::Placement placement) {
+                 internal::Placement placement, internal::StepSigmas prior) {
     const SlamOptions& opt = state.opt;
     const std::size_t n = state.nodes.size();
     Node node;
@@ -492,6 +494,7 @@ struct Slam::Impl {
     // every node (as a lost track's fragment does), not every loop_search_every_nodes.
     if (placement != internal::Placement::kMatched)
       state.search_every_node_until = n + internal::SlamState::kSearchEveryNodeAfterPlaced;
+    internal::propagatePlacedCovariance(state, n, restart, placement, prior);
     backEnd(n, static_cast<int>(state.submaps.back().nodes.size()) >= opt.submap_nodes);
   }
 };

@@ -18,6 +18,19 @@ namespace lidar2d::slam::internal {
 void addSequentialConstraints(SlamState& s, std::size_t n, bool restart, Placement placement, bool degenerate,
                               const Eigen::Vector2d& dir_local);
 
+/// Sigmas of one step: translation (x and y) [m], rotation [rad].
+struct StepSigmas {
+  double m = 0.0;
+  double rad = 0.0;
+};
+
+/// Sets SlamState::node_placed_sigma_m of node `n`, the newest (after its sequential constraints):
+/// the covariance of the steps since the latest accepted closure that the front end did not match,
+/// carried to node n, with the step to n added when its `placement` is not a match: `prior`, the
+/// motion prior's sigmas of that step (its learnt odometry noise), for Placement::kOdometry; the
+/// loop closures' sigmas (its link's in the graph) for Placement::kRefined.
+void propagatePlacedCovariance(SlamState& s, std::size_t n, bool restart, Placement placement, StepSigmas prior);
+
 /// Optimises every node's T_world_robot (node 0 fixed) with at most `iterations`; the front end's
 /// local frame follows the newest node.
 void optimize(SlamState& s, int iterations);

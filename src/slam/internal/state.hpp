@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstddef>
 #include <memory>
 #include <optional>
@@ -104,13 +105,26 @@ struct SlamState {
   SE2 T_world_local;
   std::optional<std::size_t> last_loop_node;  // latest node with an accepted closure
   /// Half-width of the proximity search's window at node `n`: loop_window_per_m of the path
-  /// travelled since the latest accepted closure (all of it before the first), within
-  /// [loop_linear_window_m, loop_max_linear_window_m]. The estimate drifts along an unclosed path.
+  /// travelled since the latest accepted closure (all of it before the first), in quadrature with
+  /// kPlacedWindowSigmas of node_placed_sigma_m, within [loop_linear_window_m,
+  /// loop_max_linear_window_m]. The estimate drifts along an unclosed path.
   double proximityWindowM(std::size_t n) const {
     const double open = node_path_m[n] - (last_loop_node && *last_loop_node <= n ? node_path_m[*last_loop_node] : 0.0);
-    return std::clamp(opt.loop_window_per_m * open, opt.loop_linear_window_m,
+    const double placed = n < node_placed_sigma_m.size() ? kPlacedWindowSigmas * node_placed_sigma_m[n] : 0.0;
+    return std::clamp(std::hypot(opt.loop_window_per_m * open, placed), opt.loop_linear_window_m,
                       std::max(opt.loop_linear_window_m, opt.loop_max_linear_window_m));
   }
+  /// The position sigma [m] the steps the front end did not match (placed by the odometry, or
+  /// refined by a weak match) give each node since the latest accepted closure
+  /// (propagatePlacedCovariance): each such step's sigmas, carried forward by the path after it (a
+  /// heading error turns the rest of the path). Steps the scans matched drift as loop_window_per_m
+  /// says; these may drift much more (keyframes metres apart: degrees on one step).
+  std::vector<double> node_placed_sigma_m;
+  Eigen::Matrix3d placed_cov = Eigen::Matrix3d::Zero();  // of the newest node (world frame)
+  std::optional<std::size_t> placed_cov_since;           // last_loop_node when placed_cov was reset
+  /// The window holds this many of those sigmas (with the matched steps' drift, in quadrature);
+  /// three let the simulated office's look-alike rooms in (BENCHMARK.md, SLAM, sparser keyframes).
+  static constexpr double kPlacedWindowSigmas = 2.0;
   // The first node of the current fragment (the front end lost track there) while no accepted
   // closure ties the fragment to the nodes before it: the descriptor search relocalizes its nodes
   // against every earlier submap, without the drift limits (its link is only the prediction).
