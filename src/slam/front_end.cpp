@@ -186,6 +186,7 @@ FrontEnd::Tracked FrontEnd::track(const Frame& f, const Points2& pts, const Pred
     if (consecutive_failures >= 5 && pts.size() >= opt.min_points) {
       s_.event(f, "lost track for 5 scans: local map restarted here (kidnapping?); loop closure may reconnect");
       out.restart = true;
+      out.lost_before = static_cast<std::size_t>(consecutive_failures - 1);
       consecutive_failures = 0;
     }
   }

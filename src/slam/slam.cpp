@@ -408,6 +408,7 @@ struct Slam::Impl {
                          std::abs(rel.theta()) >= opt.node_min_rotation_rad ||
                          f.time - last_node_time >= opt.node_max_interval_s;
       if (t.restart || (t.placement && moved && pts.size() >= opt.min_points)) {
+        if (t.restart) rehangLostScans(t.lost_before, t.T_local_robot);
         rec.node = nodes_added;
         rec.is_node = true;
         state.scans.push_back(rec);
@@ -426,6 +427,23 @@ struct Slam::Impl {
     ++state.stats.scans;
     state.scans.back().seconds = secondsSince(t0);
     state.stats.total_seconds += state.scans.back().seconds;
+  }
+
+  /// The `count` scans a lost track left at the prediction just before its restart (at
+  /// `T_local_restart`, about to become node `nodes_added`) hang off the restart's node instead of
+  /// the node before them, at the same place in the local frame (the odometry's steps between them
+  /// and the restart). None of them matched the map before the restart: after a kidnapping they were
+  /// taken where the new fragment is, and the restart's fragment is what the relocalization places;
+  /// hung off the node before the kidnapping they stayed metres off, where the robot had been.
+  /// Without a kidnapping the odometry across the lost track links both nodes the same way.
+  void rehangLostScans(std::size_t count, const SE2& T_local_restart) {
+    const SE2 T_restart_local = T_local_restart.inverse();
+    for (auto it = state.scans.rbegin(); count > 0 && it != state.scans.rend(); ++it, --count) {
+      if (it->is_node || it->matched) break;  // (never: the front end's failures are neither)
+      const SE2 T_local_scan = last_node_T_local * it->T_node_scan;
+      it->node = nodes_added;
+      it->T_node_scan = T_restart_local * T_local_scan;
+    }
   }
 
   /// Scan `scan_index` (frame `f`, at `T_local`, with its points `pts` and `raw`, and its trusted

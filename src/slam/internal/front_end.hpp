@@ -44,6 +44,7 @@ class FrontEnd {
     bool degenerate = false;  ///< the match (or the one refining the placement) could not pin `dir`
     Eigen::Vector2d dir = Eigen::Vector2d::Zero();  ///< local frame, the direction the scan could not pin
     bool restart = false;                           ///< tracking lost: the local map restarts at this scan
+    std::size_t lost_before = 0;  ///< restart: the scans just before it left at the prediction, in a row
     bool overrode_prior = false;                    ///< the match contradicts the prior (strong scan evidence)
     bool matched() const { return placement == Placement::kMatched; }
   };
