@@ -1801,9 +1801,8 @@ TEST(Slam, KidnappedIntoTheMappedAreaIsRelocalizedIntoOneMap) {
   EXPECT_EQ(slam->stats().fragments, 1u) << all;
   // Every pose is where it was: the fragment after the lost track is placed by the map, and the
   // odometry across the kidnapping, wrong, does not bend the map before it. So are the scans
-  // between the kidnapping and the lost track, which matched nothing: they hang off the fragment
-  // after it, by the odometry's steps to its first node (hung off the node before the kidnapping,
-  // where that odometry put them, they were metres off).
+  // between the kidnapping and the lost track, which matched nothing: they belong to the fragment
+  // after it, placed by the odometry's steps to its first node.
   const Errors e = poseErrors(est, frames);
   EXPECT_LT(e.rms, 0.05);
   EXPECT_LT(e.max, 0.15);

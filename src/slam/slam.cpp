@@ -433,9 +433,9 @@ struct Slam::Impl {
   /// `T_local_restart`, about to become node `nodes_added`) hang off the restart's node instead of
   /// the node before them, at the same place in the local frame (the odometry's steps between them
   /// and the restart). None of them matched the map before the restart: after a kidnapping they were
-  /// taken where the new fragment is, and the restart's fragment is what the relocalization places;
-  /// hung off the node before the kidnapping they stayed metres off, where the robot had been.
-  /// Without a kidnapping the odometry across the lost track links both nodes the same way.
+  /// taken where the new fragment is, and the restart's fragment is what the relocalization places
+  /// (the node before them lies where the robot had been). Without a kidnapping the odometry across
+  /// the lost track links both nodes the same way.
   void rehangLostScans(std::size_t count, const SE2& T_local_restart) {
     const SE2 T_restart_local = T_local_restart.inverse();
     for (auto it = state.scans.rbegin(); count > 0 && it != state.scans.rend(); ++it, --count) {
