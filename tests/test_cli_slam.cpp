@@ -61,6 +61,10 @@ TEST_F(CliSlam, WritesEveryOutput) {
   EXPECT_NEAR(summary["odometry_scale"].get<double>(), 1.0 / 1.005, 0.003);
   EXPECT_GE(summary["odometry_scale_evidence_m"].get<double>(), slam::kOdometryScaleMinEvidenceM);
   EXPECT_NE(test::readFile(run() / "report.html").find("m per metre of odometry"), std::string::npos);
+  // Nothing moves in the simulated office but the robot: no return is left out as a moving object.
+  EXPECT_EQ(summary["moving_points"], 0);
+  EXPECT_EQ(summary["scans_with_moving_points"], 0);
+  EXPECT_NE(test::readFile(run() / "report.html").find("moving objects left out"), std::string::npos);
   // The loop closures' cycles: the simulator's odometry errs more per step than its matches, so the
   // odometry keeps its links' weights.
   EXPECT_GT(summary["loop_cycles"].get<int>(), 0);

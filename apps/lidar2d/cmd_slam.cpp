@@ -278,6 +278,8 @@ void run(const SlamArgs& a) {
   j["odometry_scale"] = s.odometry_scale;
   j["odometry_scale_evidence_m"] = s.odometry_scale_evidence_m;
   j["degenerate_scans"] = s.degenerate;
+  j["moving_points"] = s.moving_points;
+  j["scans_with_moving_points"] = s.moving_scans;
   j["loop_searches"] = s.loop_searches;
   j["loop_closures_accepted"] = s.loop_accepted;
   j["loop_closures_rejected"] = s.loop_rejected;

@@ -164,6 +164,9 @@ table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 8px;text-
   row("odometry", j.value("used_odometry", false) ? "used as the prediction" : "not used (scan matching only)");
   row("scans matched / unmatched / correlative fallbacks",
       fmt::format("{} / {} / {}", j.value("matched", 0), j.value("unmatched", 0), j.value("correlative_fallbacks", 0)));
+  row("moving objects left out", fmt::format("{} returns in {} scans (people walking with the robot or crossing its "
+                                             "path; drop_moving_objects)",
+                                             j.value("moving_points", 0), j.value("scans_with_moving_points", 0)));
   row("degenerate scans", fmt::format("{} ({} nodes, orange on the map)", j.value("degenerate_scans", 0), degenerate));
   row("loop closures", fmt::format("{} accepted, {} rejected; {} searched by branch and bound (drawn: {} accepted, {} rejected); "
                                    "{} down-weighted by the pose graph (the rest of the graph contradicts them)",

@@ -62,6 +62,8 @@ py::dict statsDict(const slam::SlamStats& s) {
   d["matched"] = s.matched;
   d["unmatched"] = s.unmatched;
   d["degenerate"] = s.degenerate;
+  d["moving_points"] = s.moving_points;
+  d["moving_scans"] = s.moving_scans;
   d["fragments"] = s.fragments;
   d["odometry_scale"] = s.odometry_scale;
   d["odometry_scale_evidence_m"] = s.odometry_scale_evidence_m;

@@ -20,6 +20,7 @@
 #include "src/slam/internal/front_end.hpp"
 #include "src/slam/internal/graph.hpp"
 #include "src/slam/internal/loop_closure.hpp"
+#include "src/slam/internal/moving_objects.hpp"
 #include "src/slam/internal/points.hpp"
 #include "src/slam/internal/state.hpp"
 
@@ -196,6 +197,7 @@ struct Slam::Impl {
   internal::FrontEnd front_end;
   internal::LoopClosure loops;
   internal::DescriptorLoops descriptors;
+  internal::MovingObjectFilter moving_objects{state.opt};
   bool finished = false;
   // The name of the session a restored state continues with, until its first scan opens it (a state
   // saved again before that is the saved one, byte for byte).
@@ -356,10 +358,20 @@ struct Slam::Impl {
     return out;
   }
 
-  void add(const Frame& f) {
+  void add(const Frame& frame) {
     const auto t0 = Clock::now();
     if (finished) throw invalidArgument("add() after finish()", {"Slam", 0, "add"});
     const SlamOptions& opt = state.opt;
+    // The scan without its moving objects from here on: matched, kept with its node for the
+    // submaps and loop closures (a saved state holds it so).
+    Frame filtered;
+    std::size_t moving = 0;
+    if (opt.drop_moving_objects) moving = moving_objects.filter(frame, filtered);
+    const Frame& f = moving > 0 ? filtered : frame;
+    if (moving > 0) {
+      state.stats.moving_points += moving;
+      ++state.stats.moving_scans;
+    }
     if (resumed_session) state.sessions.push_back({*std::exchange(resumed_session, std::nullopt), state.scans.size()});
     const Points2 raw = internal::scanPoints(f, opt.max_range_m);
     Points2 pts = internal::voxelFilter(raw, opt.scan_voxel_m);

@@ -82,6 +82,8 @@ inline constexpr double kOdometryScaleMinEvidenceM = 10.0;
 struct SlamStats {
   std::size_t scans = 0, nodes = 0, submaps = 0;
   std::size_t matched = 0, correlative_fallbacks = 0, unmatched = 0, degenerate = 0;
+  /// Returns left out as moving objects (SlamOptions::drop_moving_objects), and the scans they were in.
+  std::size_t moving_points = 0, moving_scans = 0;
   std::size_t prior_overridden = 0;  ///< matches taken against the motion prior, on strong scan evidence
   std::size_t prior_kept = 0;        ///< matches contradicting the prior without that evidence (prior kept)
   std::size_t fragments = 0;         ///< stretches between lost tracks not tied together by a loop closure (1: all one)

@@ -29,6 +29,7 @@ struct SlamOptions {
   bool use_odometry = true;
   double max_range_m = 30.0;
   std::size_t min_points = 20;
+  bool drop_moving_objects = true;
 
   // --- motion filter: which scans become nodes ---
   double node_min_translation_m = 0.25;
@@ -210,6 +211,10 @@ inline constexpr SlamOption kSlamOptionTable[] = {
      "returns at or beyond this range are not matched"},
     {LIDAR2D_SLAM_FIELD(min_points), "input", "points", OptionRange::atLeast(3),
      "a scan with fewer valid points is not matched (its pose is the prediction)"},
+    {LIDAR2D_SLAM_FIELD(drop_moving_objects), "input", "flag", OptionRange::any(),
+     "leave out small objects (0.8 m across at most) that moved: those that kept their place in the robot's "
+     "frame while the odometry moved it 0.5 m (people walking with it, its own parts) and those standing where "
+     "the scan from 0.5 m back saw through (people crossing); needs odometry"},
     {LIDAR2D_SLAM_FIELD(node_min_translation_m), "motion filter", "m", OptionRange::atLeast(0),
      "a scan becomes a node when it moved this far from the last node"},
     {LIDAR2D_SLAM_FIELD(node_min_rotation_rad), "motion filter", "deg", OptionRange::atLeast(0),
