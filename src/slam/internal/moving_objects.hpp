@@ -36,8 +36,8 @@ namespace lidar2d::slam::internal {
 ///   frame as they are, and the earlier scan could have seen it standing (inView: a standing
 ///   object coming into range matches something else there as often as not): it moved with the
 ///   robot; or
-/// - more than half of them stand where the earlier scan saw through (seenThrough): it walked into
-///   space that scan saw empty (a person crossing).
+/// - it is kMinWalkerM across or more and more than half of its returns stand where the earlier
+///   scan saw through (seenThrough): it walked into space that scan saw empty (a person crossing).
 /// Only with odometry: without it there is no motion to compare with; nor across a gap in the log
 /// (more than SlamOptions::time_gap_s between frames, or time going backwards): the odometry may
 /// not know where the robot was carried meanwhile. A robot standing still or
@@ -53,6 +53,7 @@ class MovingObjectFilter {
   static constexpr double kGapM = 0.2;
   static constexpr double kGapBeams = 3.0;
   static constexpr double kMaxObjectM = 0.8;
+  static constexpr double kMinWalkerM = 0.1;
   static constexpr double kSameM = 0.1;
   static constexpr double kStaticM = 0.2;
 
