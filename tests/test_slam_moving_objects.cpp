@@ -122,6 +122,16 @@ double sum(const std::vector<std::size_t>& v, std::size_t from = 0, std::size_t 
   return s;
 }
 
+/// In frames [from, to) the person is seen (5 returns or more) and every return of theirs is left
+/// out; no return of the walls is, in any frame.
+void expectThePersonLeftOut(const Outcome& o, std::size_t from, std::size_t to) {
+  for (std::size_t k = from; k < to; ++k) {
+    EXPECT_GE(o.disc_returns[k], 5u) << k;
+    EXPECT_EQ(o.disc_left_out[k], o.disc_returns[k]) << k;
+  }
+  EXPECT_EQ(sum(o.walls_left_out), 0.0);
+}
+
 TEST(SlamMovingObjects, APersonWalkingAheadAtTheRobotsPaceIsLeftOut) {
   // 2 m ahead and 0.5 m to the left, all the way: fixed in the robot's frame.
   const Outcome o = drive(
@@ -129,22 +139,14 @@ TEST(SlamMovingObjects, APersonWalkingAheadAtTheRobotsPaceIsLeftOut) {
   // Before 0.5 m of motion there is nothing to compare with; from then on every return of the
   // person is left out, and none of the walls'.
   EXPECT_EQ(sum(o.disc_left_out, 0, 5), 0.0);
-  for (std::size_t k = 5; k < 40; ++k) {
-    EXPECT_GE(o.disc_returns[k], 5u) << k;
-    EXPECT_EQ(o.disc_left_out[k], o.disc_returns[k]) << k;
-  }
-  EXPECT_EQ(sum(o.walls_left_out), 0.0);
+  expectThePersonLeftOut(o, 5, 40);
 }
 
 TEST(SlamMovingObjects, APersonFollowingTheRobotIsLeftOut) {
   const Outcome o = drive(40, [](std::size_t k) {
     return std::vector<Disc>{{Eigen::Vector2d(-6.0 + 0.1 * static_cast<double>(k), -0.4)}};
   });
-  for (std::size_t k = 5; k < 40; ++k) {
-    EXPECT_GE(o.disc_returns[k], 5u) << k;
-    EXPECT_EQ(o.disc_left_out[k], o.disc_returns[k]) << k;
-  }
-  EXPECT_EQ(sum(o.walls_left_out), 0.0);
+  expectThePersonLeftOut(o, 5, 40);
 }
 
 TEST(SlamMovingObjects, APersonCrossingThePathIsLeftOut) {
@@ -154,11 +156,7 @@ TEST(SlamMovingObjects, APersonCrossingThePathIsLeftOut) {
   });
   // Where the scan from 0.5 m back saw the floor, the person stands now: left out, every frame
   // while the person is ahead of the robot.
-  for (std::size_t k = 5; k < 25; ++k) {
-    EXPECT_GE(o.disc_returns[k], 5u) << k;
-    EXPECT_EQ(o.disc_left_out[k], o.disc_returns[k]) << k;
-  }
-  EXPECT_EQ(sum(o.walls_left_out), 0.0);
+  expectThePersonLeftOut(o, 5, 25);
 }
 
 TEST(SlamMovingObjects, PostsTheRobotPassesAreKept) {

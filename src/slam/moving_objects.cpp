@@ -2,49 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
 #include <limits>
 #include <numbers>
 #include <optional>
-#include <unordered_map>
 #include <utility>
 
+#include "src/geometry/kdtree2.hpp"
+#include "src/slam/internal/points.hpp"
+
 namespace lidar2d::slam::internal {
-
-namespace {
-
-/// The baseline scan's returns in cells of kCellM, for "is a return within d of p".
-class PointGrid {
- public:
-  static constexpr double kCellM = 0.2;
-
-  explicit PointGrid(const Points2& pts) {
-    cells_.reserve(pts.size());
-    for (const Eigen::Vector2d& p : pts) cells_[key(cell(p.x()), cell(p.y()))].push_back(p);
-  }
-
-  bool near(const Eigen::Vector2d& p, double d) const {
-    const std::int64_t cx = cell(p.x()), cy = cell(p.y());
-    const auto reach = static_cast<std::int64_t>(std::ceil(d / kCellM));
-    for (std::int64_t dx = -reach; dx <= reach; ++dx)
-      for (std::int64_t dy = -reach; dy <= reach; ++dy) {
-        const auto it = cells_.find(key(cx + dx, cy + dy));
-        if (it == cells_.end()) continue;
-        for (const Eigen::Vector2d& q : it->second)
-          if ((q - p).squaredNorm() <= d * d) return true;
-      }
-    return false;
-  }
-
- private:
-  static std::int64_t cell(double v) { return static_cast<std::int64_t>(std::floor(v / kCellM)); }
-  static std::uint64_t key(std::int64_t x, std::int64_t y) {
-    return (static_cast<std::uint64_t>(x) << 32) ^ (static_cast<std::uint64_t>(y) & 0xffffffffULL);
-  }
-  std::unordered_map<std::uint64_t, Points2> cells_;
-};
-
-}  // namespace
 
 std::optional<MovingObjectFilter::View> MovingObjectFilter::inView(const Past& base, const Eigen::Vector2d& p_base,
                                                                    double heading_rad) const {
@@ -87,20 +53,12 @@ std::size_t MovingObjectFilter::filter(const Frame& f, Frame& out) {
   // went (a robot carried), and everything would seem to have moved: the comparison starts again.
   const bool gap = last_time_ && !(f.time - *last_time_ >= 0.0 && f.time - *last_time_ <= opt_.time_gap_s);
   last_time_ = f.time;
-  if (!opt_.use_odometry || !f.T_odom_robot || !f.T_odom_robot->isFinite() || gap) past_.clear();
-  if (!opt_.use_odometry || !f.T_odom_robot || !f.T_odom_robot->isFinite()) return 0;
+  const bool odometry = opt_.use_odometry && f.T_odom_robot && f.T_odom_robot->isFinite();
+  if (!odometry || gap) past_.clear();
+  if (!odometry) return 0;
   const LaserScan& scan = f.scan;
   std::vector<std::size_t> beams;
-  Points2 pts;
-  beams.reserve(scan.size());
-  pts.reserve(scan.size());
-  for (const std::size_t i : scan.validIndices()) {
-    const double r = scan.ranges()[i];
-    if (!(r < opt_.max_range_m)) continue;
-    const double a = scan.angle(i);
-    beams.push_back(i);
-    pts.push_back(f.T_robot_laser * Eigen::Vector2d(r * std::cos(a), r * std::sin(a)));
-  }
+  Points2 pts = scanPoints(f, opt_.max_range_m, &beams);
   const SE2 T_odom = *f.T_odom_robot;
   // The baseline: the latest earlier scan at least kBaselineM behind by the odometry (the oldest
   // kept; those before it are dropped as soon as a later one qualifies).
@@ -108,12 +66,17 @@ std::size_t MovingObjectFilter::filter(const Frame& f, Frame& out) {
   while (past_.size() >= 2 && behind(past_[1]) >= kBaselineM) past_.pop_front();
   std::vector<std::size_t> drop;
   const auto usable = [&](const Past& p) {
-    const SE2 d = p.T_odom_robot.inverse() * T_odom;
-    return behind(p) >= kBaselineM && behind(p) <= kMaxBaselineM && std::abs(d.theta()) <= kMaxTurnRad;
+    const double d = behind(p);
+    return d >= kBaselineM && d <= kMaxBaselineM &&
+           std::abs((p.T_odom_robot.inverse() * T_odom).theta()) <= kMaxTurnRad;
   };
   if (!past_.empty() && usable(past_.front()) && !pts.empty()) {
     const Past& base = past_.front();
-    const PointGrid grid(base.points);
+    const geometry::KdTree2 tree(base.points);
+    const auto near = [&](const Eigen::Vector2d& p, double d) {
+      double d2 = 0.0;
+      return tree.nearest(p, &d2) < base.points.size() && d2 <= d * d;
+    };
     // Where a standing object at p (this robot frame) lay in the baseline's robot frame.
     const SE2 T_base_now = base.T_odom_robot.inverse() * T_odom;
     // What the odometry's heading may be off by over the baseline.
@@ -152,24 +115,22 @@ std::size_t MovingObjectFilter::filter(const Frame& f, Frame& out) {
       const double static_m = kStaticM + heading_rad * centre.norm();
       if ((hi - lo).norm() <= kMaxObjectM && n >= kMinReturns && !cut_off &&
           (T_base_now * centre - centre).norm() >= static_m + kSameM) {
-        std::size_t same = 0, standing = 0;
+        std::size_t same = 0, standing = 0, through = 0;
         for (std::size_t j = first; j < k; ++j) {
-          if (grid.near(pts[j], kSameM)) ++same;
-          if (grid.near(T_base_now * pts[j], static_m)) ++standing;
+          const Eigen::Vector2d at_base = T_base_now * pts[j];
+          if (near(pts[j], kSameM)) ++same;
+          if (near(at_base, static_m)) ++standing;
+          if (seenThrough(base, at_base, heading_rad)) ++through;
         }
-        std::size_t through = 0;
-        for (std::size_t j = first; j < k; ++j)
-          if (seenThrough(base, T_base_now * pts[j], heading_rad)) ++through;
         // Where it would stand, that scan could have seen it (in its range and field of view): a
         // standing object coming into range matches something else there as often as not.
-        const bool in_view = inView(base, T_base_now * centre, heading_rad).has_value();
+        const bool with_robot = 4 * same >= 3 * n && inView(base, T_base_now * centre, heading_rad).has_value();
         // Only an object kMinWalkerM across or more walks in: a thin edge (a door frame, a table
         // leg) misplaced by the odometry read a little late seems to stand where that scan saw past
         // it.
         const bool walked_in = 2 * through > n && (hi - lo).norm() >= kMinWalkerM;
-        if (2 * standing < n && ((4 * same >= 3 * n && in_view) || walked_in)) {
+        if (2 * standing < n && (with_robot || walked_in))
           for (std::size_t j = first; j < k; ++j) drop.push_back(beams[j]);
-        }
       }
       first = k;
     }

@@ -8,15 +8,17 @@
 
 namespace lidar2d::slam::internal {
 
-Points2 scanPoints(const Frame& f, double max_range_m) {
+Points2 scanPoints(const Frame& f, double max_range_m, std::vector<std::size_t>* beams) {
   Points2 pts;
   const LaserScan& s = f.scan;
   pts.reserve(s.size());
+  if (beams) beams->clear();
   for (std::size_t i : s.validIndices()) {
     const double r = s.ranges()[i];
     if (!(r < max_range_m)) continue;
     const double a = s.angle(i);
     pts.push_back(f.T_robot_laser * Eigen::Vector2d(r * std::cos(a), r * std::sin(a)));
+    if (beams) beams->push_back(i);
   }
   return pts;
 }

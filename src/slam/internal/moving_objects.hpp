@@ -43,7 +43,7 @@ namespace lidar2d::slam::internal {
 /// not know where the robot was carried meanwhile. A robot standing still or
 /// turning in place never reaches the baseline and nothing is left out; keyframes farther apart
 /// than kMaxBaselineM are left whole (the odometry's error over such a step hides where a standing
-/// object would be: on 1 m keyframes door frames and posts were left out).
+/// object would be).
 class MovingObjectFilter {
  public:
   static constexpr double kBaselineM = 0.5;

@@ -2,7 +2,9 @@
 // Point sets of the SLAM pipeline: a scan's points in the robot frame, the voxel filter, and how
 // much of a scan a target explains.
 
+#include <cstddef>
 #include <optional>
+#include <vector>
 
 #include "lidar2d/core/frame.hpp"
 #include "lidar2d/registration/icp.hpp"
@@ -10,8 +12,8 @@
 namespace lidar2d::slam::internal {
 
 /// The valid returns of `f` under `max_range_m`, in the robot frame (laser mounting applied), in
-/// scan order.
-Points2 scanPoints(const Frame& f, double max_range_m);
+/// scan order; with `beams`, the beam index of each.
+Points2 scanPoints(const Frame& f, double max_range_m, std::vector<std::size_t>* beams = nullptr);
 
 /// Centroid of the points in each `cell_m` square, in order of first appearance.
 Points2 voxelFilter(const Points2& pts, double cell_m);
